@@ -1,0 +1,127 @@
+"""Who is calling and may they: bearer tokens with roles, basic auth for KIE Server clients.
+
+Roles: ``caller`` may fire and read; ``author`` may also deploy, roll back and delete. Tokens come
+from ``settings.api.tokens`` (``PRINTEPS_TOKENS``). With no tokens configured the API is *open* (dev
+mode for the embedded demo): every request acts as the author ``anonymous``. Missing/unknown
+credentials -> 401, a known identity without the role -> 403.
+"""
+
+from __future__ import annotations
+
+import hmac
+from dataclasses import dataclass
+from typing import Callable
+
+from fastapi import Request, Security
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBasic, HTTPBasicCredentials, HTTPBearer
+
+from gateway.api.errors import ApiError
+from gateway.config import ApiSettings
+
+ROLE_RANK = {"caller": 1, "author": 2}
+
+_bearer = HTTPBearer(auto_error=False, description="A token from settings.api.tokens")
+_basic = HTTPBasic(auto_error=False, description="KIE Server endpoints only: settings.api.basic_users")
+
+
+@dataclass(frozen=True)
+class Principal:
+    """The identity of a request: its name (recorded as deploy author), role and how it was proven."""
+
+    name: str
+    role: str
+    via: str  # "open", "token" or "basic"
+
+    def to_dict(self) -> dict[str, str]:
+        return {"name": self.name, "role": self.role, "auth": self.via}
+
+
+ANONYMOUS = Principal("anonymous", "author", "open")
+
+
+class Authenticator:
+    """Checks credentials against the configured tokens/users (constant-time comparisons)."""
+
+    def __init__(self, settings: ApiSettings) -> None:
+        self.open = settings.is_open
+        self._tokens = [(tok.encode(), entry.name, entry.role) for tok, entry in settings.tokens.items()]
+        self._users = {user: (entry.password.encode(), entry.role) for user, entry in settings.basic_users.items()}
+
+    def by_token(self, token: str) -> Principal | None:
+        presented = token.encode()
+        found = None
+        for tok, name, role in self._tokens:  # no early exit: timing does not tell which matched
+            if hmac.compare_digest(tok, presented):
+                found = Principal(name, role, "token")
+        return found
+
+    def by_basic(self, user: str, password: str) -> Principal | None:
+        entry = self._users.get(user)
+        if entry is None:
+            hmac.compare_digest(b"x", password.encode())
+            return None
+        if hmac.compare_digest(entry[0], password.encode()):
+            return Principal(user, entry[1], "basic")
+        return None
+
+    def check(
+        self,
+        role: str,
+        bearer: HTTPAuthorizationCredentials | None,
+        basic: HTTPBasicCredentials | None = None,
+        challenge: str = "Bearer",
+    ) -> Principal:
+        """The principal for these credentials, or ApiError 401/403."""
+        principal: Principal | None = None
+        if bearer is not None:
+            principal = self.by_token(bearer.credentials)
+            if principal is None:
+                raise ApiError(401, "unknown token", headers={"WWW-Authenticate": challenge})
+        elif basic is not None:
+            principal = self.by_basic(basic.username, basic.password)
+            if principal is None:
+                raise ApiError(401, "wrong user or password", headers={"WWW-Authenticate": challenge})
+        elif self.open:
+            return ANONYMOUS
+        else:
+            raise ApiError(
+                401,
+                "authentication required: send 'Authorization: Bearer <token>'",
+                headers={"WWW-Authenticate": challenge},
+            )
+        if ROLE_RANK.get(principal.role, 0) < ROLE_RANK[role]:
+            raise ApiError(403, f"{principal.name!r} has role {principal.role!r}; this needs {role!r}")
+        return principal
+
+
+def _auth(request: Request) -> Authenticator:
+    return request.app.state.auth
+
+
+def require(role: str) -> Callable[..., Principal]:
+    """A FastAPI dependency: the bearer-token principal, with at least ``role``."""
+
+    def dependency(
+        request: Request, bearer: HTTPAuthorizationCredentials | None = Security(_bearer)
+    ) -> Principal:
+        return _auth(request).check(role, bearer)
+
+    return dependency
+
+
+def require_kie(role: str) -> Callable[..., Principal]:
+    """Like :func:`require`, also accepting HTTP basic auth (what KIE Server clients send)."""
+
+    def dependency(
+        request: Request,
+        bearer: HTTPAuthorizationCredentials | None = Security(_bearer),
+        basic: HTTPBasicCredentials | None = Security(_basic),
+    ) -> Principal:
+        return _auth(request).check(role, bearer, basic, challenge='Basic realm="kie-server"')
+
+    return dependency
+
+
+caller = require("caller")
+author = require("author")
+kie_caller = require_kie("caller")

@@ -1,0 +1,87 @@
+"""Fast, bounded JSON in and out for the HTTP edge.
+
+Why not FastAPI's defaults on every route: the fire paths are hot (target p99 < 5 ms), so they read
+the raw body with orjson and answer with orjson-rendered bytes, skipping pydantic and
+``jsonable_encoder``. Every body is also checked against a nesting limit so a hostile document
+cannot exhaust the stack further down (Java or Python).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import orjson
+from fastapi import Request
+from fastapi.responses import Response
+
+
+class JSON(Response):
+    """A JSON response rendered with orjson (about 5-10x faster than the stdlib encoder)."""
+
+    media_type = "application/json"
+
+    def render(self, content: Any) -> bytes:
+        return orjson.dumps(content, option=orjson.OPT_NON_STR_KEYS, default=_fallback)
+
+
+def _fallback(value: Any) -> Any:
+    """Values orjson does not know (Java strings/numbers leaking through, sets): make them JSON."""
+    if isinstance(value, (set, frozenset, tuple)):
+        return list(value)
+    to_dict = getattr(value, "to_dict", None)
+    if callable(to_dict):
+        return to_dict()
+    return str(value)
+
+
+class BadBody(Exception):
+    """The request body is not acceptable JSON; ``status`` is 400 (syntax/depth) or 415."""
+
+    def __init__(self, message: str, status: int = 400, **extra: Any) -> None:
+        super().__init__(message)
+        self.message = message
+        self.status = status
+        self.extra = extra
+
+
+def json_depth_ok(value: Any, limit: int) -> bool:
+    """True when ``value`` nests no deeper than ``limit`` containers (iterative: no recursion)."""
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            children = node.values()
+        elif isinstance(node, list):
+            children = node
+        else:
+            continue
+        if depth > limit:
+            return False
+        for child in children:
+            if isinstance(child, (dict, list)):
+                stack.append((child, depth + 1))
+    return True
+
+
+def parse_json(raw: bytes, max_depth: int) -> Any:
+    """Parse ``raw`` as JSON or raise :class:`BadBody` saying where it broke."""
+    if not raw.strip():
+        raise BadBody("the request body is empty; a JSON document is expected")
+    try:
+        value = orjson.loads(raw)
+    except orjson.JSONDecodeError as exc:
+        raise BadBody(
+            f"the request body is not valid JSON: {exc.msg}", line=exc.lineno, column=exc.colno
+        ) from None
+    if not json_depth_ok(value, max_depth):
+        raise BadBody(f"the request body nests deeper than {max_depth} levels")
+    return value
+
+
+async def read_json(request: Request) -> Any:
+    """The request's JSON body, bounded by the app's depth limit."""
+    content_type = request.headers.get("content-type", "application/json")
+    if "json" not in content_type and "text/plain" not in content_type:
+        raise BadBody(f"content type {content_type!r} is not supported; send application/json", status=415)
+    raw = await request.body()
+    return parse_json(raw, request.app.state.settings.api.max_json_depth)

@@ -1,0 +1,75 @@
+"""Prometheus metrics of one app: fires, fire latency, deploys, errors (``GET /metrics``).
+
+Why a registry per app (not prometheus_client's global one): tests and embedders may build several
+apps in one process; each must count its own traffic. Deploys are counted from the engine's
+listener, so rule sets loaded from the filesystem or deployed by other modules are counted too.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Request
+from fastapi.responses import Response
+from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+
+# Fire latency buckets (seconds) around the 5 ms p99 goal.
+_BUCKETS = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.0075, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0, 2.5)
+
+
+class Metrics:
+    """The counters and histograms the routes update."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry(auto_describe=True)
+        self.fires = Counter(
+            "printeps_fires", "Fire requests answered, by rule set and outcome (ok/error).",
+            ["ruleset", "outcome"], registry=self.registry,
+        )
+        self.fire_seconds = Histogram(
+            "printeps_fire_seconds", "Time to answer a fire request (engine call incl. conversion).",
+            ["ruleset"], buckets=_BUCKETS, registry=self.registry,
+        )
+        self.rules_fired = Counter(
+            "printeps_rules_fired", "Rule activations fired, by rule set.", ["ruleset"], registry=self.registry,
+        )
+        self.deploys = Counter(
+            "printeps_deploys", "Rule set changes, by kind (deploy/rollback/delete).",
+            ["ruleset", "kind"], registry=self.registry,
+        )
+        self.errors = Counter(
+            "printeps_errors", "Error answers, by kind (HTTP status or engine error type).",
+            ["kind"], registry=self.registry,
+        )
+        self.rulesets = Gauge("printeps_rulesets", "Rule sets currently deployed.", registry=self.registry)
+
+    def observe_fire(self, ruleset: str, seconds: float, fired: int) -> None:
+        self.fires.labels(ruleset, "ok").inc()
+        self.fire_seconds.labels(ruleset).observe(seconds)
+        if fired:
+            self.rules_fired.labels(ruleset).inc(fired)
+
+    def fire_failed(self, ruleset: str) -> None:
+        self.fires.labels(ruleset, "error").inc()
+
+    def on_engine_event(self, kind: str, payload: dict[str, Any]) -> None:
+        """Engine listener: count deploys/rollbacks/deletes."""
+        if kind in ("deploy", "rollback", "delete"):
+            self.deploys.labels(str(payload.get("name") or payload.get("ruleset") or "?"), kind).inc()
+
+    def render(self) -> bytes:
+        return generate_latest(self.registry)
+
+
+router = APIRouter(tags=["operations"])
+
+
+@router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
+def metrics(request: Request) -> Response:
+    """Prometheus text format: printeps_fires_total, printeps_fire_seconds, printeps_deploys_total, …"""
+    state = request.app.state
+    try:
+        state.metrics.rulesets.set(len(state.engine.list_rulesets()))
+    except Exception:  # the gauge is best effort; the endpoint must answer even if the engine cannot
+        pass
+    return Response(state.metrics.render(), media_type=CONTENT_TYPE_LATEST)

@@ -1,0 +1,270 @@
+"""``/api/rulesets``: manage rule set versions and fire them.
+
+Why the two styles here: management routes (rare, human-paced) use pydantic models so the OpenAPI
+docs show their bodies; the fire route is the hot path and parses/serializes with orjson itself.
+Engine calls block (they go into the JVM), so routes are sync (FastAPI runs them in its threadpool)
+or use ``run_in_threadpool``; the engine is thread-safe.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Path as PathParam, Query, Request
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.concurrency import run_in_threadpool
+
+from gateway.api.auth import Principal, author, caller
+from gateway.api.errors import ApiError
+from gateway.api.jsonio import JSON, read_json
+
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"  # as gateway.engine.ruleset.check_name
+
+RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name (its folder name)")]
+MAX_FILES = 500
+
+router = APIRouter(tags=["rule sets"])
+
+
+class FilesBody(BaseModel):
+    """Rule files of a rule set: file name -> text (``.drl``, ``.dsl``, ``.dslr``, ``examples.json``);
+    the engine checks names, sizes and content and answers 422 naming the file."""
+
+    model_config = ConfigDict(extra="forbid")
+    files: dict[str, str] = Field(min_length=1, max_length=MAX_FILES)
+
+
+class DeployBody(FilesBody):
+    comment: str = Field(default="", max_length=2000)
+    base_version: int | None = Field(
+        default=None, ge=0, description="The version this edit started from; 409 if it is no longer current."
+    )
+
+
+class RollbackBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    version: int = Field(ge=1)
+    comment: str = Field(default="", max_length=2000)
+
+
+class TryBody(FilesBody):
+    facts: list[dict[str, Any]] = Field(default_factory=list)
+
+
+FIRE_SCHEMA: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/json": {
+                "schema": {
+                    "type": "object",
+                    "required": ["facts"],
+                    "properties": {
+                        "facts": {
+                            "type": "array",
+                            "items": {
+                                "type": "object",
+                                "required": ["type"],
+                                "properties": {"type": {"type": "string", "minLength": 1}},
+                                "additionalProperties": True,
+                            },
+                        }
+                    },
+                }
+            }
+        },
+    }
+}
+
+
+def _engine(request: Request) -> Any:
+    return request.app.state.engine
+
+
+@router.get("/api/rulesets")
+def list_rulesets(request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The current version of each rule set: name, version, deployed_at, author, comment."""
+    return JSON([info.to_dict() for info in _engine(request).list_rulesets()])
+
+
+@router.get("/api/rulesets/{name}")
+def get_ruleset(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The current version with its files."""
+    return JSON(_version_dict(_engine(request).current(name)))
+
+
+@router.get("/api/rulesets/{name}/versions")
+def list_versions(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Every kept version of the rule set, oldest first."""
+    return JSON([info.to_dict() for info in _engine(request).versions(name)])
+
+
+@router.get("/api/rulesets/{name}/versions/{version}")
+def get_version(
+    name: RuleSetName, version: Annotated[int, PathParam(ge=1)], request: Request, _: Principal = Depends(caller)
+) -> JSON:
+    """One version with its files."""
+    return JSON(_version_dict(_engine(request).version(name, version)))
+
+
+@router.put("/api/rulesets/{name}", status_code=201)
+def deploy(name: RuleSetName, body: DeployBody, request: Request, who: Principal = Depends(author)) -> JSON:
+    """Compile and make live; 422 with ``errors`` (file, line, column, message) if it does not compile,
+    409 ``{"error": "base version changed", "current": n}`` if ``base_version`` is stale."""
+    info = _engine(request).deploy(
+        name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version
+    )
+    return JSON({"name": info.name, "version": info.version}, status_code=201)
+
+
+@router.post("/api/rulesets/{name}/validate")
+def validate(name: RuleSetName, body: FilesBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Compile only: ``{"ok": bool, "errors": [...]}``; deploys nothing."""
+    errors = _engine(request).validate(name, dict(body.files))
+    return JSON({"ok": not errors, "errors": [e.to_dict() for e in errors]})
+
+
+@router.post("/api/rulesets/{name}/expand")
+def expand(name: RuleSetName, body: FilesBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The DRL each ``.dslr`` file expands to: ``{"expanded": {"x.dslr": "<drl>"}}``."""
+    return JSON({"expanded": _engine(request).expand(name, dict(body.files))})
+
+
+@router.post("/api/rulesets/{name}/rollback")
+def rollback(name: RuleSetName, body: RollbackBody, request: Request, who: Principal = Depends(author)) -> JSON:
+    """Make an earlier version current again."""
+    info = _engine(request).rollback(name, body.version, author=who.name, comment=body.comment)
+    return JSON({"name": info.name, "version": info.version})
+
+
+@router.delete("/api/rulesets/{name}")
+def delete(name: RuleSetName, request: Request, _: Principal = Depends(author)) -> JSON:
+    """Undeploy the rule set (its fire endpoint answers 404 afterwards)."""
+    _engine(request).delete(name)
+    return JSON({"name": name, "deleted": True})
+
+
+@router.post("/api/rulesets/{name}/fire", openapi_extra=FIRE_SCHEMA)
+async def fire(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Fire the current version on ``facts``: ``{"version", "actions", "fired", "facts", ...}``;
+    422 naming the bad fact/field."""
+    body = await read_json(request)
+    facts = facts_from_body(body, request.app.state.settings.engine.max_facts)
+    metrics = request.app.state.metrics
+    start = time.perf_counter()
+    try:
+        result = await run_in_threadpool(_engine(request).fire, name, facts)
+    except Exception:
+        metrics.fire_failed(name)
+        raise
+    out = result.to_dict()
+    metrics.observe_fire(name, time.perf_counter() - start, len(out.get("fired") or ()))
+    return JSON(out)
+
+
+def facts_from_body(body: Any, max_facts: int) -> list[dict[str, Any]]:
+    """The fact list of a fire request, or ApiError 422 naming what is wrong and where."""
+    if not isinstance(body, dict) or "facts" not in body:
+        raise ApiError(422, "the body must be an object with a 'facts' list",
+                       errors=[{"field": "facts", "message": "missing"}])
+    extra = sorted(set(body) - {"facts"})
+    if extra:
+        raise ApiError(422, "unknown fields in the body", errors=[{"field": f, "message": "not allowed"} for f in extra])
+    facts = body["facts"]
+    if not isinstance(facts, list):
+        raise ApiError(422, "'facts' must be a list", errors=[{"field": "facts", "message": "not a list"}])
+    if len(facts) > max_facts:
+        raise ApiError(422, f"too many facts: {len(facts)} > {max_facts}",
+                       errors=[{"field": "facts", "message": f"at most {max_facts} facts"}])
+    errors = []
+    for index, fact in enumerate(facts):
+        if not isinstance(fact, dict):
+            errors.append({"index": index, "field": None, "message": "a fact must be an object"})
+        elif not isinstance(fact.get("type"), str) or not fact["type"]:
+            errors.append({"index": index, "field": "type", "message": "a fact needs a non-empty string 'type'"})
+    if errors:
+        raise ApiError(422, "bad facts", errors=errors)
+    return facts
+
+
+@router.get("/api/rulesets/{name}/types")
+def declared_types(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The fact types the rule set declares: ``{"Customer": {"id": "String", "age": "int"}}``."""
+    return JSON(_engine(request).declared_types(name))
+
+
+@router.get("/api/rulesets/{name}/examples")
+def examples(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The rule set's ``examples.json`` (``[{"name", "facts"}]``) or ``[]`` when it has none."""
+    engine = _engine(request)
+    current = engine.current(name)  # 404 for unknown rule sets
+    text = current.files.get("examples.json")
+    source = "examples.json"
+    if text is None:
+        path = Path(request.app.state.settings.engine.rules_dir) / name / "examples.json"
+        if not path.is_file():
+            return JSON([])
+        text, source = path.read_text(encoding="utf-8"), str(path)
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ApiError(422, f"{source}:{exc.lineno}:{exc.colno}: {exc.msg}") from None
+    if not isinstance(data, list) or not all(isinstance(e, dict) and "facts" in e for e in data):
+        raise ApiError(422, f"{source}: expected a list of {{'name', 'facts'}} objects")
+    return JSON(data)
+
+
+@router.post("/api/rulesets/{name}/try")
+def try_files(
+    name: RuleSetName, body: TryBody, request: Request, _: Principal = Depends(caller)
+) -> JSON:
+    """Fire undeployed text (the workbench's "try it"); 422 ``{"errors": [...]}`` if it does not compile."""
+    facts = facts_from_body({"facts": body.facts}, request.app.state.settings.engine.max_facts)
+    return JSON(_engine(request).fire_files(dict(body.files), facts).to_dict())
+
+
+@router.get("/api/rulesets/{name}/diff")
+def diff(
+    name: RuleSetName,
+    request: Request,
+    from_: Annotated[int | None, Query(alias="from", ge=1)] = None,
+    to: Annotated[int | None, Query(ge=1)] = None,
+    _: Principal = Depends(caller),
+) -> JSON:
+    """Unified diff per changed file between two versions (default: previous -> current)."""
+    engine = _engine(request)
+    if to is None:
+        to = engine.current(name).info.version
+    if from_ is None:
+        from_ = max(1, to - 1)
+    old, new = engine.version(name, from_), engine.version(name, to)
+    return JSON({"name": name, "from": from_, "to": to, "files": file_diffs(old.files, new.files, from_, to)})
+
+
+def file_diffs(old: dict[str, str], new: dict[str, str], a: int, b: int) -> dict[str, str]:
+    """file name -> unified diff text, for files that differ (added/removed files diff against empty)."""
+    out = {}
+    for fname in sorted(set(old) | set(new)):
+        before, after = old.get(fname, ""), new.get(fname, "")
+        if before == after:
+            continue
+        lines = difflib.unified_diff(
+            before.splitlines(keepends=True), after.splitlines(keepends=True),
+            fromfile=f"v{a}/{fname}", tofile=f"v{b}/{fname}",
+        )
+        out[fname] = "".join(lines)
+    return out
+
+
+def _version_dict(rv: Any) -> dict[str, Any]:
+    return {**rv.info.to_dict(), "files": dict(rv.files)}
+
+
+@router.get("/api/whoami")
+def whoami(who: Principal = Depends(caller)) -> JSON:
+    """The identity and role of the presented token (``anonymous``/``author`` in open mode)."""
+    return JSON(who.to_dict())

@@ -1,0 +1,237 @@
+"""REST for workflows: list, read, validate, replace (live), run; runs, manual tasks, generated code;
+and the workbench page ``/workbench/workflows`` (workflow view, scenario view, editor).
+
+Why thin: everything is in ``gateway.workflow``; this maps HTTP to the :class:`WorkflowService`
+kept in ``app.state.workflows``. When the app has none, one is built on first use from
+``app.state.settings``/``engine``/``store``/``ontology`` so the router works in any app.
+
+    GET  /api/workflows                        [{name, title, version, ...}]
+    GET  /api/workflows/{name}                 {name, version, text, workflow_view, scenario_view}
+    GET  /api/workflows/{name}/versions        [{version, updated_at, author, comment, hash}]
+    POST /api/workflows/validate               {"text": yaml} -> {"valid", "problems", views}
+    PUT  /api/workflows/{name}                 {"text", "comment", "base_version"} -> 201 {name, version}
+    POST /api/workflows/{name}/rollback        {"version"} -> 201 {name, version}
+    POST /api/workflows/{name}/run             {"inputs": {...}, "wait": true} -> the run (or 202 {run_id})
+    GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id}
+    GET  /api/workflows/manual, POST /api/workflows/manual/{task_id}/done {"result": {...}}
+    GET  /api/workflows/{name}/code            the generated standalone rclpy node (text/x-python)
+"""
+
+from __future__ import annotations
+
+import threading
+from importlib import resources
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Path as PathParam, Query, Request
+from fastapi.responses import HTMLResponse, PlainTextResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from gateway.api.auth import Principal, author, caller
+from gateway.api.errors import ApiError
+from gateway.api.jsonio import JSON
+from gateway.workflow.codegen import generate
+from gateway.workflow.diagram import scenario_view, workflow_view
+from gateway.workflow.loader import WorkflowInvalid, schema
+from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
+from gateway.workflow.service import WorkflowService, build_service
+
+router = APIRouter(tags=["workflows"])
+
+WorkflowName = Annotated[str, PathParam(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=100)]
+MAX_TEXT = 1_000_000
+_build_lock = threading.Lock()
+_ASSETS = {"workflows.js": "text/javascript", "workflows.css": "text/css"}
+
+
+class TextBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    text: str = Field(min_length=1, max_length=MAX_TEXT, description="The workflow as YAML.")
+
+
+class ReplaceBody(TextBody):
+    comment: str = Field(default="", max_length=2000)
+    base_version: int | None = Field(default=None, ge=0,
+                                     description="The version this edit started from; 409 if no longer current.")
+
+
+class RollbackBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    version: int = Field(ge=1)
+    comment: str = Field(default="", max_length=2000)
+
+
+class RunBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    inputs: dict[str, Any] = Field(default_factory=dict)
+    wait: bool = Field(default=True, description="false: start in the background and answer 202 {run_id}.")
+
+
+class DoneBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    result: dict[str, Any] = Field(default_factory=dict)
+
+
+def service(request: Request) -> WorkflowService:
+    """The app's workflow service, built on first use when the app was not given one."""
+    state = request.app.state
+    existing = getattr(state, "workflows", None)
+    if existing is not None:
+        return existing
+    with _build_lock:
+        if getattr(state, "workflows", None) is None:
+            ontology = getattr(state, "ontology", None)
+            lookup = getattr(ontology, "value", None) if ontology is not None else None
+            state.workflows = build_service(state.settings, engine=getattr(state, "engine", None),
+                                            store=getattr(state, "store", None), ontology_lookup=lookup)
+    return state.workflows
+
+
+def _entry(svc: WorkflowService, name: str) -> Any:
+    try:
+        return svc.registry.current(name)
+    except WorkflowNotFound as exc:
+        raise ApiError(404, str(exc), name=name) from None
+
+
+def _invalid(exc: WorkflowInvalid) -> ApiError:
+    return ApiError(422, "workflow invalid", problems=[p.to_dict() for p in exc.problems])
+
+
+# Fixed paths first: "runs", "manual", "validate", "schema" are reserved workflow names.
+
+@router.get("/api/workflows")
+def list_workflows(request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Every workflow with its current version."""
+    svc = service(request)
+    out = []
+    for name in svc.registry.names():
+        entry = svc.registry.current(name)
+        out.append({"name": name, "title": entry.workflow.title, "business_process": entry.workflow.business_process,
+                    **entry.info.to_dict()})
+    return JSON(out)
+
+
+@router.get("/api/workflows/schema")
+def get_schema(_: Principal = Depends(caller)) -> JSON:
+    """The JSON schema workflow files are validated against."""
+    return JSON(schema())
+
+
+@router.post("/api/workflows/validate")
+def validate(body: TextBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Check a workflow text without deploying it; on success also the two views (for the editor)."""
+    wf, problems = service(request).validate(body.text)
+    if wf is None:
+        return JSON({"valid": False, "problems": [p.to_dict() for p in problems]})
+    return JSON({"valid": True, "problems": [], "name": wf.name,
+                 "workflow_view": workflow_view(wf), "scenario_view": scenario_view(wf)})
+
+
+@router.get("/api/workflows/runs")
+def list_runs(request: Request, workflow: str | None = None, limit: int = Query(50, ge=1, le=1000),
+              _: Principal = Depends(caller)) -> JSON:
+    """Finished runs, newest first."""
+    return JSON([r.to_dict() for r in service(request).runs(workflow, limit)])
+
+
+@router.get("/api/workflows/runs/{run_id}")
+def get_run(run_id: str, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """One run: 200 with the result, 202 ``{"status": "running"}`` while it runs, 404 if unknown."""
+    try:
+        result = service(request).get_run(run_id)
+    except KeyError:
+        raise ApiError(404, f"run {run_id!r} not found (or no longer kept)", run_id=run_id) from None
+    if result is None:
+        return JSON({"run_id": run_id, "status": "running"}, status_code=202)
+    return JSON(result.to_dict())
+
+
+@router.get("/api/workflows/manual")
+def manual_tasks(request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Human steps waiting for someone to do them."""
+    return JSON([t.to_dict() for t in service(request).manual.pending()])
+
+
+@router.post("/api/workflows/manual/{task_id}/done")
+def manual_done(task_id: str, body: DoneBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Mark a human step done (its ``result`` becomes the step's output)."""
+    if not service(request).manual.complete(task_id, body.result):
+        raise ApiError(404, f"no manual task {task_id!r} is waiting", task_id=task_id)
+    return JSON({"task_id": task_id, "done": True})
+
+
+@router.get("/api/workflows/{name}")
+def get_workflow(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """The current version: YAML text, version info and both views."""
+    entry = _entry(service(request), name)
+    wf = entry.workflow
+    return JSON({**entry.info.to_dict(), "title": wf.title, "text": wf.source,
+                 "workflow_view": workflow_view(wf), "scenario_view": scenario_view(wf)})
+
+
+@router.get("/api/workflows/{name}/versions")
+def versions(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    try:
+        return JSON([v.to_dict() for v in service(request).registry.versions(name)])
+    except WorkflowNotFound as exc:
+        raise ApiError(404, str(exc), name=name) from None
+
+
+@router.put("/api/workflows/{name}", status_code=201)
+def replace(name: WorkflowName, body: ReplaceBody, request: Request, who: Principal = Depends(author)) -> JSON:
+    """Validate and make live: the next run uses it (runs in progress finish with their version).
+    422 ``{"problems": [{file, path, line, column, message}]}``; 409 ``{"current": n}`` if stale."""
+    try:
+        info = service(request).registry.replace(name, body.text, author=who.name, comment=body.comment,
+                                                 base_version=body.base_version)
+    except WorkflowInvalid as exc:
+        raise _invalid(exc) from None
+    except WorkflowConflict as exc:
+        raise ApiError(409, "base version changed", current=exc.current) from None
+    return JSON({"name": info.name, "version": info.version}, status_code=201)
+
+
+@router.post("/api/workflows/{name}/rollback", status_code=201)
+def rollback(name: WorkflowName, body: RollbackBody, request: Request, who: Principal = Depends(author)) -> JSON:
+    try:
+        info = service(request).registry.rollback(name, body.version, author=who.name, comment=body.comment)
+    except WorkflowNotFound as exc:
+        raise ApiError(404, str(exc), name=name) from None
+    return JSON({"name": info.name, "version": info.version}, status_code=201)
+
+
+@router.post("/api/workflows/{name}/run")
+def run(name: WorkflowName, body: RunBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Run the current version. A failed step gives 200 with ``status: failed`` and the trace."""
+    svc = service(request)
+    _entry(svc, name)
+    if not body.wait:
+        return JSON({"run_id": svc.start(name, body.inputs), "status": "running"}, status_code=202)
+    return JSON(svc.run(name, body.inputs).to_dict())
+
+
+@router.get("/api/workflows/{name}/code")
+def code(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -> Response:
+    """The workflow as a standalone Python rclpy node (what the papers' editor generated)."""
+    entry = _entry(service(request), name)
+    return PlainTextResponse(generate(entry.workflow), media_type="text/x-python")
+
+
+# ------------------------------------------------------------------ the workbench page
+
+def _asset(name: str) -> str:
+    return resources.files("gateway.workflow").joinpath("web", name).read_text(encoding="utf-8")
+
+
+@router.get("/workbench/workflows", response_class=HTMLResponse, include_in_schema=False)
+def page() -> HTMLResponse:
+    """Workflow view, scenario view and editor (static page; data through the API above)."""
+    return HTMLResponse(_asset("workflows.html"))
+
+
+@router.get("/workbench/workflows/assets/{asset}", include_in_schema=False)
+def asset(asset: str) -> Response:
+    if asset not in _ASSETS:
+        raise ApiError(404, f"no asset {asset!r}")
+    return Response(_asset(asset), media_type=_ASSETS[asset])

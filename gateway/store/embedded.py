@@ -1,0 +1,107 @@
+"""The embedded development database: SecantusDB run as its own process, reached only via pymongo.
+
+Why a subprocess: SecantusDB is GPL-2.0, so the gateway never imports it; it runs its CLI daemon on a
+free loopback port with its data under the gateway's data dir, exactly as a real mongod would, so the
+store's pymongo code path is the same for the embedded and a real MongoDB.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pymongo
+
+log = logging.getLogger(__name__)
+
+DAEMON = "secantusd-py"
+
+
+class EmbeddedDbError(RuntimeError):
+    """The embedded database could not be started (not installed, crashed, never answered)."""
+
+
+def free_port() -> int:
+    """A free TCP port on 127.0.0.1 (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _daemon_path() -> str:
+    """Find the daemon next to this interpreter first (the venv), then on PATH."""
+    local = Path(sys.executable).with_name(DAEMON)
+    if local.exists():
+        return str(local)
+    found = shutil.which(DAEMON)
+    if not found:
+        raise EmbeddedDbError(
+            f"{DAEMON} not found: install the embedded database (pip install 'printeps-gateway[embedded-db]') "
+            "or set MONGO_URI to a real MongoDB"
+        )
+    return found
+
+
+class EmbeddedMongo:
+    """One SecantusDB daemon process: start(), uri, stop(). Restartable on the same port and data."""
+
+    def __init__(self, data_dir: Path, port: int = 0, cache: str = "64M") -> None:
+        self.data_dir = Path(data_dir)
+        self.port = port or free_port()
+        self.cache = cache
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def uri(self) -> str:
+        return f"mongodb://127.0.0.1:{self.port}/?directConnection=true"
+
+    def start(self, timeout_s: float = 30.0) -> str:
+        """Start the daemon and wait until it answers ping; returns the URI."""
+        if self.proc and self.proc.poll() is None:
+            return self.uri
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        logfile = open(self.data_dir / "secantusd.log", "ab")
+        cmd = [_daemon_path(), "--host", "127.0.0.1", "--port", str(self.port), "--storage-path",
+               str(self.data_dir / "data"), "--standalone", "--cache-size", self.cache, "--log-level", "WARNING"]
+        log.info("starting embedded database: %s", " ".join(cmd))
+        self.proc = subprocess.Popen(cmd, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                     env=dict(os.environ), start_new_session=True)
+        logfile.close()
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise EmbeddedDbError(
+                    f"{DAEMON} exited with code {self.proc.returncode}; see {self.data_dir / 'secantusd.log'}")
+            if self._ping():
+                return self.uri
+            time.sleep(0.1)
+        self.stop()
+        raise EmbeddedDbError(f"{DAEMON} did not answer on 127.0.0.1:{self.port} within {timeout_s:.0f} s")
+
+    def _ping(self) -> bool:
+        try:
+            with pymongo.MongoClient(self.uri, serverSelectionTimeoutMS=300, connectTimeoutMS=300) as client:
+                client.admin.command("ping")
+            return True
+        except pymongo.errors.PyMongoError:
+            return False
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Stop with SIGINT (a clean WiredTiger close), escalating only if it does not exit."""
+        proc, self.proc = self.proc, None
+        if not proc or proc.poll() is not None:
+            return
+        for sig, wait in ((signal.SIGINT, timeout_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+            try:
+                proc.send_signal(sig)
+                proc.wait(timeout=wait)
+                return
+            except subprocess.TimeoutExpired:
+                log.warning("embedded database did not stop on %s", sig.name)

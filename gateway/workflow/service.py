@@ -1,0 +1,148 @@
+"""The gateway's workflow service: registry + executor + adapters + run history, wired from settings.
+
+Why a separate module: the REST router, the CLI and tests need the same assembled object, and the
+wiring (which adapter for which module kind, which recorder) is decided in one place:
+
+- ``ros_service``/``ros_topic``: rclpy (``gateway.workflow.ros``) when ROS is there and not
+  simulated, else :class:`SimulatedRobots` (records the calls);
+- ``fire_rules``: the gateway's engine; ``ontology_value``: an injected value reader;
+- ``manual``: a board of human tasks (simulated humans in the demo); ``wait``: sleeping.
+Runs are recorded in the Information State (collection ``workflow_runs``) when a store is given.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import uuid
+from typing import Any, Callable, Mapping
+
+from gateway.workflow.adapters import (
+    Adapter, ManualBoard, OntologyValueAdapter, RulesAdapter, SimulatedRobots, WaitAdapter,
+)
+from gateway.workflow.executor import Executor, RunResult
+from gateway.workflow.loader import Problem, WorkflowInvalid, parse
+from gateway.workflow.model import Workflow
+from gateway.workflow.recorder import CallableRecorder, FanOutRecorder, MemoryRecorder, Recorder
+from gateway.workflow.registry import WorkflowRegistry
+
+log = logging.getLogger(__name__)
+
+RUNS_COLLECTION = "workflow_runs"
+
+
+class WorkflowService:
+    """What the API uses: read, validate, replace and run workflows; see runs and manual tasks."""
+
+    def __init__(self, registry: WorkflowRegistry, executor: Executor, manual: ManualBoard,
+                 robots: SimulatedRobots | None = None, runs_kept: int = 200,
+                 recorder: MemoryRecorder | None = None) -> None:
+        self.registry = registry
+        self.executor = executor
+        self.manual = manual
+        self.robots = robots
+        self.recorder = recorder
+        self._runs: collections.OrderedDict[str, RunResult | None] = collections.OrderedDict()
+        self._runs_kept = runs_kept
+        self._lock = threading.Lock()
+
+    def validate(self, text: str, file: str = "<edit>") -> tuple[Workflow | None, list[Problem]]:
+        """Parse without deploying: (workflow, []) or (None, problems)."""
+        try:
+            return parse(text, file=file), []
+        except WorkflowInvalid as exc:
+            return None, exc.problems
+
+    def run(self, name: str, inputs: Mapping[str, Any] | None = None, run_id: str | None = None) -> RunResult:
+        """Run the current version of ``name`` to its end (the version is fixed at the start)."""
+        entry = self.registry.current(name)
+        run_id = run_id or uuid.uuid4().hex[:12]
+        self._remember(run_id, None)
+        result = self.executor.run(entry.workflow, inputs or {}, version=entry.info.version, run_id=run_id)
+        self._remember(run_id, result)
+        return result
+
+    def start(self, name: str, inputs: Mapping[str, Any] | None = None) -> str:
+        """Run in the background (for workflows with human steps); returns the run id at once."""
+        self.registry.current(name)  # fail now if unknown
+        run_id = uuid.uuid4().hex[:12]
+        self._remember(run_id, None)
+        threading.Thread(target=self._run_quietly, args=(name, inputs, run_id), daemon=True,
+                         name=f"workflow-{name}-{run_id}").start()
+        return run_id
+
+    def _run_quietly(self, name: str, inputs: Mapping[str, Any] | None, run_id: str) -> None:
+        try:
+            self.run(name, inputs, run_id)
+        except Exception:  # a background run has nobody to raise to: log it
+            log.exception("workflow run %s of %s crashed", run_id, name)
+
+    def get_run(self, run_id: str) -> RunResult | None:
+        """The result, or None while it is running; KeyError when unknown."""
+        with self._lock:
+            return self._runs[run_id]
+
+    def runs(self, workflow: str | None = None, limit: int = 50) -> list[RunResult]:
+        with self._lock:
+            done = [r for r in self._runs.values() if r is not None and (workflow is None or r.workflow == workflow)]
+        return list(reversed(done))[:limit]
+
+    def _remember(self, run_id: str, result: RunResult | None) -> None:
+        with self._lock:
+            self._runs[run_id] = result
+            self._runs.move_to_end(run_id)
+            while len(self._runs) > self._runs_kept:
+                self._runs.popitem(last=False)
+
+    def close(self) -> None:
+        self.executor.close()
+
+
+def ros_available() -> bool:
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def build_service(settings: Any, *, engine: Any = None, store: Any = None,
+                  ontology_lookup: Callable[[str], Any] | None = None,
+                  ros_adapter: Adapter | None = None, load: bool = True) -> WorkflowService:
+    """Assemble the service from ``settings.workflows`` and whatever the gateway has running."""
+    cfg = settings.workflows
+    robots: SimulatedRobots | None = None
+    adapters: dict[str, Adapter] = {"wait": WaitAdapter()}
+    if cfg.simulate_robots is None:
+        simulate = ros_adapter is None and not ros_available()
+    else:
+        simulate = cfg.simulate_robots
+    if simulate:
+        robots = SimulatedRobots()
+        adapters["ros_service"] = adapters["ros_topic"] = robots
+    else:
+        if ros_adapter is None:
+            from gateway.workflow.ros import RclpyAdapter
+
+            ros_adapter = RclpyAdapter()
+        adapters["ros_service"] = adapters["ros_topic"] = ros_adapter
+    if engine is not None:
+        adapters["fire_rules"] = RulesAdapter(engine)
+    if ontology_lookup is not None:
+        adapters["ontology_value"] = OntologyValueAdapter(ontology_lookup)
+    manual = ManualBoard(simulate=cfg.simulate_humans)
+    adapters["manual"] = manual
+    memory = MemoryRecorder()
+    recorder: Recorder = memory
+    if store is not None:
+        def to_store(kind: str, payload: dict[str, Any]) -> None:
+            store.record(RUNS_COLLECTION, payload, stored_type=f"printeps/{kind}", inserted_by="workflow_executor")
+
+        recorder = FanOutRecorder(memory, CallableRecorder(to_store))
+    executor = Executor(adapters, recorder, default_timeout=cfg.default_timeout_s)
+    registry = WorkflowRegistry(cfg.source_dir, settings.data_dir)
+    if load:
+        for problem in registry.load():
+            log.error("workflow not loaded: %s", problem)
+    return WorkflowService(registry, executor, manual, robots, runs_kept=cfg.runs_kept, recorder=memory)

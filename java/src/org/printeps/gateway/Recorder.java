@@ -1,0 +1,81 @@
+package org.printeps.gateway;
+
+import java.util.LinkedHashMap;
+import java.util.List;
+import java.util.Map;
+
+import org.kie.api.event.rule.AfterMatchFiredEvent;
+import org.kie.api.event.rule.BeforeMatchFiredEvent;
+import org.kie.api.event.rule.DefaultAgendaEventListener;
+
+/**
+ * Records, while rules fire, which rule fired with which facts, and tells {@link Actions} which
+ * rule is requesting its actions. Matched facts are written to JSON at the moment of firing, so the
+ * answer shows what the rule saw, not what later rules changed.
+ */
+final class Recorder extends DefaultAgendaEventListener {
+    private final Actions actions;
+    private final TypeRegistry types;
+    private StringBuilder fired = new StringBuilder();
+    private int firedCount;
+    private final Map<String, Integer> counts = new LinkedHashMap<String, Integer>();
+    private final boolean recordFacts;
+
+    Recorder(Actions actions, TypeRegistry types, boolean recordFacts) {
+        this.actions = actions;
+        this.types = types;
+        this.recordFacts = recordFacts;
+    }
+
+    @Override
+    public void beforeMatchFired(BeforeMatchFiredEvent event) {
+        actions.setCurrentRule(event.getMatch().getRule().getName());
+    }
+
+    @Override
+    public void afterMatchFired(AfterMatchFiredEvent event) {
+        String rule = event.getMatch().getRule().getName();
+        actions.setCurrentRule(null);
+        Integer c = counts.get(rule);
+        counts.put(rule, c == null ? 1 : c + 1);
+        if (firedCount > 0) fired.append(',');
+        firedCount++;
+        fired.append("{\"rule\":");
+        Json.quote(fired, rule);
+        if (recordFacts) {
+            fired.append(",\"facts\":[");
+            List<Object> objs = event.getMatch().getObjects();
+            for (int k = 0; k < objs.size(); k++) {
+                if (k > 0) fired.append(',');
+                Json.write(fired, objs.get(k), types);
+            }
+            fired.append(']');
+        }
+        fired.append('}');
+    }
+
+    /** Appends {"ok":true,"fireCount":n,"actions":[...],"fired":[...]} minus the closing brace. */
+    void writeSuccess(StringBuilder b, int fireCount) {
+        b.append("{\"ok\":true,\"fireCount\":").append(fireCount).append(",\"actions\":");
+        Json.write(b, actions.drain(), types);
+        b.append(",\"fired\":[").append(fired).append(']');
+        reset();
+    }
+
+    /** A runaway report: the fire limit was reached and rules were still activated. */
+    String runaway(int limit) {
+        StringBuilder b = new StringBuilder("{\"ok\":false,\"kind\":\"runaway\",\"limit\":").append(limit).append(",\"counts\":");
+        Json.write(b, counts, null);
+        b.append('}');
+        actions.drain();
+        reset();
+        return b.toString();
+    }
+
+    void reset() {
+        fired = new StringBuilder();
+        firedCount = 0;
+        counts.clear();
+        actions.setCurrentRule(null);
+    }
+}

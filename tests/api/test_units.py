@@ -1,0 +1,175 @@
+"""Unit tests of the HTTP edge's plain parts: KIE translation, auth, JSON limits, diffs, decisions."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBasicCredentials
+
+from gateway.api import kie_server as kie
+from gateway.api.auth import Authenticator
+from gateway.api.decisions import DecisionLog
+from gateway.api.errors import ApiError
+from gateway.api.jsonio import BadBody, json_depth_ok, parse_json
+from gateway.api.limits import BodyLimit
+from gateway.api.rulesets import facts_from_body, file_diffs
+from gateway.config import ApiSettings, load_settings
+
+
+def test_tokens_and_users_parse_from_env_strings(monkeypatch):
+    monkeypatch.setenv("PRINTEPS_TOKENS", "t1:author:alice, t2:caller:bob")
+    monkeypatch.setenv("PRINTEPS_BASIC_USERS", "kie:pw:caller")
+    api = load_settings().api
+    assert api.tokens["t1"].name == "alice" and api.tokens["t1"].role == "author"
+    assert api.tokens["t2"].role == "caller"
+    assert api.basic_users["kie"].password == "pw"
+    assert api.is_open is False
+
+
+def test_bad_token_string_names_the_entry():
+    with pytest.raises(ValueError, match="entry 2"):
+        ApiSettings.model_validate({"tokens": "a:author:x,broken"})
+    with pytest.raises(ValueError):
+        ApiSettings.model_validate({"tokens": "a:boss:x"})
+
+
+def test_open_by_default_and_closable():
+    assert ApiSettings().is_open
+    assert not ApiSettings(open=False).is_open
+    assert ApiSettings.model_validate({"tokens": "a:author:x", "open": True}).is_open
+
+
+def _bearer(token: str) -> HTTPAuthorizationCredentials:
+    return HTTPAuthorizationCredentials(scheme="Bearer", credentials=token)
+
+
+def test_authenticator_roles():
+    auth = Authenticator(ApiSettings.model_validate({"tokens": "ta:author:alice,tc:caller:bob",
+                                                     "basic_users": "kie:pw:caller"}))
+    assert auth.check("author", _bearer("ta")).name == "alice"
+    assert auth.check("caller", _bearer("ta")).role == "author"  # author may do what caller may
+    assert auth.check("caller", _bearer("tc")).name == "bob"
+    with pytest.raises(ApiError) as e:
+        auth.check("author", _bearer("tc"))
+    assert e.value.status == 403
+    for bad in (_bearer("nope"), None):
+        with pytest.raises(ApiError) as e:
+            auth.check("caller", bad)
+        assert e.value.status == 401 and "WWW-Authenticate" in e.value.headers
+    assert auth.check("caller", None, HTTPBasicCredentials(username="kie", password="pw")).via == "basic"
+    with pytest.raises(ApiError) as e:
+        auth.check("caller", None, HTTPBasicCredentials(username="kie", password="wrong"))
+    assert e.value.status == 401
+
+
+def test_open_mode_is_anonymous_author_but_checks_presented_tokens():
+    auth = Authenticator(ApiSettings())
+    assert auth.check("author", None).to_dict() == {"name": "anonymous", "role": "author", "auth": "open"}
+    with pytest.raises(ApiError):
+        auth.check("caller", _bearer("made-up"))
+
+
+def test_json_depth_and_errors():
+    assert json_depth_ok({"a": [1, {"b": 2}]}, 3)
+    assert not json_depth_ok({"a": [1, {"b": 2}]}, 2)
+    deep = "[" * 100 + "]" * 100
+    with pytest.raises(BadBody, match="deeper"):
+        parse_json(deep.encode(), 64)
+    with pytest.raises(BadBody) as e:
+        parse_json(b'{"facts": [1,]}', 64)
+    assert e.value.status == 400 and "line" in e.value.extra
+    with pytest.raises(BadBody, match="empty"):
+        parse_json(b"  ", 64)
+
+
+def test_fire_body_errors_name_the_fact():
+    assert facts_from_body({"facts": [{"type": "A"}]}, 10) == [{"type": "A"}]
+    with pytest.raises(ApiError) as e:
+        facts_from_body({"facts": [{"type": "A"}, {"age": 3}, 7]}, 10)
+    assert e.value.status == 422
+    assert [(x["index"], x["field"]) for x in e.value.extra["errors"]] == [(1, "type"), (2, None)]
+    for body in ([], {"fact": []}, {"facts": {}}, {"facts": [], "x": 1}):
+        with pytest.raises(ApiError):
+            facts_from_body(body, 10)
+    with pytest.raises(ApiError, match="too many"):
+        facts_from_body({"facts": [{"type": "A"}] * 3}, 2)
+
+
+def test_file_diffs_only_changed_files():
+    out = file_diffs({"a.drl": "x\ny\n", "b.drl": "same\n"}, {"a.drl": "x\nz\n", "b.drl": "same\n", "c.drl": "new\n"}, 1, 2)
+    assert set(out) == {"a.drl", "c.drl"}
+    assert "-y" in out["a.drl"] and "+z" in out["a.drl"] and "v1/a.drl" in out["a.drl"]
+
+
+def test_decision_log_is_bounded_and_newest_first():
+    log = DecisionLog(3)
+    for i in range(5):
+        log.on_engine_event("fire", {"ruleset": "r" if i % 2 else "s", "version": i,
+                                     "fired": [{"rule": f"R{i}"}], "actions": []})
+    recent = log.recent(10)
+    assert [d["version"] for d in recent] == [4, 3, 2]
+    assert recent[0]["fired"] == ["R4"]
+    assert [d["version"] for d in log.recent(10, ruleset="r")] == [3]
+
+
+def test_kie_command_parsing():
+    cmds = kie.parse_commands({"lookup": None, "commands": [
+        {"insert": {"object": {"org.x.Customer": {"id": "c1"}}, "out-identifier": "c"}},
+        {"fire-all-rules": {}},
+    ]})
+    assert [c for c, _ in cmds] == ["insert", "fire-all-rules"]
+    assert kie.parse_commands({"fire-all-rules": {"max": 5}}) == [("fire-all-rules", {"max": 5})]
+    for bad, msg in (([], "JSON object"), ({"commands": []}, "no commands"),
+                     ({"commands": [{"start-process": {}}]}, "not supported"),
+                     ({"commands": [{"insert": 3}]}, "must be an object")):
+        with pytest.raises(kie.BatchError, match=msg):
+            kie.parse_commands(bad)
+
+
+def test_kie_fact_translation_round_trip():
+    packages: dict[str, str] = {}
+    fact = kie.fact_from_kie({"org.printeps.reception.Customer": {"id": "c1", "age": 3}}, "c0", packages)
+    assert fact == {"type": "Customer", "id": "c1", "age": 3}
+    assert packages == {"Customer": "org.printeps.reception"}
+    assert kie.fact_to_kie({"type": "Customer", "id": "c1"}, packages, "dflt") == {
+        "org.printeps.reception.Customer": {"id": "c1"}}
+    assert kie.fact_to_kie({"type": "Group", "size": 2}, packages, "dflt") == {"dflt.Group": {"size": 2}}
+    with pytest.raises(kie.BatchError, match="reserved"):
+        kie.fact_from_kie({"a.B": {"type": "x"}}, "c0", {})
+    with pytest.raises(kie.BatchError):
+        kie.fact_from_kie({"a.B": 1, "c.D": {}}, "c0", {})
+    handle = kie.fact_handle("org.x.Customer")[kie.FACT_HANDLE]["external-form"]
+    assert handle.endswith(":DEFAULT:NON_TRAIT:org.x.Customer")
+
+
+def _run_asgi(app, headers, chunks):
+    sent = []
+
+    async def receive():
+        if chunks:
+            return {"type": "http.request", "body": chunks.pop(0), "more_body": bool(chunks)}
+        return {"type": "http.disconnect"}
+
+    async def send(message):
+        sent.append(message)
+
+    scope = {"type": "http", "headers": headers}
+    asyncio.run(app(scope, receive, send))
+    return sent
+
+
+def test_body_limit_declared_and_streamed():
+    async def echo(scope, receive, send):
+        while True:
+            message = await receive()
+            if not message.get("more_body"):
+                break
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"ok"})
+
+    limited = BodyLimit(echo, max_bytes=10)
+    assert _run_asgi(limited, [(b"content-length", b"11")], [b"x" * 11])[0]["status"] == 413
+    assert _run_asgi(limited, [], [b"x" * 6, b"x" * 6])[0]["status"] == 413
+    assert _run_asgi(limited, [(b"content-length", b"zz")], [b""])[0]["status"] == 400
+    assert _run_asgi(limited, [], [b"x" * 5])[0]["status"] == 200

@@ -1,0 +1,32 @@
+"""Fixtures: a real SecantusDB daemon (own process, pymongo only) per test module, in a temp dir."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gateway.config import Settings
+from gateway.store.embedded import EmbeddedMongo
+from gateway.store.store import InformationState
+
+
+@pytest.fixture(scope="module")
+def mongo(tmp_path_factory: pytest.TempPathFactory):
+    db = EmbeddedMongo(tmp_path_factory.mktemp("mongo"))
+    db.start()
+    yield db
+    db.stop()
+
+
+@pytest.fixture
+def store(mongo: EmbeddedMongo, tmp_path: Path, request: pytest.FixtureRequest):
+    s = InformationState(mongo.uri, f"t_{request.node.name[:40].replace('[', '_').replace(']', '')}",
+                         tmp_path / "spool.jsonl", backend="embedded", timeout_ms=500, retry_interval_s=0.2)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    return Settings(data_dir=str(tmp_path / "var"))

@@ -1,0 +1,161 @@
+"""The Information State against a real MongoDB-protocol server: record, query, bad input, outages."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from datetime import datetime, timedelta, timezone
+
+import pytest
+
+from gateway.store import StoreError, open_store
+from gateway.store.store import InformationState
+
+
+def wait_for(cond, timeout_s: float = 30.0, step: float = 0.05) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()
+
+
+def test_record_has_meta_and_query_by_type_time_and_fields(store: InformationState) -> None:
+    t0 = datetime.now(timezone.utc)
+    store.record("actions", {"robot": "pepper", "module": "say", "text": "Welcome."},
+                 stored_type="printeps/Action", inserted_by="test")
+    store.record("actions", {"robot": "hsr", "module": "move"}, stored_type="printeps/Action", inserted_by="test")
+    store.record("actions", {"robot": "pepper", "note": "x"}, stored_type="printeps/Other", inserted_by="test")
+    docs = store.query("actions", type="printeps/Action")
+    assert {d["robot"] for d in docs} == {"pepper", "hsr"}
+    meta = docs[0]["_meta"]
+    assert meta["stored_type"] == "printeps/Action" and meta["inserted_by"] == "test"
+    assert meta["inserted_at"] >= t0 - timedelta(seconds=1)
+    assert [d["text"] for d in store.query("actions", filters={"robot": "pepper", "module": "say"})] == ["Welcome."]
+    assert store.query("actions", since=datetime.now(timezone.utc) + timedelta(seconds=5)) == []
+    assert len(store.query("actions", since=t0 - timedelta(seconds=1), until=datetime.now(timezone.utc)
+                           + timedelta(seconds=1))) == 3
+    assert store.health()["status"] == "ok"
+
+
+def test_nested_filters_and_newest_first(store: InformationState) -> None:
+    for i in range(3):
+        store.record("rule_firings", {"ruleset": "reception", "result": {"count": i}}, stored_type="printeps/Firing")
+    docs = store.query("rule_firings", filters={"result.count": 2})
+    assert len(docs) == 1
+    assert [d["result"]["count"] for d in store.query("rule_firings")] == [2, 1, 0]
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda s: s.record("bad name", {}, stored_type="x"), "collection 'bad name'"),
+    (lambda s: s.record("actions", {"$where": 1}, stored_type="x"), "field name '$where'"),
+    (lambda s: s.record("actions", {"a": {"b.c": 1}}, stored_type="x"), "actions.a: field name 'b.c'"),
+    (lambda s: s.query("actions", filters={"$or": []}), "filter field '$or'"),
+    (lambda s: s.query("actions", limit=0), "limit 0"),
+    (lambda s: s.query("actions", since=datetime(2030, 1, 1, tzinfo=timezone.utc),
+                       until=datetime(2020, 1, 1, tzinfo=timezone.utc)), "since"),
+])
+def test_bad_input_is_a_clear_error(store: InformationState, call, message: str) -> None:
+    with pytest.raises(StoreError, match=message.replace("$", r"\$").replace(".", r"\.")):
+        call(store)
+
+
+def test_nan_is_stored_as_null_not_lost(store: InformationState) -> None:
+    store.record("sensor_messages", {"id": "e1", "distance": math.nan}, stored_type="printeps/Entrance")
+    assert store.query("sensor_messages", filters={"id": "e1"})[0]["distance"] is None
+
+
+def _outage_under_load(store: InformationState, mongo, outage_s: float) -> None:
+    """Write continuously while the DB is down for ``outage_s``; every document must arrive once."""
+    written: list[str] = []
+    stop = threading.Event()
+
+    def writer() -> None:
+        i = 0
+        while not stop.is_set():
+            written.append(store.record("sensor_messages", {"seq": i}, stored_type="printeps/Entrance"))
+            i += 1
+            time.sleep(0.005)
+
+    th = threading.Thread(target=writer)
+    th.start()
+    try:
+        time.sleep(0.3)
+        mongo.stop()
+        assert wait_for(lambda: store.health()["status"] == "degraded", 10)
+        time.sleep(outage_s)
+        assert store.health()["buffered"] > 0
+        mongo.start()
+        time.sleep(0.3)
+    finally:
+        stop.set()
+        th.join(timeout=10)
+    assert wait_for(lambda: store.health()["status"] == "ok", 30), store.health()
+    assert store.count("sensor_messages") == len(written)
+    assert sorted(d["seq"] for d in store.query("sensor_messages", limit=1000, newest_first=False)
+                  )[: min(1000, len(written))] == list(range(min(1000, len(written))))
+
+
+def test_db_outage_under_load_loses_nothing(store: InformationState, mongo) -> None:
+    _outage_under_load(store, mongo, outage_s=3.0)
+
+
+@pytest.mark.slow
+def test_db_outage_30s_under_load_loses_nothing(store: InformationState, mongo) -> None:
+    _outage_under_load(store, mongo, outage_s=30.0)
+
+
+def test_spool_survives_a_gateway_restart(mongo, tmp_path) -> None:
+    spool = tmp_path / "spool.jsonl"
+    s1 = InformationState(mongo.uri, "t_restart", spool, timeout_ms=300, retry_interval_s=0.2)
+    s1.record("actions", {"n": 1}, stored_type="printeps/Action")
+    mongo.stop()
+    s1.record("actions", {"n": 2}, stored_type="printeps/Action")
+    s1.record("actions", {"n": 3}, stored_type="printeps/Action")
+    s1.close(flush_timeout_s=1)
+    assert spool.read_text().count("\n") == 2  # kept on disk, not lost
+    mongo.start()
+    s2 = InformationState(mongo.uri, "t_restart", spool, timeout_ms=300, retry_interval_s=0.2)
+    try:
+        assert wait_for(lambda: s2.health()["status"] == "ok", 20)
+        assert sorted(d["n"] for d in s2.query("actions")) == [1, 2, 3]
+    finally:
+        s2.close()
+
+
+def test_full_spool_refuses_and_reports(mongo, tmp_path) -> None:
+    s = InformationState("mongodb://127.0.0.1:1/?directConnection=true", "t_full", tmp_path / "sp.jsonl",
+                         timeout_ms=200, spool_max_docs=2, retry_interval_s=5)
+    try:
+        for i in range(4):
+            s.record("actions", {"n": i}, stored_type="printeps/Action")
+        h = s.health()
+        assert h["status"] == "degraded" and h["buffered"] == 2 and h["dropped"] == 2
+        assert h["last_error"]
+    finally:
+        s.close(flush_timeout_s=0.5)
+
+
+def test_open_store_starts_the_embedded_db_and_stops_it(settings, monkeypatch) -> None:
+    monkeypatch.delenv("MONGO_URI", raising=False)
+    store = open_store(settings)
+    try:
+        assert store.health()["backend"] == "embedded"
+        store.record("actions", {"a": 1}, stored_type="printeps/Action")
+        assert store.count("actions") == 1
+        proc = store.embedded.proc
+    finally:
+        store.close()
+    assert proc.poll() is not None
+
+
+def test_mongo_uri_selects_an_external_db(settings, mongo, monkeypatch) -> None:
+    monkeypatch.setenv("MONGO_URI", mongo.uri)
+    store = open_store(settings)
+    try:
+        assert store.health()["backend"] == "external" and store.embedded is None
+        assert store.health()["status"] == "ok"
+    finally:
+        store.close()

@@ -1,0 +1,77 @@
+// CodeMirror editors as the workbench uses them: line numbers, highlighting, search, undo, and
+// diagnostics pushed from outside (the checks run on the whole rule set, not one file).
+
+import { basicSetup } from "codemirror";
+import { EditorView, keymap } from "@codemirror/view";
+import { EditorState } from "@codemirror/state";
+import { indentWithTab } from "@codemirror/commands";
+import { setDiagnostics, lintGutter } from "@codemirror/lint";
+import { languageFor } from "./lang.js";
+
+const theme = EditorView.theme({
+  "&": { height: "100%", fontSize: "15px", backgroundColor: "#fff" },
+  ".cm-scroller": { fontFamily: "ui-monospace, 'DejaVu Sans Mono', monospace", lineHeight: "1.5" },
+});
+
+/** A new editor in `parent`. onChange(text) is called after every edit of the text. */
+export function createEditor(parent, { doc, fileName, readOnly = false, onChange = null, label = "" }) {
+  const extensions = [
+    basicSetup,
+    lintGutter(),
+    keymap.of([indentWithTab]),
+    theme,
+    EditorView.lineWrapping,
+    languageFor(fileName),
+    EditorState.readOnly.of(readOnly),
+    EditorView.editable.of(!readOnly),
+    EditorView.contentAttributes.of({ "aria-label": label || fileName }),
+  ];
+  if (onChange) {
+    extensions.push(EditorView.updateListener.of((update) => {
+      if (update.docChanged) onChange(update.state.doc.toString());
+    }));
+  }
+  return new EditorView({ parent, state: EditorState.create({ doc, extensions }) });
+}
+
+/** Replace the whole text (e.g. discard edits) as one undoable change. */
+export function setText(view, text) {
+  view.dispatch({ changes: { from: 0, to: view.state.doc.length, insert: text } });
+}
+
+/** Show problems ({line, column, endColumn?, severity, message}) inline in the editor. */
+export function showProblems(view, problems) {
+  const doc = view.state.doc;
+  const diagnostics = problems.filter((p) => p.line > 0).map((p) => toDiagnostic(doc, p));
+  view.dispatch(setDiagnostics(view.state, diagnostics));
+}
+
+function toDiagnostic(doc, problem) {
+  const line = doc.line(Math.min(problem.line, doc.lines));
+  let from = line.from;
+  let to = line.to;
+  if (problem.column > 0) {
+    from = Math.min(line.from + problem.column - 1, line.to);
+    to = problem.endColumn > problem.column ? Math.min(line.from + problem.endColumn - 1, line.to) : wordEnd(doc, line, from);
+  }
+  if (to <= from) {
+    if (from >= line.to && from > line.from) from -= 1; // past the end of the line: mark its last character
+    to = Math.min(from + 1, line.to);
+  }
+  return { from, to, severity: problem.severity || "error", message: problem.message, source: problem.source };
+}
+
+function wordEnd(doc, line, from) {
+  const rest = doc.sliceString(from, line.to);
+  const word = /^[\w$.]+/.exec(rest);
+  return from + (word ? word[0].length : Math.min(1, rest.length));
+}
+
+/** Move the cursor to a problem and show it. */
+export function reveal(view, problem) {
+  const doc = view.state.doc;
+  const line = doc.line(Math.min(Math.max(problem.line, 1), doc.lines));
+  const pos = Math.min(line.from + Math.max(problem.column - 1, 0), line.to);
+  view.dispatch({ selection: { anchor: pos }, effects: EditorView.scrollIntoView(pos, { y: "center" }) });
+  view.focus();
+}

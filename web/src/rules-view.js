@@ -1,0 +1,479 @@
+// The main view: a rule set's files in editors, checked as you type, with the DRL preview, the
+// "Try it" panel and Deploy. Edits are kept as a local draft (localStorage) until deployed, so a
+// reload, a conflict or a closed tab loses nothing.
+
+import { h, fill, when, debounce } from "./dom.js";
+import { api, rulesetPath } from "./api.js";
+import { createEditor, setText, showProblems, reveal } from "./editor.js";
+import { localProblems } from "./checks.js";
+import { actionList, firedList } from "./actions.js";
+
+const CHECK_DELAY_MS = 500;
+
+const KINDS = [
+  [".dslr", "rules in plain sentences"],
+  [".dsl", "sentence dictionary"],
+  [".drl", "rules (technical)"],
+  [".json", "examples"],
+];
+
+function kindOf(fileName) {
+  const lower = fileName.toLowerCase();
+  const index = KINDS.findIndex(([ext]) => lower.endsWith(ext));
+  return index < 0 ? { order: KINDS.length, label: "file" } : { order: index, label: KINDS[index][1] };
+}
+
+/** File names in the order a non-programmer should meet them: sentences first. */
+export function orderedFiles(names) {
+  return [...names].sort((a, b) => kindOf(a).order - kindOf(b).order || a.localeCompare(b));
+}
+
+function draftKey(name) {
+  return `printeps.workbench.draft.${name}`;
+}
+
+function sameFiles(a, b) {
+  const keys = Object.keys(a);
+  return keys.length === Object.keys(b).length && keys.every((k) => a[k] === b[k]);
+}
+
+/** Open rule set `name` in `main`; returns the view (with dispose()) or null when it failed. */
+export async function showRules(main, ctx, name) {
+  fill(main, h("p", { class: "muted" }, `Opening “${name}”…`));
+  let current;
+  try {
+    current = await api("GET", rulesetPath(name));
+  } catch (err) {
+    fill(main, h("div", { class: "message error", role: "alert" }, `Cannot open the rule set “${name}”: ${err.message}`));
+    return null;
+  }
+  const [types, examples] = await Promise.all([
+    api("GET", rulesetPath(name, "/types")).catch(() => ({})),
+    api("GET", rulesetPath(name, "/examples")).catch(() => []),
+  ]);
+  return new RulesView(main, ctx, current, types || {}, Array.isArray(examples) ? examples : []);
+}
+
+class RulesView {
+  constructor(main, ctx, current, types, examples) {
+    this.ctx = ctx;
+    this.info = current.info || current;
+    this.name = this.info.name;
+    this.base = this.info.version;
+    this.original = { ...(current.files || {}) };
+    this.types = types;
+    this.examples = examples;
+    this.editable = ctx.isAuthor();
+    this.views = {};
+    this.hosts = {};
+    this.tabs = {};
+    this.local = [];
+    this.server = [];
+    this.checkError = "";
+    this.seq = 0;
+    this.previewOn = false;
+    this.scheduleCheck = debounce(() => this.check(), CHECK_DELAY_MS);
+    this.saveDraft = debounce(() => this.storeDraft(), 300);
+    this.build(main);
+    const draft = this.loadDraft();
+    this.active = orderedFiles(Object.keys(draft ? draft.files : this.original))[0];
+    this.createEditors(draft ? draft.files : this.original);
+    if (draft) this.announceDraft(draft);
+    this.select(this.active);
+    this.updateDirty();
+    this.check();
+  }
+
+  dispose() {
+    this.scheduleCheck.cancel();
+    this.saveDraft.cancel();
+    this.storeDraft();
+    this.seq++;
+  }
+
+  // ---- layout -------------------------------------------------------------------------------
+
+  build(main) {
+    this.liveEl = h("span", { class: "live", "data-testid": "live-version" });
+    this.dirtyEl = h("span", { class: "badge dirty", hidden: true }, "Changed — not deployed yet");
+    this.bannerEl = h("div", { class: "banners" });
+    this.tabsEl = h("div", { class: "tabs", role: "tablist" });
+    this.statusEl = h("span", { class: "check-status", "data-testid": "check-status", "aria-live": "polite" });
+    this.previewToggle = h("input", { type: "checkbox", onchange: () => this.togglePreview() });
+    this.editorsEl = h("div", { class: "editors" });
+    this.previewTitle = h("div", { class: "pane-title" });
+    this.previewHost = h("div", { class: "preview-host" });
+    this.previewEl = h("div", { class: "preview", hidden: true, "data-testid": "preview" }, this.previewTitle, this.previewHost);
+    this.problemsEl = h("ul", { class: "problems", "data-testid": "problems" });
+    this.previewView = createEditor(this.previewHost, { doc: "", fileName: "preview.drl", readOnly: true, label: "Generated DRL" });
+
+    fill(main, h("section", { class: "ruleset" },
+      h("div", { class: "title-row" }, h("h1", {}, this.name), this.liveEl, this.dirtyEl),
+      this.bannerEl,
+      this.editable ? null : h("div", { class: "message info" },
+        "You are signed in with a caller token: you can read and try the rules, but not change or deploy them."),
+      h("div", { class: "columns" },
+        h("div", { class: "left" },
+          h("div", { class: "toolbar" }, this.tabsEl,
+            h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
+            this.statusEl),
+          h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
+          h("h2", { class: "small" }, "Problems"), this.problemsEl),
+        h("div", { class: "right" }, this.buildTry(), this.buildDeploy()))));
+    this.renderLive();
+  }
+
+  renderLive() {
+    const i = this.info;
+    fill(this.liveEl, `Live: version ${i.version}`, i.author ? ` · by ${i.author}` : "", ` · ${when(i.deployed_at)}`);
+  }
+
+  createEditors(files) {
+    for (const fileName of orderedFiles(Object.keys(files))) {
+      const host = h("div", { class: "editor-host", hidden: true, "data-file": fileName });
+      this.editorsEl.append(host);
+      this.hosts[fileName] = host;
+      this.views[fileName] = createEditor(host, {
+        doc: files[fileName], fileName, readOnly: !this.editable,
+        label: `Editor for ${fileName}`, onChange: () => this.changed(),
+      });
+      const tab = h("button", { class: "tab", role: "tab", "data-file": fileName, onclick: () => this.select(fileName) },
+        h("span", { class: "tab-name" }, fileName), h("span", { class: "tab-kind" }, kindOf(fileName).label),
+        h("span", { class: "tab-count" }));
+      this.tabs[fileName] = tab;
+      this.tabsEl.append(tab);
+    }
+  }
+
+  select(fileName) {
+    this.active = fileName;
+    for (const [name, host] of Object.entries(this.hosts)) host.hidden = name !== fileName;
+    for (const [name, tab] of Object.entries(this.tabs)) tab.setAttribute("aria-selected", String(name === fileName));
+    this.views[fileName]?.requestMeasure();
+    this.renderPreview();
+  }
+
+  files() {
+    const files = {};
+    for (const [name, view] of Object.entries(this.views)) files[name] = view.state.doc.toString();
+    return files;
+  }
+
+  changed() {
+    this.updateDirty();
+    this.saveDraft();
+    this.statusEl.className = "check-status pending";
+    fill(this.statusEl, "Checking…");
+    this.scheduleCheck();
+  }
+
+  updateDirty() {
+    this.dirtyEl.hidden = sameFiles(this.files(), this.original);
+  }
+
+  // ---- drafts ---------------------------------------------------------------------------------
+
+  loadDraft() {
+    if (!this.editable) return null;
+    try {
+      const draft = JSON.parse(localStorage.getItem(draftKey(this.name)) || "null");
+      if (!draft || typeof draft.files !== "object" || sameFiles(draft.files, this.original)) return null;
+      if (draft.base !== this.info.version) this.base = draft.base;
+      return draft;
+    } catch {
+      return null;
+    }
+  }
+
+  storeDraft() {
+    if (!this.editable) return;
+    const files = this.files();
+    try {
+      if (sameFiles(files, this.original)) localStorage.removeItem(draftKey(this.name));
+      else localStorage.setItem(draftKey(this.name), JSON.stringify({ base: this.base, files, saved_at: new Date().toISOString() }));
+    } catch {
+      this.banner("warning", "These files are too big to keep a local copy in the browser: deploy or keep the tab open.");
+    }
+  }
+
+  announceDraft(draft) {
+    const parts = [`Your changes from ${when(draft.saved_at)} are back (they were not deployed).`];
+    if (draft.base !== this.info.version) {
+      parts.push(` You started from version ${draft.base}; version ${this.info.version} has been deployed since.`);
+    }
+    this.banner("info", parts.join(""), h("button", { class: "link", onclick: (e) => {
+      e.target.closest(".message").remove();
+      this.discard();
+    } }, "Throw my changes away"));
+  }
+
+  banner(kind, text, ...extra) {
+    this.bannerEl.append(h("div", { class: `message ${kind}`, role: kind === "error" ? "alert" : "status" }, text, " ", extra));
+  }
+
+  discard() {
+    for (const [name, view] of Object.entries(this.views)) {
+      if (name in this.original && view.state.doc.toString() !== this.original[name]) setText(view, this.original[name]);
+    }
+    this.base = this.info.version;
+    localStorage.removeItem(draftKey(this.name));
+  }
+
+  // ---- checking -------------------------------------------------------------------------------
+
+  async check() {
+    const seq = ++this.seq;
+    const files = this.files();
+    this.local = localProblems(files);
+    this.renderProblems(true);
+    try {
+      const result = await api("POST", rulesetPath(this.name, "/validate"), { files });
+      if (seq !== this.seq) return;
+      this.server = normalizeErrors(result && result.errors);
+      this.checkError = "";
+    } catch (err) {
+      if (seq !== this.seq) return;
+      this.server = normalizeErrors(err.errors);
+      this.checkError = this.server.length || err.status === 403 ? "" : err.message;
+    }
+    this.renderProblems(false);
+    if (this.previewOn) await this.expand(seq, files);
+  }
+
+  allProblems() {
+    const order = orderedFiles(Object.keys(this.views));
+    const rank = (p) => (order.includes(p.file) ? order.indexOf(p.file) : -1);
+    return [...this.server, ...this.local].sort((a, b) => rank(a) - rank(b) || a.line - b.line || a.column - b.column);
+  }
+
+  renderProblems(pending) {
+    const problems = this.allProblems();
+    for (const [name, view] of Object.entries(this.views)) {
+      const mine = problems.filter((p) => p.file === name);
+      showProblems(view, mine);
+      const count = this.tabs[name].querySelector(".tab-count");
+      count.textContent = mine.length ? String(mine.length) : "";
+      count.className = `tab-count${mine.some((p) => p.severity === "error") ? " error" : mine.length ? " warning" : ""}`;
+    }
+    fill(this.problemsEl, problems.map((p) => h("li", { class: p.severity },
+      h("button", { class: "problem", onclick: () => this.goTo(p) },
+        h("span", { class: "where" }, `${p.file || "rule set"}${p.line ? `, line ${p.line}` : ""}${p.column ? `, column ${p.column}` : ""}`),
+        h("span", { class: "what" }, p.message)))));
+    const errors = problems.filter((p) => p.severity === "error").length;
+    const warnings = problems.length - errors;
+    let text;
+    let kind;
+    if (pending) [text, kind] = ["Checking…", "pending"];
+    else if (this.checkError) [text, kind] = [`Could not check: ${this.checkError}`, "error"];
+    else if (errors) [text, kind] = [`✗ ${errors} problem${errors > 1 ? "s" : ""}`, "error"];
+    else if (warnings) [text, kind] = [`⚠ ${warnings} warning${warnings > 1 ? "s" : ""}`, "warning"];
+    else [text, kind] = ["✓ No problems", "ok"];
+    this.statusEl.className = `check-status ${kind}`;
+    this.statusEl.textContent = text;
+    if (!problems.length) this.problemsEl.append(h("li", { class: "none" }, pending ? "Checking…" : "None."));
+  }
+
+  goTo(problem) {
+    if (!this.views[problem.file]) return;
+    this.select(problem.file);
+    if (problem.line > 0) reveal(this.views[problem.file], problem);
+  }
+
+  // ---- DRL preview ----------------------------------------------------------------------------
+
+  togglePreview() {
+    this.previewOn = this.previewToggle.checked;
+    this.previewEl.hidden = !this.previewOn;
+    this.editorsEl.parentElement.classList.toggle("split", this.previewOn);
+    if (this.previewOn) this.expand(this.seq, this.files());
+  }
+
+  async expand(seq, files) {
+    try {
+      const result = await api("POST", rulesetPath(this.name, "/expand"), { files });
+      if (seq !== this.seq) return;
+      this.expanded = (result && (result.expanded || result.files)) || {};
+      this.expandError = "";
+    } catch (err) {
+      if (seq !== this.seq) return;
+      this.expanded = {};
+      this.expandError = err.message;
+    }
+    this.renderPreview();
+  }
+
+  renderPreview() {
+    if (!this.previewOn) return;
+    const isDslr = this.active.toLowerCase().endsWith(".dslr");
+    let text = "";
+    if (!isDslr) {
+      this.previewTitle.textContent = `${this.active} is not a .dslr file: there is nothing to expand.`;
+    } else if (this.expandError) {
+      this.previewTitle.textContent = `Cannot show the DRL: ${this.expandError}`;
+    } else {
+      this.previewTitle.textContent = `What the rule engine reads for ${this.active} (generated, read-only)`;
+      text = (this.expanded && this.expanded[this.active]) || "";
+    }
+    if (this.previewView.state.doc.toString() !== text) setText(this.previewView, text);
+  }
+
+  // ---- Try it ---------------------------------------------------------------------------------
+
+  buildTry() {
+    this.tryResultEl = h("div", { class: "try-result", "data-testid": "try-result", "aria-live": "polite" });
+    const factsHost = h("div", { class: "facts-host" });
+    const initial = this.examples.length ? this.examples[0].facts : [];
+    this.factsView = createEditor(factsHost, { doc: JSON.stringify(initial, null, 2), fileName: "facts.json", label: "Facts (JSON)" });
+    const exampleButtons = this.examples.map((ex) => h("button", {
+      class: "chip", onclick: () => setText(this.factsView, JSON.stringify(ex.facts, null, 2)),
+    }, ex.name));
+    const typeButtons = Object.keys(this.types).sort().map((type) => h("button", {
+      class: "chip add", title: `Fields: ${Object.entries(this.types[type]).map(([f, t]) => `${f} (${t})`).join(", ")}`,
+      onclick: () => this.addFact(type),
+    }, `+ ${type}`));
+    return h("div", { class: "card try" },
+      h("h2", {}, "Try it"),
+      h("p", { class: "hint" }, "Pick a situation (or write facts), then press Try it. It uses the text in the editor; nothing is deployed."),
+      exampleButtons.length ? h("div", { class: "chips" }, h("span", { class: "label" }, "Situations:"), exampleButtons) : null,
+      typeButtons.length ? h("div", { class: "chips" }, h("span", { class: "label" }, "Add a fact:"), typeButtons) : null,
+      factsHost,
+      h("button", { class: "big primary", "data-testid": "try", onclick: () => this.tryIt() }, "▶ Try it"),
+      this.tryResultEl);
+  }
+
+  addFact(type) {
+    const template = { type };
+    for (const [field, javaType] of Object.entries(this.types[type] || {})) template[field] = sampleValue(field, javaType);
+    let facts;
+    try {
+      facts = JSON.parse(this.factsView.state.doc.toString() || "[]");
+    } catch {
+      facts = null;
+    }
+    if (!Array.isArray(facts)) facts = facts && typeof facts === "object" ? [facts] : [];
+    facts.push(template);
+    setText(this.factsView, JSON.stringify(facts, null, 2));
+  }
+
+  async tryIt() {
+    const text = this.factsView.state.doc.toString();
+    let facts;
+    try {
+      facts = JSON.parse(text.trim() || "[]");
+    } catch (err) {
+      fill(this.tryResultEl, h("div", { class: "message error", role: "alert" }, `The facts are not valid JSON: ${jsonErrorWhere(text, err)}`));
+      return;
+    }
+    if (!Array.isArray(facts)) facts = [facts];
+    fill(this.tryResultEl, h("p", { class: "muted" }, "Trying…"));
+    try {
+      const result = await api("POST", rulesetPath(this.name, "/try"), { files: this.files(), facts });
+      fill(this.tryResultEl,
+        h("h3", {}, "The robot would:"), actionList(result.actions),
+        h("h3", {}, "Rules that fired, in order:"), firedList(result.fired),
+        h("details", {}, h("summary", {}, "Facts afterwards"), h("pre", {}, JSON.stringify(result.facts || [], null, 2))));
+    } catch (err) {
+      const compile = normalizeErrors(err.errors.filter((e) => e.file !== undefined || e.line !== undefined));
+      const factErrors = err.errors.filter((e) => e.file === undefined && e.line === undefined);
+      if (compile.length) {
+        this.server = compile;
+        this.renderProblems(false);
+      }
+      fill(this.tryResultEl, h("div", { class: "message error", role: "alert" },
+        compile.length ? "The rules have problems (see the list under the editor): fix them and try again." : err.message,
+        factErrors.length ? h("ul", {}, factErrors.map((e) => h("li", {}, describeFactError(e)))) : null));
+    }
+  }
+
+  // ---- Deploy ---------------------------------------------------------------------------------
+
+  buildDeploy() {
+    if (!this.editable) return null;
+    this.commentEl = h("input", { type: "text", class: "comment", maxlength: "500", "aria-label": "What did you change?",
+      placeholder: "e.g. Friendlier greeting for groups" });
+    this.deployResultEl = h("div", { class: "deploy-result", "data-testid": "deploy-result", "aria-live": "polite" });
+    return h("div", { class: "card deploy" },
+      h("h2", {}, "Deploy"),
+      h("label", { class: "field" }, "What did you change? (shown in the history)", this.commentEl),
+      h("div", { class: "buttons" },
+        h("button", { class: "big primary", "data-testid": "deploy", onclick: () => this.deploy() }, "Deploy to the robot"),
+        h("button", { class: "big secondary", onclick: () => this.discard() }, "Undo all my changes")),
+      this.deployResultEl);
+  }
+
+  async deploy() {
+    const files = this.files();
+    const comment = this.commentEl.value.trim();
+    fill(this.deployResultEl, h("p", { class: "muted" }, "Deploying…"));
+    try {
+      const result = await api("PUT", rulesetPath(this.name), { files, comment, base_version: this.base });
+      this.original = files;
+      this.base = result.version;
+      this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
+      localStorage.removeItem(draftKey(this.name));
+      this.commentEl.value = "";
+      this.renderLive();
+      this.updateDirty();
+      fill(this.deployResultEl, h("div", { class: "message ok", role: "status" }, `✓ Deployed. Version ${result.version} is now live.`));
+      this.ctx.refreshRulesets();
+    } catch (err) {
+      if (err.status === 409) this.conflict(err.body && err.body.current);
+      else if (err.errors.length) {
+        this.server = normalizeErrors(err.errors);
+        this.renderProblems(false);
+        fill(this.deployResultEl, h("div", { class: "message error", role: "alert" },
+          `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
+      } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
+    }
+  }
+
+  conflict(current) {
+    const started = this.base;
+    const compare = `#/history/${encodeURIComponent(this.name)}?from=${started}&to=${current}`;
+    fill(this.deployResultEl, h("div", { class: "message warning", role: "alert", "data-testid": "conflict" },
+      h("p", {}, `Not deployed: someone else deployed version ${current} while you were editing (you started from version ${started}). `,
+        "Your changes are still here; nothing was lost."),
+      h("div", { class: "buttons" },
+        h("a", { class: "button secondary", href: compare, target: "_blank", rel: "noopener" }, `See what changed in version ${current}`),
+        h("button", { class: "secondary", onclick: () => {
+          this.base = current;
+          this.storeDraft();
+          this.deploy();
+        } }, `Deploy mine anyway (replaces version ${current}; it stays in the history)`))));
+  }
+}
+
+/** Server errors ({file, line, column, message}) as problems. */
+function normalizeErrors(errors) {
+  if (!Array.isArray(errors)) return [];
+  return errors.filter((e) => e && (e.message || e.msg)).map((e) => ({
+    file: e.file || "", line: Number(e.line) || 0, column: Number(e.column) || 0,
+    severity: e.severity === "warning" ? "warning" : "error", message: String(e.message || e.msg), source: "compiler",
+  }));
+}
+
+function describeFactError(e) {
+  const where = [`Fact ${e.index !== undefined ? Number(e.index) + 1 : "?"}`];
+  if (e.type) where.push(`(${e.type})`);
+  if (e.field) where.push(`field “${e.field}”`);
+  return `${where.join(" ")}: ${e.message}`;
+}
+
+/** "line L, column C: message" for a JSON.parse error (browsers say "position N"). */
+function jsonErrorWhere(text, err) {
+  const position = /position (\d+)/.exec(err.message);
+  if (!position) return err.message;
+  const before = text.slice(0, Number(position[1]));
+  const line = before.split("\n").length;
+  const column = before.length - before.lastIndexOf("\n");
+  return `line ${line}, column ${column}: ${err.message.replace(/\s*\(line \d+ column \d+\)/, "")}`;
+}
+
+function sampleValue(field, javaType) {
+  const t = String(javaType).toLowerCase();
+  if (field === "id") return "new-1";
+  if (/int|long|short|byte/.test(t)) return 0;
+  if (/double|float|number|bigdecimal/.test(t)) return 0.0;
+  if (/bool/.test(t)) return false;
+  return "";
+}
