@@ -67,6 +67,8 @@ class RosSettings(BaseModel):
     max_customers: int = Field(default=100, description="Readings with more customers are rejected.")
     max_distance_m: float = Field(default=20.0, description="Readings farther than this are rejected.")
     queue_size: int = Field(default=1000, description="Bound of the node's work queue.")
+    robot_start: dict[str, str] = Field(
+        default_factory=lambda: {"pepper": "counter"}, description="Where each robot is at start (Robot facts).")
 
 
 class TokenEntry(BaseModel):
@@ -153,6 +155,31 @@ class WorkflowSettings(BaseModel):
     runs_kept: int = Field(default=200, description="Recent runs kept for GET /api/workflows/runs.")
 
 
+class StreamSettings(BaseModel):
+    """Stream reasoning (C-SPARQL) and the teahouse ontology: files, bounds and defaults."""
+
+    ontology_file: str = str(PROJECT_ROOT / "ontology" / "teahouse.ttl")
+    ontology_graph: str = Field(
+        default="http://printeps.org/cafe/ontology",
+        description="IRI under which the ontology is a static graph for queries (FROM <iri>).",
+    )
+    swrl_file: str = str(PROJECT_ROOT / "ontology" / "teahouse.swrl")
+    queries_dir: str | None = Field(
+        default=str(PROJECT_ROOT / "ontology" / "queries"),
+        description="*.rq files registered at start-up (None: none).",
+    )
+    stream_mappings: dict[str, str] = Field(
+        default_factory=lambda: {"http://printeps.org/cafe/entrance": "entrance"},
+        description="Stream IRI -> message mapping used when a posted message names none.",
+    )
+    max_window_triples: int = Field(default=1_000_000, description="Per query and stream; oldest dropped (counted).")
+    max_message_triples: int = Field(default=100_000, description="Triples in one posted message.")
+    max_queries: int = Field(default=100)
+    results_kept: int = Field(default=100, description="Recent non-empty results kept per query.")
+    max_pending_posts: int = Field(default=64, description="Concurrent POST /api/streams before 503.")
+    fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
+
+
 class Settings(BaseModel):
     """All gateway settings. Sections are added by the adapters that use them."""
 
@@ -163,6 +190,7 @@ class Settings(BaseModel):
     store: StoreSettings = Field(default_factory=StoreSettings)
     ros: RosSettings = Field(default_factory=RosSettings)
     workflows: WorkflowSettings = Field(default_factory=WorkflowSettings)
+    streams: StreamSettings = Field(default_factory=StreamSettings)
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @property

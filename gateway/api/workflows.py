@@ -215,7 +215,7 @@ def run(name: WorkflowName, body: RunBody, request: Request, _: Principal = Depe
 def code(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -> Response:
     """The workflow as a standalone Python rclpy node (what the papers' editor generated)."""
     entry = _entry(service(request), name)
-    return PlainTextResponse(generate(entry.workflow), media_type="text/x-python")
+    return PlainTextResponse(generate(entry.workflow, version=entry.info.version), media_type="text/x-python")
 
 
 # ------------------------------------------------------------------ the workbench page

@@ -20,6 +20,7 @@ import itertools
 import json
 import re
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -141,7 +142,9 @@ def _expand_dslr(
         for dsl_name in named:
             if dsl_name in mappings:
                 chosen.append(mappings[dsl_name])
-            elif dsl_name not in files:
+            elif dsl_name in files:
+                return None, []  # the DSL file itself is broken: its own errors say where
+            else:
                 line = _line_of(text, re.compile(r"^\s*expander\s+" + re.escape(dsl_name), re.MULTILINE))
                 errors.append(CompileError(fname, line, 1, f"expander '{dsl_name}' not found in this rule set"))
     else:
@@ -166,6 +169,11 @@ def _expand_dslr(
             continue  # always paired with an "Unable to expand" for the same line
         errors.append(CompileError(fname, line, column, message))
     return expanded, errors
+
+
+def _line_of(text: str, pattern: re.Pattern[str]) -> int:
+    match = pattern.search(text)
+    return text.count("\n", 0, match.start()) + 1 if match else 0
 
 
 def expand(files: dict[str, str]) -> dict[str, str]:
@@ -249,6 +257,29 @@ def check(files: dict[str, str]) -> list[CompileError]:
     except CompileFailed as failed:
         return failed.errors
     return []
+
+
+_cache: "OrderedDict[str, CompiledRuleSet]" = OrderedDict()
+CACHE_SIZE = 16
+
+
+def compile_cached(files: dict[str, str], label: str = "ruleset") -> CompiledRuleSet:
+    """Like :func:`compile_files`, reusing an earlier build of identical files.
+
+    A compiled rule set is immutable, so sharing it between versions, engines and drafts is safe;
+    it makes "try it" in the workbench, validate-then-deploy and rollbacks cost one build only.
+    """
+    key = content_hash(files)
+    with _compile_lock:
+        cached = _cache.get(key)
+        if cached is not None:
+            _cache.move_to_end(key)
+            return cached
+        compiled = compile_files(files, label)
+        _cache[key] = compiled
+        while len(_cache) > CACHE_SIZE:
+            _cache.popitem(last=False)
+        return compiled
 
 
 def compile_files(files: dict[str, str], label: str = "ruleset") -> CompiledRuleSet:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable
 
@@ -41,12 +40,10 @@ DRAFT = "(draft)"
 class Engine:
     """Rule sets by name, each with a live version; thread-safe."""
 
-    def __init__(self, settings: Settings | None = None, compile_cache_size: int = 8):
+    def __init__(self, settings: Settings | None = None):
         self.settings = settings or load_settings()
         self.store = VersionStore(Path(self.settings.data_dir) / "registry")
         self._live: dict[str, tuple[VersionInfo, CompiledRuleSet]] = {}
-        self._cache: OrderedDict[str, CompiledRuleSet] = OrderedDict()
-        self._cache_size = compile_cache_size
         self._lock = threading.RLock()
         self._listeners: list[Listener] = []
         self._sessions: dict[str, StatefulSession] = {}
@@ -67,18 +64,7 @@ class Engine:
     # ------------------------------------------------------------------ compile
 
     def _compile(self, files: dict[str, str], label: str) -> CompiledRuleSet:
-        key = content_hash(files)
-        with self._lock:
-            cached = self._cache.get(key)
-            if cached is not None:
-                self._cache.move_to_end(key)
-                return cached
-        compiled = compiler.compile_files(files, label)
-        with self._lock:
-            self._cache[key] = compiled
-            while len(self._cache) > self._cache_size:
-                self._cache.popitem(last=False)
-        return compiled
+        return compiler.compile_cached(files, label)
 
     def validate(self, name: str, files: dict[str, str]) -> list[CompileError]:
         """All compile errors of ``files`` ([] when they compile). Deploys nothing."""

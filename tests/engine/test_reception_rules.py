@@ -18,6 +18,7 @@ import pytest
 
 from gateway.config import Settings
 from gateway.engine import Engine
+from gateway.engine.ruleset import read_folder
 
 RULES_DIR = Path(__file__).resolve().parents[2] / "rules" / "drl" / "reception"
 RULE_SET = "reception"
@@ -172,8 +173,8 @@ AGE_EDGES = {0: "infant", 3: "infant", 4: "child", 12: "child", 13: "teenager", 
 # --- fixtures and helpers ------------------------------------------------------------------
 
 def rule_set_files() -> dict[str, str]:
-    return {p.name: p.read_text(encoding="utf-8") for p in sorted(RULES_DIR.iterdir())
-            if p.suffix in (".drl", ".dsl", ".dslr")}
+    """The folder as the engine's loader reads it (rule files and examples.json)."""
+    return read_folder(RULES_DIR)
 
 
 @pytest.fixture(scope="module")
@@ -220,9 +221,13 @@ def expected_types(facts: list[Fact]) -> Counter:
 # --- tests ---------------------------------------------------------------------------------
 
 def test_the_rule_set_has_32_rules_in_three_kinds() -> None:
-    names = re.findall(r'^rule "([^"]+)"', rule_set_files()["reception.dslr"], re.M)
+    text = rule_set_files()["reception.dslr"]
+    names = re.findall(r'^rule "([^"]+)"', text, re.M)
     assert len(names) == 32 and len(set(names)) == 32
-    assert TYPE_RULES <= set(names)
+    # The file's three sections: customer type, group, speech and motion.
+    sections = re.split(r"^// \d\. ", text, flags=re.M)[1:]
+    assert [len(re.findall(r'^rule "', sec, re.M)) for sec in sections] == [6, 12, 14]
+    assert set(re.findall(r'^rule "([^"]+)"', sections[0], re.M)) == TYPE_RULES
 
 
 def test_every_rule_has_a_scenario() -> None:
@@ -230,6 +235,10 @@ def test_every_rule_has_a_scenario() -> None:
     covered = {name for _, _, fired, _ in SCENARIOS for name in fired}
     covered |= {name for name, _, _ in TYPE_SCENARIOS}
     assert names - covered == set()
+
+
+def test_the_rule_set_compiles_cleanly(engine: Engine) -> None:
+    assert engine.validate(RULE_SET, rule_set_files()) == []
 
 
 def test_the_dsl_expands_every_line(engine: Engine) -> None:

@@ -1,0 +1,50 @@
+"""Wire the real pipeline stages: detector (stream side), rules (gateway.engine), dispatcher, store.
+
+Why one place: the node, the demo and the benchmark all build the same chain; tests replace single
+stages by passing their own.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable
+
+from gateway.ros.detector import EntryDetector, EventDetector
+from gateway.ros.dispatcher import ActionDispatcher
+from gateway.ros.pipeline import Pipeline, Rules, engine_rules
+
+log = logging.getLogger(__name__)
+
+
+def make_detector(distance_to_entrance: float = 3.3) -> EventDetector:
+    """The entry detector: the stream package's CustomerDetectionQuery when it offers one, else ours."""
+    try:
+        from gateway.stream import entrance_detector  # type: ignore[attr-defined]
+    except ImportError:
+        return EntryDetector(distance_to_entrance=distance_to_entrance)
+    return entrance_detector(distance_to_entrance=distance_to_entrance)
+
+
+def pipeline_factory(settings: Any, store: Any, rules: Rules, *, detector: EventDetector | None = None,
+                     on_event: Callable[[str, dict[str, Any]], None] | None = None,
+                     on_outcome: Callable[[dict[str, Any]], None] | None = None) -> Callable[[Any], Pipeline]:
+    """A factory for GatewayNode: builds the Pipeline once the node (and its service caller) exists."""
+    ros = settings.ros
+
+    def build(node: Any) -> Pipeline:
+        dispatcher = ActionDispatcher(node.caller, dict(ros.robots), timeout_s=ros.call_timeout_s,
+                                      retries=ros.call_retries, store=store, on_outcome=on_outcome)
+        return Pipeline(detector or make_detector(), rules, dispatcher, store, ruleset=ros.ruleset,
+                        robot_positions=dict(ros.robot_start), max_customers=ros.max_customers,
+                        max_distance_m=ros.max_distance_m, on_event=on_event)
+
+    return build
+
+
+def engine_stage(settings: Any) -> tuple[Any, Rules]:
+    """Start the engine with the rule sets from the rules dir; returns (engine, rules stage)."""
+    from gateway.engine import Engine
+
+    engine = Engine(settings)
+    engine.load_rules_dir()
+    return engine, engine_rules(engine)
