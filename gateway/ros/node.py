@@ -81,8 +81,8 @@ class GatewayNode(Node):
 
     def __init__(self, ros_settings: Any, pipeline_factory: Callable[["GatewayNode"], Any],
                  rules: Callable[[str, list[dict[str, Any]]], dict[str, Any]] | None = None,
-                 store: Any = None) -> None:
-        super().__init__(ros_settings.node_name)
+                 store: Any = None, context: Any = None) -> None:
+        super().__init__(ros_settings.node_name, context=context)
         self.cfg = ros_settings
         self.store = store
         self.rules = rules

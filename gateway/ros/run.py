@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
         engine, rules = engine_stage(settings)
         rt = RosRuntime(args=["gateway", *ros_args])
         try:
-            rt.add(GatewayNode(settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store))
+            rt.make(GatewayNode, settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store)
             print("gateway node ready", flush=True)
             stop.wait()
             print("gateway node stopping", flush=True)

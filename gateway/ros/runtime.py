@@ -48,6 +48,10 @@ class RosRuntime:
             self._thread.start()
         return node
 
+    def make(self, node_cls: type, *args: object, **kwargs: object) -> Node:
+        """Create ``node_cls(*args, context=<this runtime's context>, **kwargs)`` and spin it."""
+        return self.add(node_cls(*args, context=self.context, **kwargs))
+
     def _spin(self) -> None:
         try:
             self.executor.spin()

@@ -26,8 +26,9 @@ from printeps_interfaces.srv import Gesture, MoveTo, Speak
 
 class RobotSim(Node):
     def __init__(self, name: str = "pepper", *, log_path: str | Path | None = None, hang_s: float = 0.0,
-                 fail: bool = False, on_call: Callable[[dict[str, Any]], None] | None = None) -> None:
-        super().__init__(f"{name}_sim", namespace=f"/{name}")
+                 fail: bool = False, on_call: Callable[[dict[str, Any]], None] | None = None,
+                 context: Any = None) -> None:
+        super().__init__(f"{name}_sim", namespace=f"/{name}", context=context)
         self.robot = name
         self.hang_s = hang_s
         self.fail = fail
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     rt = RosRuntime()
     try:
-        rt.add(RobotSim(args.name, log_path=args.log, hang_s=args.hang_s, fail=args.fail))
+        rt.make(RobotSim, args.name, log_path=args.log, hang_s=args.hang_s, fail=args.fail)
         print(f"robot simulator {args.name} ready", flush=True)
         stop.wait()
     finally:

@@ -28,8 +28,8 @@ class EntranceSensorSim(Node):
 
     def __init__(self, scenario: Scenario, *, topic: str = "entrance", sensor_topic: str | None = None,
                  rate_hz: float | None = None, speed: float = 1.0, wait_for_subscribers: float = 10.0,
-                 on_reading: Callable[[dict[str, Any]], None] | None = None) -> None:
-        super().__init__(f"{scenario.sensor_id}_sim")
+                 on_reading: Callable[[dict[str, Any]], None] | None = None, context: Any = None) -> None:
+        super().__init__(f"{scenario.sensor_id}_sim", context=context)
         self.scenario = scenario
         self.rate_hz = rate_hz or scenario.rate_hz
         self.speed = speed
@@ -91,8 +91,8 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     rt = RosRuntime()
     try:
-        sim = rt.add(EntranceSensorSim(scenario, topic=args.topic, sensor_topic=args.sensor_topic,
-                                       rate_hz=args.rate, speed=args.speed))
+        sim = rt.make(EntranceSensorSim, scenario, topic=args.topic, sensor_topic=args.sensor_topic,
+                      rate_hz=args.rate, speed=args.speed)
         sim.start()
         print(f"sensor simulator: playing {scenario.name!r} ({scenario.duration:.0f} s)", flush=True)
         while not stop.is_set() and not sim.done.is_set():

@@ -23,15 +23,15 @@ SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "teahouse-recepti
 
 
 def start_gateway(rt: RosRuntime, settings, store, rules) -> GatewayNode:
-    return rt.add(GatewayNode(settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store))
+    return rt.make(GatewayNode, settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store)
 
 
 def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_id, settings, store,
                                                                         engine_rules) -> None:
     with RosRuntime(domain_id=domain_id) as rt:
-        robot = rt.add(RobotSim("pepper"))
+        robot = rt.make(RobotSim, "pepper")
         gw = start_gateway(rt, settings, store, engine_rules)
-        sensor = rt.add(EntranceSensorSim(load_scenario(SCENARIO), speed=4.0))
+        sensor = rt.make(EntranceSensorSim, load_scenario(SCENARIO), speed=4.0)
         sensor.start()
         assert sensor.done.wait(30)
         assert wait_for(lambda: gw.queue.empty() and len(robot.calls) >= 8, 20), robot.calls
@@ -60,7 +60,7 @@ def test_bad_sensor_values_are_rejected_recorded_and_do_not_stop_the_node(domain
         gw = start_gateway(rt, settings, store, engine_rules)
         from rclpy.node import Node
         from printeps_interfaces.msg import Entrance
-        pub_node = rt.add(Node("bad_sensor"))
+        pub_node = rt.make(Node, "bad_sensor")
         pub = pub_node.create_publisher(Entrance, "entrance", 100)
         assert wait_for(lambda: pub.get_subscription_count() > 0, 15)
         wait_for(lambda: False, 0.3)
@@ -102,7 +102,7 @@ def test_hanging_robot_times_out_then_recorded(domain_id, settings, store, engin
     settings.ros.call_timeout_s = 0.4
     settings.ros.call_retries = 1
     with RosRuntime(domain_id=domain_id) as robot_rt, RosRuntime(domain_id=domain_id) as rt:
-        robot_rt.add(RobotSim("pepper", hang_s=1.5))
+        robot_rt.make(RobotSim, "pepper", hang_s=1.5)
         gw = start_gateway(rt, settings, store, engine_rules)
         assert wait_for(lambda: gw.caller._client("/pepper/speak", "Speak").service_is_ready(), 15)
         reading = _one_group()
@@ -121,7 +121,7 @@ def test_fire_business_rules_service(domain_id, settings, store, engine_rules) -
              {"type": "Robot", "id": "pepper", "position": "entrance"}]
     with RosRuntime(domain_id=domain_id) as rt:
         start_gateway(rt, settings, store, engine_rules)
-        client = rt.add(Node("workflow")).create_client(FireBusinessRules, "fire_business_rules")
+        client = rt.make(Node, "workflow").create_client(FireBusinessRules, "fire_business_rules")
         assert client.wait_for_service(timeout_sec=15)
         res = client.call(FireBusinessRules.Request(ruleset="reception", facts_json=json.dumps(facts)), timeout_sec=10)
         assert res.success and res.version >= 1
@@ -138,7 +138,7 @@ def test_gateway_restart_mid_scenario_loses_nothing(domain_id, settings, store, 
     half = len(readings) // 2
     calls = []
     with RosRuntime(domain_id=domain_id) as robot_rt:
-        robot = robot_rt.add(RobotSim("pepper", on_call=calls.append))
+        robot = robot_rt.make(RobotSim, "pepper", on_call=calls.append)
         for part in (readings[:half], readings[half:]):  # the gateway is stopped and started in between
             with RosRuntime(domain_id=domain_id) as rt:
                 gw = start_gateway(rt, settings, store, engine_rules)
