@@ -8,7 +8,6 @@ imports, no attribute access to Python internals) and small: we use ``simpleeval
 
 from __future__ import annotations
 
-import re
 from typing import Any, Mapping
 
 from simpleeval import DEFAULT_FUNCTIONS, EvalWithCompoundTypes, InvalidExpression
@@ -19,8 +18,6 @@ FUNCTIONS = {
     "any": any, "all": all, "sorted": sorted,
 }
 
-TEMPLATE = re.compile(r"\$\{([^{}]+)\}")
-_WHOLE = re.compile(r"^\s*\$\{([^{}]+)\}\s*$")
 
 
 class ExpressionError(ValueError):
@@ -54,11 +51,41 @@ def check_syntax(expression: str) -> str | None:
     return None
 
 
+def placeholders(text: str) -> list[tuple[int, int, str]]:
+    """``(start, end, expression)`` of each ``${...}`` in ``text``; braces inside may nest
+    (``${[{'type': 'Robot'}]}``) and braces inside quotes do not count."""
+    found: list[tuple[int, int, str]] = []
+    start = text.find("${")
+    while start != -1:
+        depth, quote, i = 0, "", start + 1
+        while i < len(text):
+            ch = text[i]
+            if quote:
+                if ch == "\\":
+                    i += 1
+                elif ch == quote:
+                    quote = ""
+            elif ch in "'\"":
+                quote = ch
+            elif ch == "{":
+                depth += 1
+            elif ch == "}":
+                depth -= 1
+                if depth == 0:
+                    found.append((start, i + 1, text[start + 2:i]))
+                    break
+            i += 1
+        else:
+            raise ExpressionError(text[start:], "'${' without its closing '}'")
+        start = text.find("${", i + 1)
+    return found
+
+
 def template_expressions(value: Any) -> list[str]:
     """Every ``${...}`` expression inside a (nested) template value."""
     found: list[str] = []
     if isinstance(value, str):
-        found.extend(m.group(1) for m in TEMPLATE.finditer(value))
+        found.extend(expression for _s, _e, expression in placeholders(value))
     elif isinstance(value, Mapping):
         for item in value.values():
             found.extend(template_expressions(item))
@@ -75,10 +102,15 @@ def render(value: Any, names: Mapping[str, Any]) -> Any:
     placeholder inside text is formatted with ``str``.
     """
     if isinstance(value, str):
-        whole = _WHOLE.match(value)
-        if whole:
-            return evaluate(whole.group(1), names)
-        return TEMPLATE.sub(lambda m: _text(evaluate(m.group(1), names)), value)
+        spots = placeholders(value)
+        if len(spots) == 1 and spots[0][0] == 0 and spots[0][1] == len(value.rstrip()) and not value[:1].isspace():
+            return evaluate(spots[0][2], names)
+        out, last = [], 0
+        for start, end, expression in spots:
+            out.append(value[last:start])
+            out.append(_text(evaluate(expression, names)))
+            last = end
+        return "".join(out) + value[last:]
     if isinstance(value, Mapping):
         return {k: render(v, names) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -262,8 +262,7 @@ def _check_references(wf: Workflow, data: dict[str, Any], errors: _Collector) ->
         for action, target in (module.options.get("dispatch") or {}).items():
             if target not in wf.modules:
                 errors.add(path + ("dispatch", action), f"unknown module {target!r}")
-        for expression in expr.template_expressions(module.params):
-            _check_expression(expression, path + ("params",), errors)
+        _check_templates(module.params, path + ("params",), errors)
     seen_ids: dict[str, PathT] = {}
     for name, process in wf.processes.items():
         _check_steps(wf, process.steps, data["processes"][name]["steps"], ("processes", name, "steps"),
@@ -305,8 +304,17 @@ def _check_steps(wf: Workflow, steps: tuple[Step, ...], specs: list[Any], path: 
             _check_steps(wf, step.then, spec["then"], here + ("then",), seen_ids, errors)
             _check_steps(wf, step.otherwise, spec.get("else") or [], here + ("else",), seen_ids, errors)
         params = step.values if isinstance(step, SetStep) else getattr(step, "params", {})
-        for expression in expr.template_expressions(params):
-            _check_expression(expression, here + ("set" if isinstance(step, SetStep) else "with",), errors)
+        _check_templates(params, here + ("set" if isinstance(step, SetStep) else "with",), errors)
+
+
+def _check_templates(value: Any, path: PathT, errors: _Collector) -> None:
+    try:
+        expressions = expr.template_expressions(value)
+    except expr.ExpressionError as exc:
+        errors.add(path, str(exc))
+        return
+    for expression in expressions:
+        _check_expression(expression, path, errors)
 
 
 def _check_expression(expression: str, path: PathT, errors: _Collector) -> None:

@@ -85,7 +85,8 @@ def test_policy_retry():
     ex = Executor({"ros_service": adapter})
     result = ex.run(parse(flaky("retry", retries=2)))
     assert result.status == "succeeded" and result.steps[0].attempts == 3
-    adapter = Flaky(failures=5)
+    ex.close()
+    ex = Executor({"ros_service": Flaky(failures=5)})
     result = ex.run(parse(flaky("retry", retries=2)))
     assert result.status == "failed" and result.steps[0].attempts == 3
     ex.close()
