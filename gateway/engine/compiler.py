@@ -16,6 +16,7 @@ A successful build gives a :class:`CompiledRuleSet`: the KieBase wrapped by the 
 
 from __future__ import annotations
 
+import difflib
 import itertools
 import json
 import re
@@ -49,10 +50,43 @@ class CompiledRuleSet:
 
 @dataclass
 class _Source:
-    """A DRL text to compile and the file it came from (a .drl, or the .dslr it expands)."""
+    """A DRL text to compile and the file it came from (a .drl, or the .dslr it expands).
+
+    ``line_map[i]`` is the source line of DRL line ``i + 1``: the DSL expander folds ``- ``
+    continuation lines into the line above, so an expanded text is shorter than its ``.dslr``.
+    """
 
     file: str
     drl: str
+    line_map: list[int] | None = None
+
+    def source_line(self, line: int) -> int:
+        if self.line_map is None or line <= 0:
+            return line
+        return self.line_map[min(line, len(self.line_map)) - 1]
+
+
+def _align_lines(expanded: str, original: str) -> list[int]:
+    """Maps each expanded line to its .dslr line, anchored on lines the expander left unchanged
+    (rule/when/then/end, comments, plain DRL); lines in between keep their order."""
+    exp = [line.strip() for line in expanded.split("\n")]
+    src = [line.strip() for line in original.split("\n")]
+    mapping = [0] * len(exp)
+    anchors: list[tuple[int, int]] = []
+    for block in difflib.SequenceMatcher(None, exp, src, autojunk=False).get_matching_blocks():
+        anchors.extend((block.a + k, block.b + k) for k in range(block.size))
+    anchor_iter = iter(anchors + [(len(exp), len(src))])
+    prev_a, prev_b = -1, -1
+    next_a, next_b = next(anchor_iter)
+    for i in range(len(exp)):
+        while i > next_a:
+            prev_a, prev_b = next_a, next_b
+            next_a, next_b = next(anchor_iter)
+        if i == next_a:
+            mapping[i] = next_b + 1
+        else:
+            mapping[i] = min(prev_b + (i - prev_a), next_b - 1) + 1 if prev_a >= 0 else min(i, next_b - 1) + 1
+    return mapping
 
 
 def _java():
@@ -209,7 +243,7 @@ def _syntax_errors(source: _Source) -> list[CompileError]:
         line, col = _parser_position(err, message)
         if "Parser returned a null Package" in message:
             continue
-        errors.append(CompileError(source.file, line, col, _clean_parser_message(message)))
+        errors.append(CompileError(source.file, source.source_line(line), col, _clean_parser_message(message)))
     return errors
 
 
@@ -228,7 +262,10 @@ def _parser_position(err: Any, message: str) -> tuple[int, int]:
 
 def _clean_parser_message(message: str) -> str:
     message = re.sub(r"^\[ERR \d+\]\s*", "", message)
-    return _LINE_COL.sub(lambda m: f"line {m.group(1)}:{int(m.group(2)) + 1}", message, count=1)
+    message = _LINE_COL.sub("", message, count=1).strip()
+    if re.search(r"mismatched input '(rule|query|declare|function)'", message) or "mismatched input '<EOF>'" in message:
+        message += " (is an 'end' missing before this point?)"
+    return message
 
 
 # --------------------------------------------------------------------------- build
@@ -246,7 +283,8 @@ def _sources(files: dict[str, str]) -> tuple[list[_Source], dict[str, str], list
             errors.extend(errs)
             if drl is not None:
                 expanded[fname] = drl
-                sources.append(_Source(fname, drl))
+            if drl is not None and not errs:  # a half-expanded text would only add confusing errors
+                sources.append(_Source(fname, drl, _align_lines(drl, text)))
     return sources, expanded, errors
 
 
@@ -317,14 +355,20 @@ def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, st
         by_path[path.removeprefix("src/main/resources/")] = source
         kfs.write(path, source.drl)
     builder = ks.newKieBuilder(kfs)
-    builder.buildAll(j["ExecModel"])
+    try:
+        builder.buildAll(j["ExecModel"])
+    except Exception as exc:  # e.g. ConsequenceRewriteException: the builder throws instead of reporting
+        raise CompileFailed(_unbound_variables(sources) or [_error_from_exception(exc, sources)]) from None
     messages = list(builder.getResults().getMessages(_error_level()))
     try:
         builder.getKieModule()
     except j["CompilationErrors"] as exc:
         messages = list(exc.getErrorMessages()) or messages
     if messages:
-        raise CompileFailed(_sorted(_map_build_messages(messages, by_path, sources)))
+        mapped = _map_build_messages(messages, by_path, sources)
+        if any(e.message.startswith("then-part:") for e in mapped):
+            mapped = _unbound_variables(sources) + [e for e in mapped if not e.message.startswith("then-part:") or e.line > 0] or mapped
+        raise CompileFailed(_sorted(mapped))
     container = ks.newKieContainer(release)
     ks.getRepository().removeKieModule(release)  # the container keeps it; don't let the repository grow
     runner = j["Runner"](container.newKieBase(_kiebase_configuration(ks)))
@@ -337,6 +381,49 @@ def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, st
         type_names=json.loads(str(runner.typeFullNames())),
         expanded=expanded,
     )
+
+
+_RULE_BLOCK = re.compile(r'^\s*rule\s+("[^"]*"|\S+)(.*?)^\s*end\b', re.MULTILINE | re.DOTALL)
+
+
+def _unbound_variables(sources: list[_Source]) -> list[CompileError]:
+    """Then-parts that use a ``$variable`` their when-part never binds (a common DSL slip: a
+    consequence sentence that needs a condition sentence the rule lacks)."""
+    errors: list[CompileError] = []
+    for source in sources:
+        for rule in _RULE_BLOCK.finditer(source.drl):
+            body = rule.group(2)
+            parts = re.split(r"^\s*then\b", body, maxsplit=1, flags=re.MULTILINE)
+            if len(parts) != 2:
+                continue
+            bound = set(re.findall(r"(\$\w+)\s*:", parts[0]))
+            then_start = rule.start(2) + len(parts[0])
+            for used in dict.fromkeys(re.findall(r"\$\w+", parts[1])):
+                if used not in bound:
+                    offset = then_start + parts[1].index(used)
+                    line = source.drl.count("\n", 0, offset) + 1
+                    col = offset - (source.drl.rfind("\n", 0, offset) + 1) + 1
+                    errors.append(CompileError(
+                        source.file, source.source_line(line), col,
+                        f"then-part of rule {rule.group(1)} uses {used}, which its when-part does not bind"
+                        " (is a condition sentence missing?)",
+                    ))
+    return errors
+
+
+def _error_from_exception(exc: Exception, sources: list[_Source]) -> CompileError:
+    """A Java exception thrown by the build, located via the rule or fragment it names."""
+    text = str(getattr(exc, "getMessage", lambda: exc)() or exc)
+    cause = exc
+    while getattr(cause, "getCause", None) is not None and cause.getCause() is not None:
+        cause = cause.getCause()
+    detail = str(cause.getMessage() if hasattr(cause, "getMessage") else cause)
+    message = detail if detail and detail != "None" else text
+    found = _locate_fragment(f"{text} {detail}", sources)
+    if found:
+        src, line, col = found
+        return CompileError(src.file, src.source_line(line), col, message)
+    return CompileError(sources[0].file if sources else "", 0, 0, message)
 
 
 def _kiebase_configuration(ks: Any) -> Any:
@@ -373,14 +460,17 @@ def _map_build_messages(messages: list[Any], by_path: dict[str, _Source], source
             found = _locate_fragment(text, sources if source is None else [source])
             if found:
                 fsrc, line, col = found
-                errors.append(CompileError(fsrc.file, line, col, _clean_build_message(text)))
+                errors.append(CompileError(fsrc.file, fsrc.source_line(line), col, _clean_build_message(text)))
                 continue
+        if source is not None:
+            line = source.source_line(line)
         errors.append(CompileError(source.file if source else path, max(line, 0), max(col, 0), _clean_build_message(text)))
     return _unique(errors)
 
 
 def _clean_build_message(text: str) -> str:
     text = text.strip().split("\n")[0]
+    text = re.sub(r", expected one of .*$", "", text)
     text = re.sub(r"^\[ERR \d+\]\s*", "", text)
     if text.startswith("Unable to find class: "):
         return f"unknown type '{text.removeprefix('Unable to find class: ').strip()}'"
@@ -396,6 +486,7 @@ def _locate_fragment(text: str, sources: list[_Source]) -> tuple[_Source, int, i
     for prefix in ("Unable to find class: ", "Unable to parse left part of expression: ", "Unknown property "):
         if prefix in text:
             candidates.append(text.split(prefix, 1)[1].strip().split("\n")[0])
+    candidates += re.findall(r"The method (\w+)\(", text) + re.findall(r"(\S+) cannot be resolved", text)
     candidates += re.findall(r"'([^']{2,})'", text) + re.findall(r'"([^"]{2,})"', text)
     for cand in candidates:
         pattern = re.compile(r"(?<![A-Za-z0-9_])" + re.escape(cand) + r"(?![A-Za-z0-9_])")
@@ -436,10 +527,10 @@ def _locate_java_error(text: str, line: int, generated: list[str], sources: list
             for source in sources:
                 found = _search_code(source.drl, pattern)
                 if found:
-                    return CompileError(source.file, found[0], found[1], message)
+                    return CompileError(source.file, source.source_line(found[0]), found[1], message)
     found = _locate_fragment(text, sources)
     if found:
-        return CompileError(found[0].file, found[1], found[2], message)
+        return CompileError(found[0].file, found[0].source_line(found[1]), found[2], message)
     return CompileError(sources[0].file if sources else "", 0, 0, message)
 
 

@@ -43,8 +43,12 @@ def pipeline_factory(settings: Any, store: Any, rules: Rules, *, detector: Event
 
 def engine_stage(settings: Any) -> tuple[Any, Rules]:
     """Start the engine with the rule sets from the rules dir; returns (engine, rules stage)."""
+    from gateway import jvm
     from gateway.engine import Engine
 
+    if "-Xrs" not in settings.jvm.extra_options:  # the JVM must leave SIGINT/SIGTERM to us (clean ROS exit)
+        settings.jvm.extra_options.append("-Xrs")
+    jvm.start(settings.jvm)  # before Engine: its compiler starts the JVM without our options otherwise
     engine = Engine(settings)
     engine.load_rules_dir()
     return engine, engine_rules(engine)

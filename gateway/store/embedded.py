@@ -24,6 +24,16 @@ log = logging.getLogger(__name__)
 DAEMON = "secantusd-py"
 
 
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: SIGINT the daemon if the gateway dies without stopping it (no orphaned databases)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGINT)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
 class EmbeddedDbError(RuntimeError):
     """The embedded database could not be started (not installed, crashed, never answered)."""
 
@@ -72,7 +82,8 @@ class EmbeddedMongo:
                str(self.data_dir / "data"), "--standalone", "--cache-size", self.cache, "--log-level", "WARNING"]
         log.info("starting embedded database: %s", " ".join(cmd))
         self.proc = subprocess.Popen(cmd, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                     env=dict(os.environ), start_new_session=True)
+                                     env=dict(os.environ), start_new_session=True,
+                                     preexec_fn=_die_with_parent if sys.platform == "linux" else None)
         logfile.close()
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:

@@ -122,8 +122,8 @@ class WorkflowRuntime(Node):
         self.args = args
         self.values = json.loads(args.values or '{}')
         self.trace = []
-        self._clients = {}
-        self._publishers = {}
+        self._wf_clients = {}
+        self._wf_publishers = {}
         self._done_tasks = set()
         self._done_lock = threading.Condition()
         self._manual_pub = self.create_publisher(String, 'manual_requests', 10)
@@ -180,9 +180,9 @@ class WorkflowRuntime(Node):
     # -- module kinds
     def kind_ros_service(self, spec, params, timeout):
         key = (spec['service'], spec['type'])
-        if key not in self._clients:
-            self._clients[key] = self.create_client(TYPES[spec['type']], spec['service'])
-        client = self._clients[key]
+        if key not in self._wf_clients:
+            self._wf_clients[key] = self.create_client(TYPES[spec['type']], spec['service'])
+        client = self._wf_clients[key]
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f"service {spec['service']} is not available")
         request = TYPES[spec['type']].Request()
@@ -209,12 +209,12 @@ class WorkflowRuntime(Node):
 
     def kind_ros_topic(self, spec, params, timeout):
         key = (spec['topic'], spec['type'])
-        if key not in self._publishers:
-            self._publishers[key] = self.create_publisher(TYPES[spec['type']], spec['topic'], 10)
+        if key not in self._wf_publishers:
+            self._wf_publishers[key] = self.create_publisher(TYPES[spec['type']], spec['topic'], 10)
         message = TYPES[spec['type']]()
         for field, value in params.items():
             setattr(message, field, value)
-        self._publishers[key].publish(message)
+        self._wf_publishers[key].publish(message)
         return {'published': spec['topic']}
 
     def kind_fire_rules(self, spec, params, timeout):

@@ -375,3 +375,47 @@ def test_listener_sees_deploys_and_fires(engine, simple_files):
     engine.deploy("t", simple_files)
     engine.fire("t", FIVE_FACTS)
     assert seen == ["deploy", "fire"]
+
+
+def test_dslr_error_lines_account_for_continuation_lines(engine):
+    # Two "- " continuation lines above the error are folded away by the expander: the reported
+    # line must still be the .dslr line, not the expanded one.
+    extra = """
+rule "duplicate"
+when
+    There is a customer aged at least 18
+    - who is female
+then
+    Pepper says "again"
+end
+
+rule "greet women"
+when
+    There is a customer aged at least 30
+then
+    Pepper says "twice"
+end
+"""
+    dslr = DSLR + extra
+    errors = _errors(engine, {"types.drl": TYPES, "teahouse.dsl": DSL, "greet.dslr": dslr})
+    lines = dslr.split("\n")
+    second = [i for i, line in enumerate(lines, 1) if line.startswith('rule "greet women"')][1]
+    assert errors[0].file == "greet.dslr" and "Duplicate rule name" in errors[0].message
+    assert errors[0].line == second
+
+
+def test_then_part_using_an_unbound_variable(engine):
+    dsl = DSL + "[consequence][]The customer is greeted=actions.say(\"pepper\", \"Hi \" + $c.getId());\n"
+    dslr = """package org.printeps.test;
+expander teahouse.dsl
+
+rule "no customer"
+when
+    eval(true)
+then
+    The customer is greeted
+end
+"""
+    errors = _errors(engine, {"types.drl": TYPES, "teahouse.dsl": dsl, "greet.dslr": dslr})
+    assert (errors[0].file, errors[0].line) == ("greet.dslr", 8)
+    assert "$c" in errors[0].message and "does not bind" in errors[0].message
