@@ -3,7 +3,7 @@ and the workbench page ``/workbench/workflows`` (workflow view, scenario view, e
 
 Why thin: everything is in ``gateway.workflow``; this maps HTTP to the :class:`WorkflowService`
 kept in ``app.state.workflows``. When the app has none, one is built on first use from
-``app.state.settings``/``engine``/``store``/``ontology`` so the router works in any app.
+``app.state.settings``/``engine``/``store`` so the router works in any app.
 
     GET  /api/workflows                        [{name, title, version, ...}]
     GET  /api/workflows/{name}                 {name, version, text, workflow_view, scenario_view}
@@ -80,10 +80,8 @@ def service(request: Request) -> WorkflowService:
         return existing
     with _build_lock:
         if getattr(state, "workflows", None) is None:
-            ontology = getattr(state, "ontology", None)
-            lookup = getattr(ontology, "value", None) if ontology is not None else None
             state.workflows = build_service(state.settings, engine=getattr(state, "engine", None),
-                                            store=getattr(state, "store", None), ontology_lookup=lookup)
+                                            store=getattr(state, "store", None))
     return state.workflows
 
 

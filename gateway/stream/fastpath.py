@@ -438,7 +438,7 @@ def run_plan(plan: Plan, window: WindowData) -> Evaluation:
         count = int(mask.sum())
         if count == 0:
             continue
-        if count * MAX_ABS_UNITS * 2 > 2**62:
+        if count * (int(np.abs(x_arr).max()) + 1) * 8 > 2**62:  # binds add/subtract a few values
             raise Fallback("too many pairs for exact int64 sums")
         group = _aggregate(plan, s, env, mask, count, full, scale, all_int)
         row = _tail(plan, s, group)

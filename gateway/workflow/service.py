@@ -5,7 +5,8 @@ wiring (which adapter for which module kind, which recorder) is decided in one p
 
 - ``ros_service``/``ros_topic``: rclpy (``gateway.workflow.ros``) when ROS is there and not
   simulated, else :class:`SimulatedRobots` (records the calls);
-- ``fire_rules``: the gateway's engine; ``ontology_value``: an injected value reader;
+- ``fire_rules``: the gateway's engine; ``ontology_value``: the teahouse ontology file
+  (``settings.streams.ontology_file``, re-read when it changes) unless a reader is injected;
 - ``manual``: a board of human tasks (simulated humans in the demo); ``wait``: sleeping.
 Runs are recorded in the Information State (collection ``workflow_runs``) when a store is given.
 """
@@ -16,6 +17,7 @@ import collections
 import logging
 import threading
 import uuid
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from gateway.workflow.adapters import (
@@ -107,6 +109,17 @@ def ros_available() -> bool:
     return True
 
 
+def _ontology_lookup(settings: Any) -> Callable[[str], Any] | None:
+    """Values from the teahouse ontology file the stream/ontology side uses (re-read on change)."""
+    streams = getattr(settings, "streams", None)
+    path = getattr(streams, "ontology_file", None)
+    if not path or not Path(path).is_file():
+        return None
+    from gateway.workflow.knowledge import OntologyValues
+
+    return OntologyValues(path).value
+
+
 def build_service(settings: Any, *, engine: Any = None, store: Any = None,
                   ontology_lookup: Callable[[str], Any] | None = None,
                   ros_adapter: Adapter | None = None, load: bool = True) -> WorkflowService:
@@ -129,6 +142,8 @@ def build_service(settings: Any, *, engine: Any = None, store: Any = None,
         adapters["ros_service"] = adapters["ros_topic"] = ros_adapter
     if engine is not None:
         adapters["fire_rules"] = RulesAdapter(engine)
+    if ontology_lookup is None:
+        ontology_lookup = _ontology_lookup(settings)
     if ontology_lookup is not None:
         adapters["ontology_value"] = OntologyValueAdapter(ontology_lookup)
     manual = ManualBoard(simulate=cfg.simulate_humans)

@@ -411,7 +411,7 @@ expander teahouse.dsl
 
 rule "no customer"
 when
-    eval(true)
+    >eval(true)
 then
     The customer is greeted
 end

@@ -56,7 +56,8 @@ def recorder() -> MemoryRecorder:
 
 @pytest.fixture()
 def executor(robots: SimulatedRobots, recorder: MemoryRecorder) -> Executor:
-    values = {"robot_human_distance": 1.2}
+    values = {"pepper1.robotToHumanDistance": 1.2, "pepper1.robotToTableDistance": 0.5,
+              "serving1.emptyCupReactionTime": 30}
     ex = Executor({"ros_service": robots, "ros_topic": robots, "wait": WaitAdapter(),
                    "manual": ManualBoard(simulate=True), "ontology_value": OntologyValueAdapter(values.get)},
                   recorder, default_timeout=5.0)

@@ -100,7 +100,7 @@ def test_generated_node_runs_the_thanking_workflow(pepper, ros_env, tmp_path):
 
 def test_generated_node_passes_data_and_values(pepper, ros_env, tmp_path):
     result = run_generated(PROJECT_ROOT / "workflows" / "2_show_to_seat.yaml", ros_env, tmp_path,
-                           "--timeout", "20", "--values", '{"robot_human_distance": 0.8}',
+                           "--timeout", "20", "--values", '{"pepper1.robotToHumanDistance": 0.8, "pepper1.robotToTableDistance": 0.5}',
                            "--inputs", '{"party": {"size": 2, "x": 2.0, "y": 1.0}}')
     assert result["status"] == "succeeded", result
     assert robot_calls(pepper) == [("move_to", (2.8, 1.0)), ("move_to", (3.5, 2.0))]
@@ -136,7 +136,7 @@ def test_executor_calls_robots_over_rclpy(pepper, ros_env, tmp_path, monkeypatch
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     adapter = RclpyAdapter("workflow_test")
     ex = Executor({"ros_service": adapter, "ros_topic": adapter,
-                   "ontology_value": OntologyValueAdapter({"robot_table_distance": 0.7}.get)}, default_timeout=20)
+                   "ontology_value": OntologyValueAdapter({"pepper1.robotToTableDistance": 0.7}.get)}, default_timeout=20)
     try:
         result = ex.run(load(PROJECT_ROOT / "workflows" / "3_take_order.yaml"))
         assert result.status == "succeeded", result.error
