@@ -366,8 +366,9 @@ def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, st
         messages = list(exc.getErrorMessages()) or messages
     if messages:
         mapped = _map_build_messages(messages, by_path, sources)
-        if any(e.message.startswith("then-part:") for e in mapped):
-            mapped = _unbound_variables(sources) + [e for e in mapped if not e.message.startswith("then-part:") or e.line > 0] or mapped
+        unbound = _unbound_variables(sources) if any(e.message.startswith("then-part:") for e in mapped) else []
+        if unbound:  # the likely cause of the Java errors: say it in the author's terms
+            mapped = unbound + [e for e in mapped if not e.message.startswith("then-part:")]
         raise CompileFailed(_sorted(mapped))
     container = ks.newKieContainer(release)
     ks.getRepository().removeKieModule(release)  # the container keeps it; don't let the repository grow

@@ -93,6 +93,7 @@ class Plan:
     tail: list[tuple[str, str | None, Any]]  # ("bind", var, node) | ("filter", None, node) over groups
     project: list[str]
     constants: list[Decimal] = field(default_factory=list)
+    growth: int = 1  # how much larger than an input value a BIND result can be (2 per + or -)
 
 
 def compile_query(sparql: str) -> Plan:
@@ -108,6 +109,7 @@ def compile_query(sparql: str) -> Plan:
 class _Compiler:
     def __init__(self) -> None:
         self.constants: list[Decimal] = []
+        self.growth = 1
 
     def compile(self, algebra: Any) -> Plan:
         if algebra.name != "SelectQuery":
@@ -181,7 +183,7 @@ class _Compiler:
             self._check_tail(n.expr, set(aggregates) | {subject} | {str(t[1]) for t in tail if t[1]})
             tail.append(("bind" if n.name == "Extend" else "filter", str(n.var) if n.name == "Extend" else None,
                          n.expr))
-        return Plan(shape, steps, aggregates, agg_int, tail, project, self.constants)
+        return Plan(shape, steps, aggregates, agg_int, tail, project, self.constants, self.growth)
 
     # -- the basic graph pattern --------------------------------------------------------------
     def _shape(self, triples: list[tuple[Any, Any, Any]], subject: str) -> PairShape:
@@ -305,6 +307,7 @@ class _Compiler:
             return Expr("const", a.fn, a.is_int and b.is_int, value)
         fa, fb = self._operand(a, kind), self._operand(b, kind)
         is_int = a.is_int and b.is_int
+        self.growth *= 2
         if op == "+":
             return Expr(kind, lambda env, scale: fa(env, scale) + fb(env, scale), is_int)
         return Expr(kind, lambda env, scale: fa(env, scale) - fb(env, scale), is_int)
@@ -438,7 +441,7 @@ def run_plan(plan: Plan, window: WindowData) -> Evaluation:
         count = int(mask.sum())
         if count == 0:
             continue
-        if count * (int(np.abs(x_arr).max()) + 1) * 8 > 2**62:  # binds add/subtract a few values
+        if count * (int(np.abs(x_arr).max()) + 1) * plan.growth > 2**62:
             raise Fallback("too many pairs for exact int64 sums")
         group = _aggregate(plan, s, env, mask, count, full, scale, all_int)
         row = _tail(plan, s, group)
