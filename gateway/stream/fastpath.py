@@ -64,6 +64,8 @@ def _const_units(value: Decimal, scale: int) -> int:
     units = value.scaleb(scale, context=_CTX)
     if units != units.to_integral_value():
         raise Fallback(f"constant {value} has more than {scale} fractional digits")
+    if abs(units) > 2**60:
+        raise Fallback(f"constant {value} is too large for the fixed-point path")
     return int(units)
 
 
@@ -290,6 +292,8 @@ class _Compiler:
         if kind == "ts":
             if value != value.to_integral_value():  # type: ignore[union-attr]
                 raise NotCompilable("comparing a timestamp with a fraction")
+            if abs(value) > 2**60:  # type: ignore[arg-type]
+                raise NotCompilable("timestamp constant out of range")
             return lambda env, scale: int(value)  # type: ignore[arg-type]
         return lambda env, scale: _const_units(value, scale)  # type: ignore[arg-type]
 

@@ -1,0 +1,123 @@
+"""Benchmark: last entrance reading that completes a detection → Speak request at the robot.
+
+Real pieces: Fast DDS over loopback (sensor publisher, gateway node and robot in separate ROS
+contexts/participants), the Drools engine with the reception rules, the embedded Information State
+(every reading, event, firing and action is written). Each trial sends a fresh pair walking up to
+the entrance (event-time stamps 1 s apart, like the papers; 20 ms apart on the wall clock); the
+fifth reading completes the detection. Latency = Speak arrival at the robot − publish of that
+reading. Peers measured in the same run: a bare Speak round trip, and a bare rule firing.
+
+    .venv/bin/python bench/ros_latency.py [trials=200]
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import tempfile
+import threading
+import time
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+from rclpy.node import Node  # noqa: E402
+
+from gateway.config import Settings  # noqa: E402
+from gateway.ros.convert import dict_to_entrance  # noqa: E402
+from gateway.ros.node import GatewayNode  # noqa: E402
+from gateway.ros.runtime import RosRuntime  # noqa: E402
+from gateway.ros.sim_robot import RobotSim  # noqa: E402
+from gateway.ros.stages import WARM_UP_FACTS, engine_stage, pipeline_factory  # noqa: E402
+from gateway.store import open_store  # noqa: E402
+
+from printeps_interfaces.msg import Entrance  # noqa: E402
+from printeps_interfaces.srv import Speak  # noqa: E402
+
+
+def pct(xs: list[float], p: float) -> float:
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(round(p / 100 * (len(xs) - 1))))]
+
+
+def line(name: str, xs: list[float]) -> str:
+    return f"{name:<38} n={len(xs):<4} median {statistics.median(xs):7.2f} ms  p99 {pct(xs, 99):7.2f} ms"
+
+
+def main() -> int:
+    trials = int(sys.argv[1]) if len(sys.argv) > 1 else 200
+    domain = 90 + os.getpid() % 10
+    settings = Settings(data_dir=tempfile.mkdtemp(prefix="bench-ros-"))
+    store = open_store(settings)
+    engine, rules = engine_stage(settings)
+    speak_at: dict[str, float] = {}
+    arrived = threading.Event()
+
+    def on_call(entry: dict) -> None:
+        if entry["service"] == "speak":
+            speak_at["t"] = time.perf_counter()
+            arrived.set()
+
+    robot_rt, gw_rt, sensor_rt = (RosRuntime(domain_id=domain) for _ in range(3))
+    try:
+        robot_rt.make(RobotSim, "pepper", on_call=on_call)
+        gw = gw_rt.make(GatewayNode, settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store)
+        pub_node = sensor_rt.make(Node, "bench_sensor")
+        pub = pub_node.create_publisher(Entrance, "entrance", 100)
+        speak_client = pub_node.create_client(Speak, "/pepper/speak")
+        assert speak_client.wait_for_service(timeout_sec=30) and gw.caller._client(
+            "/pepper/speak", "Speak").wait_for_service(timeout_sec=30)
+        deadline = time.monotonic() + 30
+        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+
+        # peers: bare Speak round trip and bare firing, same run, same machine
+        rtt, fire = [], []
+        for i in range(trials):
+            t = time.perf_counter()
+            speak_client.call(Speak.Request(robot="pepper", text=f"peer {i}"), timeout_sec=5)
+            rtt.append((time.perf_counter() - t) * 1000)
+            t = time.perf_counter()
+            rules("reception", [dict(f) for f in WARM_UP_FACTS])
+            fire.append((time.perf_counter() - t) * 1000)
+
+        latency, misses = [], 0
+        for k in range(trials + 10):
+            base = 10_000.0 + k * 100.0
+            ids = (f"k{k}a", f"k{k}b")
+            arrived.clear()
+            t_last = 0.0
+            for i, d in enumerate([5.0, 4.0, 3.0, 2.0, 1.8]):
+                msg = dict_to_entrance({"id": f"b{k}-{i}", "stamp": base + i, "customers": [
+                    {"id": c, "distance": d + 0.05 * j, "age": 30, "gender": "female"} for j, c in enumerate(ids)]})
+                if i == 4:
+                    time.sleep(0.02)
+                    t_last = time.perf_counter()
+                pub.publish(msg)
+                if i < 4:
+                    time.sleep(0.02)
+            if not arrived.wait(5):
+                misses += 1
+                continue
+            if k >= 10:  # the first trials warm the whole path up
+                latency.append((speak_at["t"] - t_last) * 1000)
+            deadline = time.monotonic() + 5
+            while not gw.queue.empty() and time.monotonic() < deadline:
+                time.sleep(0.005)
+            time.sleep(0.05)  # the rest of the trial's actions (gesture, move)
+        print(line("reading -> Speak at robot (gateway)", latency))
+        print(line("peer: bare Speak round trip", rtt))
+        print(line("peer: bare rule firing (reception)", fire))
+        print(f"misses: {misses}; ratio p99 gateway / p99 Speak RTT: {pct(latency, 99) / pct(rtt, 99):.1f}x; "
+              f"p99 gateway / p99 firing: {pct(latency, 99) / pct(fire, 99):.1f}x; goal p99 < 50 ms: "
+              f"{'met' if pct(latency, 99) < 50 else 'NOT met'}")
+    finally:
+        for rt in (sensor_rt, gw_rt, robot_rt):
+            rt.shutdown()
+        store.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

