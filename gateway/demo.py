@@ -211,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default=None)
     ap.add_argument("--config", default=None)
     args = ap.parse_args(argv)
+    sys.setswitchinterval(0.001)  # GIL hand-offs between executor/worker threads: see docs/ros.md
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

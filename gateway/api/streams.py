@@ -220,7 +220,8 @@ async def get_query(request: Request, name: str) -> Any:
     return _svc(request).engine.query_info(name)
 
 
-@router.delete("/api/queries/{name}", status_code=204, dependencies=[_role("author")])
+@router.delete("/api/queries/{name}", status_code=204, response_model=None, response_class=Response,
+               dependencies=[_role("author")])
 @_guarded
 async def delete_query(request: Request, name: str) -> Any:
     await run_in_threadpool(_svc(request).engine.unregister, name)

@@ -108,6 +108,7 @@ class Mapper:
         self.mappings.update(mappings or {})
         self.prefixes = dict(DEFAULT_PREFIXES)
         self.prefixes.update(prefixes or {})
+        self._iri_cache: dict[str, NamedNode] = {}
 
     def map(self, message: Any, timestamp_ms: int, mapping: str | None = None) -> list[Triple]:
         """The triples of one message received at ``timestamp_ms``; generic if no mapping named."""
@@ -180,6 +181,15 @@ class Mapper:
                 raise MappingError(exc.where, exc.message) from None
 
     def _iri(self, text: str, where: str) -> NamedNode:
+        cached = self._iri_cache.get(text)
+        if cached is not None:
+            return cached
+        node = self._parse_iri(text, where)
+        if len(self._iri_cache) < 10_000:
+            self._iri_cache[text] = node
+        return node
+
+    def _parse_iri(self, text: str, where: str) -> NamedNode:
         try:
             node = parse_node(text, where, self.prefixes)
         except TermError as exc:

@@ -41,6 +41,8 @@ class ActionDispatcher:
         self.store = store
         self.retry_pause_s = retry_pause_s
         self.on_outcome = on_outcome
+        # set by the Pipeline so action records join its per-reading batch (written after the reading)
+        self.record: Callable[[str, dict[str, Any], str], None] | None = None
 
     def service_for(self, action: dict[str, Any]) -> tuple[str, str] | tuple[None, str]:
         """(service name, kind) or (None, reason) when the action has no robot service."""
@@ -73,8 +75,10 @@ class ActionDispatcher:
                    **(context or {})}
         (log.info if status == "ok" else log.error)("action %s → %s: %s %s", action.get("module"), service,
                                                     status, message)
-        if self.store is not None:
-            self.store.record(ACTIONS, outcome, stored_type=f"printeps/Action/{status}", inserted_by="gateway_node")
         if self.on_outcome:
             self.on_outcome(outcome)
+        if self.record is not None:
+            self.record(ACTIONS, outcome, f"printeps/Action/{status}")
+        elif self.store is not None:
+            self.store.record(ACTIONS, outcome, stored_type=f"printeps/Action/{status}", inserted_by="gateway_node")
         return outcome

@@ -52,6 +52,8 @@ class Pipeline:
         self.detector = detector
         self.rules = rules
         self.dispatcher = dispatcher
+        if hasattr(dispatcher, "record"):
+            dispatcher.record = self._record
         self.store = store
         self.ruleset = ruleset
         self.positions = dict(robot_positions or {})
@@ -60,14 +62,31 @@ class Pipeline:
         self.forget_after_s = forget_after_s
         self.on_event = on_event or (lambda kind, payload: None)
         self.handled: dict[str, float] = {}  # customer id → stamp it was last part of a detection
+        self._pending: list[tuple[str, dict[str, Any], str]] = []
         self.stats = {"readings": 0, "rejected": 0, "detections": 0, "firings": 0, "actions": 0, "failed": 0}
 
     def _record(self, collection: str, doc: dict[str, Any], stored_type: str) -> None:
+        """Queue a record; written when the reading is done, so the robot is not kept waiting on the DB."""
         if self.store is not None:
+            self._pending.append((collection, doc, stored_type))
+
+    def _write_pending(self) -> None:
+        pending, self._pending = self._pending, []
+        for collection, doc, stored_type in pending:
             self.store.record(collection, doc, stored_type=stored_type, inserted_by=BY)
 
     def on_reading(self, reading: dict[str, Any], source: str = "entrance") -> list[dict[str, Any]]:
-        """Process one Entrance reading; returns the action outcomes it caused (often none)."""
+        """Process one Entrance reading; returns the action outcomes it caused (often none).
+
+        Its records (message, stream item, query results, firing) are written right after it is
+        processed, in order; action outcomes are written by the dispatcher as they happen.
+        """
+        try:
+            return self._process(reading, source)
+        finally:
+            self._write_pending()
+
+    def _process(self, reading: dict[str, Any], source: str) -> list[dict[str, Any]]:
         received = time.time()
         try:
             validate_entrance(reading, max_customers=self.max_customers, max_distance_m=self.max_distance_m)
@@ -82,10 +101,11 @@ class Pipeline:
         if not reading.get("stamp"):
             reading["stamp"] = received
         self._record(SENSOR_MESSAGES, {"source": source, "reading": reading}, "printeps_interfaces/Entrance")
+        events = self.detector.push(reading)
         self._record(RDF_EVENTS, {"stream": "http://printeps.org/cafe/entrance", "stamp": reading["stamp"],
+                                  "triples": getattr(self.detector, "last_rdf", None),
                                   "items": [{"s": c["id"], "distance": c["distance"]}
                                             for c in reading.get("customers", [])]}, "printeps/RdfStreamItem")
-        events = self.detector.push(reading)
         if not events:
             return []
         for event in events:

@@ -25,6 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description="PRINTEPS gateway ROS node")
     ap.add_argument("--config", default=None)
     args = ap.parse_args(own)
+    sys.setswitchinterval(0.001)  # GIL hand-offs between executor/worker threads: see docs/ros.md
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     settings = load_settings(args.config)
 

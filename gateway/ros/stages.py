@@ -16,13 +16,15 @@ from gateway.ros.pipeline import Pipeline, Rules, engine_rules
 log = logging.getLogger(__name__)
 
 
-def make_detector(distance_to_entrance: float = 3.3) -> EventDetector:
-    """The entry detector: the stream package's CustomerDetectionQuery when it offers one, else ours."""
+def make_detector(settings: Any) -> EventDetector:
+    """The entry detector: gateway.stream's C-SPARQL engine when available, else the plain-Python one."""
     try:
-        from gateway.stream import entrance_detector  # type: ignore[attr-defined]
-    except ImportError:
-        return EntryDetector(distance_to_entrance=distance_to_entrance)
-    return entrance_detector(distance_to_entrance=distance_to_entrance)
+        from gateway.ros.stream_detector import stream_detector
+
+        return stream_detector(settings)
+    except ImportError as exc:  # the stream package is optional for the ROS side
+        log.warning("gateway.stream not available (%s): using the built-in entry detector", exc)
+        return EntryDetector()
 
 
 def pipeline_factory(settings: Any, store: Any, rules: Rules, *, detector: EventDetector | None = None,
@@ -34,7 +36,7 @@ def pipeline_factory(settings: Any, store: Any, rules: Rules, *, detector: Event
     def build(node: Any) -> Pipeline:
         dispatcher = ActionDispatcher(node.caller, dict(ros.robots), timeout_s=ros.call_timeout_s,
                                       retries=ros.call_retries, store=store, on_outcome=on_outcome)
-        return Pipeline(detector or make_detector(), rules, dispatcher, store, ruleset=ros.ruleset,
+        return Pipeline(detector or make_detector(settings), rules, dispatcher, store, ruleset=ros.ruleset,
                         robot_positions=dict(ros.robot_start), max_customers=ros.max_customers,
                         max_distance_m=ros.max_distance_m, on_event=on_event)
 

@@ -82,8 +82,9 @@ class _Buffer:
         self.drop_first(bisect.bisect_left(self.stamps, ts))
 
     def keep_last_triples(self, n: int) -> None:
-        drop = 0
-        while drop < len(self.items) - 1 and self.n_triples - sum(len(x) for x in self.items[:drop + 1]) >= n:
+        drop, remaining = 0, self.n_triples
+        while drop < len(self.items) - 1 and remaining - len(self.items[drop]) >= n:
+            remaining -= len(self.items[drop])
             drop += 1
         self.drop_first(drop)
 
@@ -128,6 +129,7 @@ class QueryRuntime:
     session: Any = None
     param_values: dict[str, str] = field(default_factory=dict)
     param_error: str | None = None
+    param_version: int = -1
     stats: dict[str, int] = field(default_factory=lambda: {
         "windows": 0, "fast": 0, "general": 0, "fallbacks": 0, "results": 0, "late_dropped": 0,
         "overflow_dropped": 0, "errors": 0, "rule_fires": 0, "rule_errors": 0, "skipped_windows": 0,
@@ -218,7 +220,7 @@ class StreamEngine:
                 self._check_binding(runtime, binding)
             old = self._queries.get(query.name)
             if old is not None and old.session is not None:
-                _close_quietly(old.session)
+                self._close_session(old.session)
             self._queries[query.name] = runtime
             return runtime.info()
 
@@ -227,7 +229,7 @@ class StreamEngine:
         with self._lock:
             runtime = self._get(name)
             if runtime.session is not None:
-                _close_quietly(runtime.session)
+                self._close_session(runtime.session)
                 runtime.session = None
             runtime.binding = None
             if binding is not None:
@@ -249,7 +251,7 @@ class StreamEngine:
             if runtime is None:
                 raise QueryNotFound(f"no query named {name!r}")
             if runtime.session is not None:
-                _close_quietly(runtime.session)
+                self._close_session(runtime.session)
 
     def queries(self) -> list[dict[str, Any]]:
         with self._lock:
@@ -379,6 +381,9 @@ class StreamEngine:
     # -- evaluation --------------------------------------------------------------------------------
     def _bind_params(self, runtime: QueryRuntime) -> bool:
         """(Re)bind parameters; recompile the fast path when a value changed. False if unbound."""
+        if runtime.plan_text is not None and runtime.param_version == self.ontology.version \
+                and runtime.param_error is None:
+            return True  # the ontology did not change since the last binding
         values: dict[str, str] = {}
         try:
             for spec in runtime.query.params:
@@ -387,6 +392,7 @@ class StreamEngine:
             runtime.param_error = str(exc)
             return bool(runtime.param_values) or not runtime.query.params
         runtime.param_error = None
+        runtime.param_version = self.ontology.version
         if values != runtime.param_values or runtime.plan_text is None:
             runtime.param_values = values
             text = runtime.query.executable(values)
@@ -478,11 +484,18 @@ class StreamEngine:
             "actions": payload.get("actions", []), "fired": payload.get("fired", []),
         })
 
+    def _close_session(self, session: Any) -> None:
+        closer = getattr(self.rules_engine, "close_session", None)
+        try:
+            closer(session.id) if closer is not None and hasattr(session, "id") else session.close()
+        except Exception:  # closing a dead session must not hide the real work
+            log.debug("closing a rules session failed", exc_info=True)
+
     def close(self) -> None:
         with self._lock:
             for runtime in self._queries.values():
                 if runtime.session is not None:
-                    _close_quietly(runtime.session)
+                    self._close_session(runtime.session)
                     runtime.session = None
 
 
@@ -511,10 +524,3 @@ def _positioned(message: str) -> QueryParseError:
     if match:
         return QueryParseError(match.group(3).strip(), int(match.group(1)), int(match.group(2)))
     return QueryParseError(message, 0, 0)
-
-
-def _close_quietly(session: Any) -> None:
-    try:
-        session.close()
-    except Exception:  # closing a dead session must not hide the real work
-        log.debug("closing a rules session failed", exc_info=True)

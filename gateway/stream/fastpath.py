@@ -207,6 +207,8 @@ class _Compiler:
         if len(values) != len(links) or len({p for _, p, _ in values}) != 1:
             raise NotCompilable("one value property per reading")
         link = links[0][0]
+        if link == values[0][1]:
+            raise NotCompilable("the link and value properties are the same")
         branches = []
         for _, t in links:
             match = [x for r, _, x in values if r == t]
@@ -375,42 +377,60 @@ def _to_ox(term: Any) -> Term:
 # Running a plan on a window.
 
 
+_VALUE_CACHE: dict[Term, tuple[int, bool] | None] = {}
+_VALUE_CACHE_MAX = 200_000
+
+
+def _units(term: Term) -> tuple[int, bool] | None:
+    """(fixed-point units at MAX_SCALE, is an integer type) of an exact number; None otherwise.
+
+    Cached per literal: the same readings are seen by every window that overlaps them."""
+    cached = _VALUE_CACHE.get(term, False)
+    if cached is not False:
+        return cached  # type: ignore[return-value]
+    result: tuple[int, bool] | None = None
+    if isinstance(term, Literal) and term.datatype.value in NUMERIC_DATATYPES:
+        try:
+            units = Decimal(term.value).scaleb(MAX_SCALE, context=_CTX)
+        except decimal.InvalidOperation:
+            units = None
+        if units is not None and units == units.to_integral_value() and abs(units) <= MAX_ABS_UNITS:
+            result = (int(units), term.datatype.value != XSD + "decimal")
+    if len(_VALUE_CACHE) >= _VALUE_CACHE_MAX:
+        _VALUE_CACHE.clear()
+    _VALUE_CACHE[term] = result
+    return result
+
+
 def run_plan(plan: Plan, window: WindowData) -> Evaluation:
-    """Evaluate ``plan`` on ``window``; raises :class:`Fallback` when the data is not exact numbers."""
+    """Evaluate ``plan`` on ``window``; raises :class:`Fallback` when the data is not exact numbers.
+
+    Numbers are fixed-point integers with MAX_SCALE fractional digits (|value| <= 10**6)."""
     shape = plan.shape
-    link, value_pred = shape.link, shape.value_pred
+    link, value_pred = NamedNode(shape.link), NamedNode(shape.value_pred)
+    needed = {NamedNode(p) for p, _ in shape.constraints}
+    constraints = {(NamedNode(p), o) for p, o in shape.constraints}
     readings: dict[Term, list[tuple[Term, int]]] = {}
     values: dict[Term, list[Term]] = {}
-    subject_props: dict[Term, set[tuple[str, Term]]] = {}
-    needed = {p for p, _ in shape.constraints}
-    for triple in window.triples():
-        s, p, o = triple
-        pv = p.value
-        if pv == link:
-            ts = window.stamped.get(triple)
-            if ts is None:
-                raise Fallback("a reading link outside the stream windows has no timestamp")
-            readings.setdefault(s, []).append((o, ts))
-        if pv == value_pred:
-            values.setdefault(s, []).append(o)
-        if pv in needed:
-            subject_props.setdefault(s, set()).add((pv, o))
-    parsed: dict[Term, tuple[Decimal, bool]] = {}
-    max_exp = 0
-    for lst in values.values():
-        for term in lst:
-            if term not in parsed:
-                if not isinstance(term, Literal) or term.datatype.value not in NUMERIC_DATATYPES:
-                    raise Fallback(f"value {term} is not an integer/decimal")
-                value = Decimal(term.value)
-                parsed[term] = (value, term.datatype.value != XSD + "decimal")
-                max_exp = max(max_exp, -value.as_tuple().exponent)  # type: ignore[operator]
-    for c in plan.constants:
-        max_exp = max(max_exp, -c.as_tuple().exponent)  # type: ignore[operator]
-    if max_exp > MAX_SCALE:
-        raise Fallback(f"numbers with more than {MAX_SCALE} fractional digits")
-    scale = max_exp
-    constraints = set(shape.constraints)
+    subject_props: dict[Term, set[tuple[NamedNode, Term]]] = {}
+    stamped = window.stamped
+    for source in (stamped, window.static):
+        for triple in source:
+            s, p, o = triple
+            if p == link:
+                ts = stamped.get(triple)
+                if ts is None:
+                    raise Fallback("a reading link outside the stream windows has no timestamp")
+                if source is not stamped and triple in stamped:
+                    continue  # already seen with its timestamp
+                readings.setdefault(s, []).append((o, ts))
+            elif p == value_pred:
+                if source is not stamped and triple in stamped:
+                    continue
+                values.setdefault(s, []).append(o)
+            if p in needed:
+                subject_props.setdefault(s, set()).add((p, o))
+    scale = MAX_SCALE
     rows: list[Row] = []
     two = len(shape.branches) == 2
     for s in sorted(readings, key=lambda t: (type(t).__name__, str(t))):
@@ -419,13 +439,12 @@ def run_plan(plan: Plan, window: WindowData) -> Evaluation:
         ts_list, x_list, all_int = [], [], True
         for node, ts in readings[s]:
             for v in values.get(node, ()):
-                value, is_int = parsed[v]
-                units = value.scaleb(scale, context=_CTX)
-                if abs(units) > MAX_ABS_UNITS:
-                    raise Fallback("number too large for the fixed-point path")
+                parsed = _units(v)
+                if parsed is None:
+                    raise Fallback(f"value {v} is not an exact integer/decimal within 10**6 and 10**-9")
                 ts_list.append(ts)
-                x_list.append(int(units))
-                all_int = all_int and is_int
+                x_list.append(parsed[0])
+                all_int = all_int and parsed[1]
         if not x_list:
             continue
         ts_arr = np.asarray(ts_list, dtype=np.int64)

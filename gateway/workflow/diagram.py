@@ -42,7 +42,8 @@ def scenario_view(wf: Workflow) -> dict[str, Any]:
         if row["actor"] not in lanes:
             lanes.append(row["actor"])
     return {"name": wf.name, "lanes": lanes,
-            "labels": {a.name: a.label or a.name for a in wf.actors.values()}, "steps": rows}
+            "labels": {a.name: a.label or a.name for a in wf.actors.values()},
+            "kinds": {a.name: a.kind for a in wf.actors.values()}, "steps": rows}
 
 
 def _label(wf: Workflow, step: Step) -> str:

@@ -79,13 +79,18 @@ class _Places:
 
     def __init__(self, root: yaml.Node | None) -> None:
         self._marks: dict[PathT, tuple[int, int]] = {}
+        self.duplicates: list[tuple[PathT, tuple[int, int]]] = []  # a repeated key would lose data
         if root is not None:
             self._walk(root, ())
 
     def _walk(self, node: yaml.Node, path: PathT) -> None:
         self._marks[path] = (node.start_mark.line + 1, node.start_mark.column + 1)
         if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
             for key, value in node.value:
+                if key.value in seen:
+                    self.duplicates.append((path + (key.value,), (key.start_mark.line + 1, key.start_mark.column + 1)))
+                seen.add(key.value)
                 child = path + (key.value,)
                 self._walk(value, child)
                 # a problem about a key itself ("unknown property") points at the key
@@ -119,6 +124,11 @@ class _Collector:
 def parse(text: str, file: str = "<workflow>") -> Workflow:
     """Parse and validate workflow YAML text; raises :class:`WorkflowInvalid` with all problems."""
     try:
+        alias = next((e for e in yaml.parse(text, Loader=yaml.SafeLoader) if isinstance(e, yaml.AliasEvent)), None)
+        if alias is not None:  # aliases can blow a small text up exponentially (and no workflow needs them)
+            mark = alias.start_mark
+            raise WorkflowInvalid([Problem(file, "", mark.line + 1, mark.column + 1,
+                                           "YAML aliases (*name) are not allowed in workflows")])
         root = yaml.compose(text, Loader=yaml.SafeLoader)
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
@@ -128,12 +138,23 @@ def parse(text: str, file: str = "<workflow>") -> Workflow:
         raise WorkflowInvalid([Problem(file, "", line, column, message)]) from None
     except yaml.YAMLError as exc:
         raise WorkflowInvalid([Problem(file, "", 0, 0, f"YAML error: {exc}")]) from None
-    places = _Places(root)
+    except RecursionError:
+        raise WorkflowInvalid([Problem(file, "", 0, 0, "the document is nested too deeply")]) from None
+    try:
+        places = _Places(root)
+    except RecursionError:
+        raise WorkflowInvalid([Problem(file, "", 0, 0, "the document is nested too deeply")]) from None
     errors = _Collector(file, places)
+    for path, (line, column) in places.duplicates:
+        errors.problems.append(Problem(file, format_path(path), line, column,
+                                       f"duplicate key {path[-1]!r} (the earlier value would be lost)"))
     if not isinstance(data, dict):
         errors.add((), f"a workflow must be a mapping, got {type(data).__name__}")
         raise WorkflowInvalid(errors.problems)
-    _check_schema(data, errors)
+    try:
+        _check_schema(data, errors)
+    except RecursionError:
+        errors.add((), "the document is nested too deeply")
     if errors.problems:
         raise WorkflowInvalid(errors.problems)
     workflow = _build(data, text)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import threading
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
@@ -20,6 +21,8 @@ from typing import Any
 
 from gateway.workflow.loader import Problem, WorkflowInvalid, parse
 from gateway.workflow.model import Workflow
+
+log = logging.getLogger(__name__)
 
 RESERVED_NAMES = {"runs", "manual", "validate", "schema"}
 
@@ -105,9 +108,13 @@ class WorkflowRegistry:
             name = history_file.parent.name
             entries = []
             for item in state["versions"]:
-                text = (history_file.parent / f"v{item['version']}.yaml").read_text(encoding="utf-8")
-                entries.append(Entry(parse(text, file=f"{name} v{item['version']}"), VersionInfo(**item)))
-            self._history[name] = entries
+                path = history_file.parent / f"v{item['version']}.yaml"
+                try:
+                    entries.append(Entry(parse(path.read_text(encoding="utf-8"), file=str(path)), VersionInfo(**item)))
+                except WorkflowInvalid:  # e.g. written under an older schema: keep the versions that still load
+                    log.error("kept workflow version %s no longer loads; skipped", path)
+            if entries:
+                self._history[name] = entries
             if state.get("imported_hash"):
                 self._imported[name] = state["imported_hash"]
 

@@ -58,12 +58,12 @@ def test_param_directives():
     (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 0s STEP 0s] WHERE {}", 3, 34, "RANGE must be greater"),
     (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 3s STEP 0s] WHERE {}", 3, 43, "STEP must be greater"),
     (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 3 STEP 1s] WHERE {}", 3, 42, "time unit"),
-    (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 3s STEP 1s WHERE {}", 3, 52, "expected ]"),
+    (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 3s STEP 1s WHERE {}", 3, 51, "expected ]"),
     (HEAD + "SELECT * FROM STREAM <http://s> RANGE 3s WHERE {}", 3, 33, "[RANGE"),
     (HEAD + "SELECT * FROM STREAM <http://s> [RANGE TRIPLES 0] WHERE {}", 3, 48, "TRIPLES"),
     (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s]\nWHERE { ?a foo:b ?c }", 4, 12, "unknown prefix 'foo'"),
-    (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE { ?a ?b ?c ~ }", 3, 70, "unexpected character"),
-    ("REGISTER QUERY AS SELECT", 1, 16, "AS"),
+    (HEAD + "SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE { ?a ?b ?c ~ }", 3, 69, "unexpected character"),
+    ("REGISTER QUERY AS SELECT", 1, 19, "expected AS"),
     ("", 1, 1, "empty"),
 ])
 def test_errors_have_positions(text, line, column, words):

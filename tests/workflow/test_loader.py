@@ -92,3 +92,28 @@ def test_process_cycles_are_rejected(small):
 
 def test_not_a_mapping():
     assert problems("- a\n- b\n")[0][3].startswith("a workflow must be a mapping")
+
+
+def test_command_line_validate_and_generate(teahouse_dir, tmp_path, capsys):
+    from gateway.workflow.__main__ import main
+
+    assert main(["validate", *map(str, sorted(teahouse_dir.glob("*.yaml")))]) == 0
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("workflow: bad\nmodules: {}\nprocesses: {}\nservices: {}\nroute: {services: []}\n")
+    assert main(["validate", str(bad)]) == 1
+    assert f"{bad}:2:10: modules:" in capsys.readouterr().err
+    out = tmp_path / "node.py"
+    assert main(["generate", str(teahouse_dir / "7_thanking.yaml"), "-o", str(out)]) == 0
+    compile(out.read_text(), str(out), "exec")
+
+
+def test_yaml_aliases_are_refused(small):
+    text = small.replace("inputs: {customers: [a, b]}", "inputs: &x {customers: [a, b]}\nextra: *x")
+    found = problems(text)
+    assert found == [(3, 8, "", "YAML aliases (*name) are not allowed in workflows")]
+
+
+def test_duplicate_keys_and_deep_nesting_are_refused(small):
+    found = problems(small.replace("inputs: {customers: [a, b]}", "inputs: {customers: [a, b]}\ninputs: {}"))
+    assert (3, 1, "inputs", "duplicate key 'inputs' (the earlier value would be lost)") in found
+    assert problems("a: " + "[" * 500 + "]" * 500)[0][3] == "the document is nested too deeply"

@@ -117,7 +117,7 @@ function drawScenario(target, view) {
     const lane = Math.max(0, view.lanes.indexOf(step.actor));
     const x = left + i * colW, y = 10 + lane * laneH + 12;
     const label = (step.branch ? "[" + step.branch.split(": ")[1] + "] " : "") + step.label;
-    box(svg, x, y, BW, BH, label, step.kind === "branch" ? "branch" : "", step.id);
+    box(svg, x, y, BW, BH, label, step.kind === "branch" ? "branch" : (view.kinds || {})[step.actor] || "system", step.id);
     if (prev) edge(svg, prev.x + BW, prev.y + BH / 2, x, y + BH / 2);
     prev = { x, y };
   });

@@ -43,8 +43,9 @@ public final class Session {
         String error = Runner.buildFacts(runner.types(), factsJson, facts);
         if (error != null) return error;
         for (Object f : facts) {
+            if (runner.types().isEvent(f)) continue;  // events are not kept by id
             String id = runner.types().idOf(f);
-            if (id != null && !runner.types().isEvent(f) && byId.containsKey(id)) {
+            if (id != null && byId.containsKey(id)) {
                 return Runner.factError(facts.indexOf(f), null, "id", id,
                         "a fact with id '" + id + "' is already in the session: update or retract it");
             }
@@ -53,8 +54,9 @@ public final class Session {
         StringBuilder ids = new StringBuilder("{\"ok\":true,\"inserted\":").append(facts.size()).append('}');
         for (Object f : facts) {
             FactHandle h = session.insert(f);
+            if (runner.types().isEvent(f)) continue;
             String id = runner.types().idOf(f);
-            if (id != null && !runner.types().isEvent(f)) byId.put(id, h);
+            if (id != null) byId.put(id, h);
         }
         return ids.toString();
     }

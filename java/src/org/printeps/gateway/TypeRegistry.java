@@ -39,8 +39,13 @@ public final class TypeRegistry {
         final Class<?> cls;
         final Map<String, FieldInfo> fields = new LinkedHashMap<String, FieldInfo>();
         final boolean event;
+        /** The public no-argument constructor, looked up once (null: none, reported at build). */
+        final java.lang.reflect.Constructor<?> constructor;
         TypeInfo(String simpleName, String fullName, Class<?> cls, boolean event) {
             this.simpleName = simpleName; this.fullName = fullName; this.cls = cls; this.event = event;
+            java.lang.reflect.Constructor<?> c;
+            try { c = cls.getConstructor(); } catch (Exception e) { c = null; }
+            this.constructor = c;
         }
     }
 
@@ -145,7 +150,8 @@ public final class TypeRegistry {
     Object build(TypeInfo t, Map<?, ?> values, int depth) throws FactProblem {
         Object obj;
         try {
-            obj = t.cls.getConstructor().newInstance();
+            if (t.constructor == null) obj = t.cls.getConstructor().newInstance();  // throws the usual error
+            else obj = t.constructor.newInstance();
         } catch (Exception e) {
             throw new FactProblem(null, "cannot create a " + t.simpleName + ": " + e);
         }

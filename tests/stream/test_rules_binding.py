@@ -1,0 +1,73 @@
+"""Detections become facts of a rule set and the rules fire (real Drools in the JVM)."""
+
+from __future__ import annotations
+
+import pytest
+
+from gateway.config import Settings
+from gateway.engine import Engine
+from gateway.stream import BindingError, RuleBinding, StreamEngine
+
+from csparql_scenarios import CUSTOMER_QUERY, approaching, messages, replay, walking_past
+
+DRL = """package org.printeps.detect;
+import org.printeps.gateway.Actions;
+global Actions actions;
+
+declare CustomerEntered
+    @role(event)
+    id : String
+    count : int
+    distance : double
+end
+
+rule "greet a customer who entered"
+when
+    $c : CustomerEntered(distance < 3.3)
+then
+    actions.say("pepper", "Welcome, " + $c.getId());
+end
+"""
+
+
+@pytest.fixture(scope="module")
+def rules_engine(tmp_path_factory) -> Engine:
+    base = tmp_path_factory.mktemp("rules")
+    engine = Engine(Settings(data_dir=str(base / "data"), engine={"rules_dir": str(base / "drl")}))
+    engine.deploy("detect", {"detect.drl": DRL}, author="test")
+    return engine
+
+
+@pytest.mark.parametrize("mode", ["stateless", "stateful"])
+def test_detections_fire_the_rules(settings, rules_engine, mode):
+    engine = StreamEngine(settings, rules_engine=rules_engine)
+    binding = RuleBinding("detect", "CustomerEntered", {"id": "s", "count": "cnt", "distance": "distance"}, mode=mode)
+    engine.register(CUSTOMER_QUERY, binding=binding)
+    events: list[dict] = []
+    engine.subscribe(events.append)
+    replay(engine, messages({"c1": approaching(4.0, 0.3), "c2": walking_past(2.0)}, hz=1, seconds=6, t0_ms=500))
+    actions = [e for e in events if e["kind"] == "actions"]
+    # detections in the windows ending 4000 and 5000 (see test_customer_detection)
+    assert [a["window"]["end"] for a in actions] == [4000, 5000]
+    first = actions[0]
+    assert first["facts"] == [{"type": "CustomerEntered", "id": "c1", "count": 3, "distance": 3.2}]
+    assert [(a["module"], a["params"]) for a in first["actions"]] == [("say", {"robot": "pepper", "text": "Welcome, c1"})]
+    assert engine.query_info("CustomerDetectionQuery")["stats"]["rule_fires"] == 2
+    engine.close()
+
+
+def test_bad_bindings_are_refused(settings, rules_engine):
+    engine = StreamEngine(settings, rules_engine=rules_engine)
+    engine.register(CUSTOMER_QUERY)
+    name = "CustomerDetectionQuery"
+    with pytest.raises(BindingError, match="declares no type 'Nope'"):
+        engine.bind_rules(name, RuleBinding("detect", "Nope"))
+    with pytest.raises(BindingError, match="no field 'age'"):
+        engine.bind_rules(name, RuleBinding("detect", "CustomerEntered", {"age": "cnt"}))
+    with pytest.raises(BindingError, match="no variable \\?x"):
+        engine.bind_rules(name, RuleBinding("detect", "CustomerEntered", {"id": "x"}))
+    with pytest.raises(Exception, match="nope"):
+        engine.bind_rules(name, RuleBinding("nope", "CustomerEntered"))
+    # default fields: variables named like fields (only "distance" here)
+    info = engine.bind_rules(name, RuleBinding("detect", "CustomerEntered"))
+    assert info["binding"]["fields"] == {"distance": "distance"}
