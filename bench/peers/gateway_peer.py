@@ -73,16 +73,16 @@ def simple(n: int) -> None:
 
 
 def _one_at_a_time(engine, events: list[dict], want: dict[str, int], checks: list[bool]) -> dict[str, float]:
-    """insert_event + fire per event, counting the fired rules the answer names (like a callback)."""
-    session = engine.open_session("visitors")
+    """One event in, its answer out (``session.push``: insert + fire in one JVM call), counting the
+    fired rules the answer names (like a callback)."""
+    session = engine.open_session("visitors", record_facts=False)
     clock = [0]
 
     def one_round() -> int:
         counts: dict[str, int] = {}
         for e in events:
             clock[0] += 1
-            session.insert_event(e, clock[0])
-            for f in session.fire().fired:
+            for f in session.push([e], clock[0]).fired:
                 counts[f["rule"]] = counts.get(f["rule"], 0) + 1
         checks.append(counts == want)
         return len(events)

@@ -68,8 +68,13 @@ def _locate_unencodable(facts: Any, exc: Exception) -> dict[str, Any]:
     return {"index": -1, "type": None, "id": None, "field": None, "message": f"facts are not JSON: {exc}"}
 
 
+_NOTHING_FIRED = '{"ok":true,"fireCount":0,"actions":[],"fired":[]}'
+
+
 def decode_result(answer: str, ruleset: str, version: int, duration_ms: float) -> FireResult:
     """Parses the Runner's answer; refusals and runaways become exceptions."""
+    if answer == _NOTHING_FIRED:  # the common case on a stream: skip the JSON parse
+        return FireResult(ruleset, version, [], [], [], 0, duration_ms)
     data = json.loads(answer)
     if not data.get("ok"):
         kind = data.get("kind")

@@ -16,6 +16,7 @@ from gateway.engine.errors import EngineError, FactError
 from gateway.engine.results import FireResult, decode_result, encode_facts
 
 _ids = itertools.count(1)
+_NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
 
 
 def _check(answer: Any) -> dict[str, Any]:
@@ -54,6 +55,16 @@ class StatefulSession:
     def insert_events(self, facts: list[dict[str, Any]], timestamp_ms: int) -> int:
         data = _check(self._live().insertAt(encode_facts(facts, self._max_facts), int(timestamp_ms)))
         return int(data["inserted"])
+
+    def push(self, facts: list[dict[str, Any]], timestamp_ms: int | None = None, return_facts: bool = False) -> FireResult:
+        """Inserts ``facts`` (stamped with ``timestamp_ms`` if given) and fires, in one JVM call.
+
+        The stream path: each event (or small batch) is answered with the actions it caused.
+        """
+        started = time.perf_counter()
+        stamp = _NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
+        answer = str(self._live().pushAt(encode_facts(facts, self._max_facts), stamp, self._fire_limit, return_facts))
+        return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
 
     def update(self, fact: dict[str, Any]) -> None:
         _check(self._live().update(json.dumps(fact, allow_nan=False)))

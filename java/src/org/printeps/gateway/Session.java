@@ -37,6 +37,16 @@ public final class Session {
         return insertAt(factsJson, Long.MIN_VALUE);
     }
 
+    /**
+     * Inserts facts stamped with {@code timestampMs} and fires, in one call: the stream path, where
+     * every event is pushed and answered on its own (one JPype crossing instead of two).
+     */
+    public synchronized String pushAt(String factsJson, long timestampMs, int limit, boolean returnFacts) {
+        String inserted = insertAt(factsJson, timestampMs);
+        if (!inserted.startsWith("{\"ok\":true")) return inserted;
+        return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
+    }
+
     /** Inserts facts stamped with {@code timestampMs}: the clock first advances to it (never back). */
     public synchronized String insertAt(String factsJson, long timestampMs) {
         List<Object> facts = new ArrayList<Object>();
