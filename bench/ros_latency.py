@@ -14,6 +14,7 @@ Latency = Speak arrival at the robot − publish of that reading. Peers measured
 from __future__ import annotations
 
 import os
+import shutil
 import statistics
 import sys
 import tempfile
@@ -68,7 +69,7 @@ def main() -> int:
         pub_node = sensor_rt.make(Node, "bench_sensor")
         pub = pub_node.create_publisher(Entrance, "entrance", 100)
         speak_client = pub_node.create_client(Speak, "/pepper/speak")
-        assert speak_client.wait_for_service(timeout_sec=30) and gw.caller._client(
+        assert speak_client.wait_for_service(timeout_sec=30) and gw.caller.client(
             "/pepper/speak", "Speak").wait_for_service(timeout_sec=30)
         deadline = time.monotonic() + 30
         while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
@@ -119,6 +120,7 @@ def main() -> int:
         for rt in (sensor_rt, gw_rt, robot_rt):
             rt.shutdown()
         store.close()
+        shutil.rmtree(settings.data_dir, ignore_errors=True)
     return 0
 
 

@@ -150,7 +150,7 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
                                                                    on_outcome=on_outcome),
                        rules=rules, store=store)
         robot = _sim("gateway.ros.sim_robot", ["--name", "pepper", "--log", str(calls_log)], env, work / "robot.log")
-        client = node.caller._client("/pepper/speak", "Speak")
+        client = node.caller.client("/pepper/speak", "Speak")
         if not client.wait_for_service(timeout_sec=30):
             raise RuntimeError(f"the robot simulator did not come up; see {work / 'robot.log'}")
         say("robot simulator (pepper) ready; starting the entrance sensor")
@@ -166,10 +166,7 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         stats = dict(node.pipeline.stats)
         say("scenario over")
         if not headless and url and not stop_event.is_set():
-            import webbrowser
-
-            webbrowser.open(f"{url}/")
-            say("gateway still running for the workbench; press Ctrl-C to stop")
+            say(f"gateway still running: open {url}/workbench to edit the rules; press Ctrl-C to stop")
             try:
                 stop_event.wait()
             except KeyboardInterrupt:

@@ -43,6 +43,7 @@ _EXCLUDED_JAR_PREFIXES = (
 _lock = threading.RLock()
 _extra_classpath: list[str] = []
 _helpers_dir: Path | None = None
+_configured: JvmSettings | None = None
 
 
 class JvmError(RuntimeError):
@@ -139,10 +140,21 @@ def _helpers_cache_dir(sources: dict[str, str]) -> Path:
     return base / "java-helpers" / digest.hexdigest()[:16]
 
 
+def configure(settings: JvmSettings) -> None:
+    """Set the JVM settings for the coming start (the engine calls this with its settings).
+
+    Ignored once the JVM runs: it starts only once per process.
+    """
+    global _configured
+    with _lock:
+        if not jpype.isJVMStarted():
+            _configured = settings
+
+
 def start(settings: JvmSettings | None = None) -> None:
     """Start the JVM (once per process) and make the Java helpers loadable."""
     global _helpers_dir
-    settings = settings or JvmSettings()
+    settings = settings or _configured or JvmSettings()
     with _lock:
         if jpype.isJVMStarted():
             return
@@ -152,6 +164,7 @@ def start(settings: JvmSettings | None = None) -> None:
         _helpers_dir.mkdir(parents=True, exist_ok=True)
         classpath = drools_jars() + [str(_helpers_dir)] + _extra_classpath
         options = [
+            "-Xrs",  # leave SIGINT/SIGTERM to Python, so shutdown hooks (ROS, DB process) run
             "-Xss4m",
             f"-Xmx{settings.max_heap}",
             "-XX:+UseSerialGC",

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from gateway import jvm
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler
 from gateway.engine.compiler import CompiledRuleSet
@@ -42,6 +43,7 @@ class Engine:
 
     def __init__(self, settings: Settings | None = None):
         self.settings = settings or load_settings()
+        jvm.configure(self.settings.jvm)
         self.store = VersionStore(Path(self.settings.data_dir) / "registry")
         self._live: dict[str, tuple[VersionInfo, CompiledRuleSet]] = {}
         self._lock = threading.RLock()
@@ -240,8 +242,6 @@ class Engine:
 
     def open_session(self, name: str, record_facts: bool = True) -> StatefulSession:
         """A long-lived stateful session on the live version of ``name``."""
-        from gateway import jvm
-
         info, compiled = self._live_entry(name)
         java = jvm.helper_class("Session")(compiled.runner, record_facts)
         session = StatefulSession(java, name, info.version, self.settings.engine.fire_limit, self.settings.engine.max_facts)

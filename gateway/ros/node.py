@@ -51,7 +51,7 @@ class RosServiceCaller:
         self._lock = threading.Lock()
         self._group = ReentrantCallbackGroup()
 
-    def _client(self, service: str, kind: str) -> Any:
+    def client(self, service: str, kind: str) -> Any:
         with self._lock:
             if service not in self._clients:
                 self._clients[service] = self.node.create_client(SRV_TYPES[kind], service,
@@ -59,7 +59,7 @@ class RosServiceCaller:
             return self._clients[service]
 
     def __call__(self, service: str, kind: str, params: dict[str, Any], timeout_s: float) -> tuple[str, str]:
-        client = self._client(service, kind)
+        client = self.client(service, kind)
         deadline = time.monotonic() + timeout_s
         if not client.service_is_ready() and not client.wait_for_service(timeout_sec=timeout_s):
             return "no_service", f"{service} is not available (waited {timeout_s:g} s)"

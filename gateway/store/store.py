@@ -201,7 +201,8 @@ class InformationState:
             spec[field] = value
         order = pymongo.DESCENDING if newest_first else pymongo.ASCENDING
         try:
-            cursor = self.db[collection].find(spec).sort("_meta.inserted_at", order).limit(limit)
+            # inserted_at has millisecond resolution; _id (ObjectId: time + counter) breaks ties in order
+            cursor = self.db[collection].find(spec).sort([("_meta.inserted_at", order), ("_id", order)]).limit(limit)
             docs = list(cursor)
         except PyMongoError as exc:
             raise StoreUnavailable(f"Information State unreachable: {exc.__class__.__name__}: {exc}") from exc

@@ -104,7 +104,7 @@ def test_hanging_robot_times_out_then_recorded(domain_id, settings, store, engin
     with RosRuntime(domain_id=domain_id) as robot_rt, RosRuntime(domain_id=domain_id) as rt:
         robot_rt.make(RobotSim, "pepper", hang_s=1.5)
         gw = start_gateway(rt, settings, store, engine_rules)
-        assert wait_for(lambda: gw.caller._client("/pepper/speak", "Speak").service_is_ready(), 15)
+        assert wait_for(lambda: gw.caller.client("/pepper/speak", "Speak").service_is_ready(), 15)
         reading = _one_group()
         outcomes = [o for r in reading for o in gw.pipeline.on_reading(r)]
     assert outcomes and outcomes[0]["status"] == "timeout" and outcomes[0]["attempts"] == 2
@@ -142,7 +142,7 @@ def test_gateway_restart_mid_scenario_loses_nothing(domain_id, settings, store, 
         for part in (readings[:half], readings[half:]):  # the gateway is stopped and started in between
             with RosRuntime(domain_id=domain_id) as rt:
                 gw = start_gateway(rt, settings, store, engine_rules)
-                assert wait_for(lambda: gw.caller._client("/pepper/speak", "Speak").service_is_ready(), 15)
+                assert wait_for(lambda: gw.caller.client("/pepper/speak", "Speak").service_is_ready(), 15)
                 for r in part:
                     gw.pipeline.on_reading(dict(r))
         assert robot is not None
