@@ -264,6 +264,32 @@ class Engine:
         if session is not None:
             session.close()
 
+    # ------------------------------------------------------------------ warm-up
+
+    def warm_up(self, rounds: int = 2, fires: int = 200, background: bool = True) -> threading.Thread | None:
+        """Builds the live rule sets ``rounds`` more times (results thrown away) and fires each
+        ``fires`` times with no facts, so the JIT has compiled Drools' builder and firing paths
+        before an author's first live edit or the first customer. Runs in a daemon thread by default.
+        """
+
+        def work() -> None:
+            for info in self.list_rulesets():
+                try:
+                    stored = self.store.load(info.name, info.version)
+                    for _ in range(rounds):
+                        compiler.compile_files(stored.files, f"warmup-{info.name}")
+                    for _ in range(fires):
+                        self.fire(info.name, [], return_facts=False)
+                except Exception:  # warm-up is best effort; real errors show on real use
+                    log.debug("warm-up of %s failed", info.name, exc_info=True)
+
+        if not background:
+            work()
+            return None
+        thread = threading.Thread(target=work, name="engine-warm-up", daemon=True)
+        thread.start()
+        return thread
+
     # ------------------------------------------------------------------ files on disk
 
     def load_rules_dir(self, rules_dir: str | None = None) -> dict[str, str]:
