@@ -30,7 +30,7 @@ from gateway.ros.convert import dict_to_entrance  # noqa: E402
 from gateway.ros.node import GatewayNode  # noqa: E402
 from gateway.ros.runtime import RosRuntime  # noqa: E402
 from gateway.ros.sim_robot import RobotSim  # noqa: E402
-from gateway.ros.stages import WARM_UP_FACTS, engine_stage, pipeline_factory  # noqa: E402
+from gateway.ros.stages import engine_stage, pipeline_factory  # noqa: E402
 from gateway.store import open_store  # noqa: E402
 
 from printeps_interfaces.msg import Entrance  # noqa: E402
@@ -77,13 +77,19 @@ def main() -> int:
         time.sleep(0.5)
 
         # peers: bare Speak round trip and bare firing, same run, same machine
+        peer_facts = [
+            {"type": "Entrance", "id": "peer", "number_of_customers": 2},
+            {"type": "Customer", "id": "p1", "entrance": "peer", "age": 30, "gender": "female", "distance": 2.0},
+            {"type": "Customer", "id": "p2", "entrance": "peer", "age": 32, "gender": "male", "distance": 2.0},
+            {"type": "Robot", "id": "pepper", "position": "counter"},
+        ]
         rtt, fire = [], []
         for i in range(trials):
             t = time.perf_counter()
             speak_client.call(Speak.Request(robot="pepper", text=f"peer {i}"), timeout_sec=5)
             rtt.append((time.perf_counter() - t) * 1000)
             t = time.perf_counter()
-            rules("reception", [dict(f) for f in WARM_UP_FACTS])
+            rules("reception", [dict(f) for f in peer_facts])
             fire.append((time.perf_counter() - t) * 1000)
 
         latency, misses = [], 0

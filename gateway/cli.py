@@ -109,6 +109,10 @@ def serve(
         except EngineError as exc:
             _fail(f"loading {settings.engine.rules_dir}: {exc}")
     application = create_app(settings, engine)
+    import gc
+
+    gc.collect()
+    gc.freeze()  # startup objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
     uvicorn.run(
         application,
         host=host or settings.api.host,

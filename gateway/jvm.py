@@ -152,7 +152,11 @@ def configure(settings: JvmSettings) -> None:
 
 
 def start(settings: JvmSettings | None = None) -> None:
-    """Start the JVM (once per process) and make the Java helpers loadable."""
+    """Start the JVM (once per process) and make the Java helpers loadable.
+
+    Start it from the main thread (``create_app`` and the CLI do): a JVM first started from a
+    worker thread makes JPype's exit handler wait forever at interpreter exit.
+    """
     global _helpers_dir
     settings = settings or _configured or JvmSettings()
     with _lock:

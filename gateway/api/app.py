@@ -14,6 +14,7 @@ from typing import Any
 
 from fastapi import FastAPI
 
+from gateway import jvm
 from gateway.api import decisions, health, kie_server, metrics, rulesets
 from gateway.api.auth import Authenticator
 from gateway.api.errors import install_error_handlers
@@ -50,6 +51,9 @@ def create_app(
     also add to ``app.state.health_checks`` later.
     """
     settings = settings or load_settings()
+    # Start the JVM here, in the thread that builds the app (normally the main thread): a JVM first
+    # started from a request's worker thread makes the interpreter hang at exit (JPype shutdown).
+    jvm.start(settings.jvm)
     if engine is None:
         from gateway.engine import Engine
 

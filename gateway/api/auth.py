@@ -101,7 +101,7 @@ def _auth(request: Request) -> Authenticator:
 def require(role: str) -> Callable[..., Principal]:
     """A FastAPI dependency: the bearer-token principal, with at least ``role``."""
 
-    def dependency(
+    async def dependency(  # async: a sync dependency would cost a threadpool hop per request
         request: Request, bearer: HTTPAuthorizationCredentials | None = Security(_bearer)
     ) -> Principal:
         return _auth(request).check(role, bearer)
@@ -112,7 +112,7 @@ def require(role: str) -> Callable[..., Principal]:
 def require_kie(role: str) -> Callable[..., Principal]:
     """Like :func:`require`, also accepting HTTP basic auth (what KIE Server clients send)."""
 
-    def dependency(
+    async def dependency(
         request: Request,
         bearer: HTTPAuthorizationCredentials | None = Security(_bearer),
         basic: HTTPBasicCredentials | None = Security(_basic),

@@ -22,10 +22,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fastapi import APIRouter, Depends, Request
-from starlette.concurrency import run_in_threadpool
 
 from gateway.api.auth import Principal, kie_caller
-from gateway.api.jsonio import JSON, read_json
+from gateway.api.jsonio import JSON, read_json, run_blocking
 from gateway.engine import EngineError, RuleSetNotFound
 
 PREFIX = "/kie-server/services/rest/server"
@@ -328,7 +327,7 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
     try:
         commands = parse_commands(body)
         start = time.perf_counter()
-        run = await run_in_threadpool(run_batch, request.app.state.engine, container_id, commands)
+        run = await run_blocking(run_batch, request.app.state.engine, container_id, commands)
     except RuleSetNotFound:
         return JSON(service_response(False, f"Container {container_id} is not instantiated."))
     except (BatchError, EngineError) as exc:

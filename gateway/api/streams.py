@@ -76,9 +76,12 @@ def configure(services: StreamServices | None) -> None:
     _services = services
 
 
-def build_services(settings: Settings, rules_engine: Any = None) -> StreamServices:
+def build_services(settings: Settings, rules_engine: Any = None, warm: bool = True) -> StreamServices:
     """The standard wiring: stream engine (+ rules), mapper, Pellet reasoner, and the .rq files of
-    ``settings.streams.queries_dir`` registered (a broken file is logged, not fatal)."""
+    ``settings.streams.queries_dir`` registered (a broken file is logged, not fatal).
+
+    ``warm`` runs the reasoner once here (starting the JVM in the calling thread — call this from
+    the main thread: a JVM started from a worker thread makes interpreter exit hang)."""
     cfg = settings.streams
     engine = StreamEngine(cfg, rules_engine=rules_engine)
     if cfg.queries_dir and Path(cfg.queries_dir).is_dir():
@@ -88,6 +91,8 @@ def build_services(settings: Settings, rules_engine: Any = None) -> StreamServic
             except (QueryParseError, StreamError) as exc:
                 log.error("query file %s not registered: %s", path, exc)
     reasoner = Reasoner(cfg.ontology_file, cfg.swrl_file)
+    if warm:
+        reasoner.warm_up()
     return StreamServices(engine=engine, mapper=Mapper(), reasoner=reasoner, settings=cfg)
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import itertools
 import json
 import time
-from typing import Any
+from typing import Any, Callable
 
 from gateway.engine.errors import EngineError, FactError
 from gateway.engine.results import FireResult, decode_result, encode_facts
@@ -29,7 +29,15 @@ def _check(answer: Any) -> dict[str, Any]:
 class StatefulSession:
     """A Drools KieSession kept between calls (thread-safe: the Java side synchronizes)."""
 
-    def __init__(self, java_session: Any, ruleset: str, version: int, fire_limit: int, max_facts: int):
+    def __init__(
+        self,
+        java_session: Any,
+        ruleset: str,
+        version: int,
+        fire_limit: int,
+        max_facts: int,
+        on_close: Callable[[str], None] | None = None,
+    ):
         self.id = f"s{next(_ids)}"
         self.ruleset = ruleset
         self.version = version
@@ -37,6 +45,7 @@ class StatefulSession:
         self._fire_limit = fire_limit
         self._max_facts = max_facts
         self.closed = False
+        self._on_close = on_close
 
     def _live(self) -> Any:
         if self.closed:
@@ -97,9 +106,12 @@ class StatefulSession:
         return int(self._live().insertAndFireCount(facts_json, self._fire_limit))
 
     def close(self) -> None:
+        """Disposes the Drools session and forgets it in the engine."""
         if not self.closed:
             self.closed = True
             self._java.dispose()
+            if self._on_close is not None:
+                self._on_close(self.id)
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "ruleset": self.ruleset, "version": self.version, "closed": self.closed}

@@ -102,6 +102,14 @@ class Reasoner:
                                     classes, objs, datas, rules)
         return self._cache
 
+    def warm_up(self) -> None:
+        """Start the JVM and load Pellet now (call from the main thread at start-up), so the first
+        request does not pay for it. Failures are logged: reasoning then fails per request."""
+        try:
+            self.reason(None)
+        except Exception as exc:  # a broken ontology must not stop the gateway from starting
+            log.error("the reasoner could not be warmed up: %s", exc)
+
     # -- reasoning -----------------------------------------------------------------------------
     def reason(self, data: dict[str, Any] | str | None = None) -> dict[str, Any]:
         """Reason over the ontology plus ``data`` (JSON individuals, or Turtle text).

@@ -37,7 +37,8 @@ def engine_rules(engine: Any) -> Rules:
     """Adapt gateway.engine.Engine to the Rules stage."""
 
     def fire(ruleset: str, facts: list[dict[str, Any]]) -> dict[str, Any]:
-        return engine.fire(ruleset, facts).to_dict()
+        # origin "ros": the pipeline records this firing in the Information State itself
+        return engine.fire(ruleset, facts, context={"origin": "ros"}).to_dict()
 
     return fire
 

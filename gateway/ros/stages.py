@@ -54,22 +54,5 @@ def engine_stage(settings: Any) -> tuple[Any, Rules]:
     engine = Engine(settings)
     engine.load_rules_dir()
     rules = engine_rules(engine)
-    warm_up(rules, settings.ros.ruleset)
+    engine.warm_up(rounds=0, fires=20, background=False)  # the first customer must not pay for the JIT
     return engine, rules
-
-
-WARM_UP_FACTS = [
-    {"type": "Entrance", "id": "warm-up", "number_of_customers": 2},
-    {"type": "Customer", "id": "w1", "entrance": "warm-up", "age": 30, "gender": "female", "distance": 2.0},
-    {"type": "Customer", "id": "w2", "entrance": "warm-up", "age": 32, "gender": "male", "distance": 2.0},
-    {"type": "Robot", "id": "pepper", "position": "counter"},
-]
-
-
-def warm_up(rules: Rules, ruleset: str, rounds: int = 20) -> None:
-    """Fire a few times before the first customer: the JVM's first firings are ~100x slower."""
-    try:
-        for _ in range(rounds):
-            rules(ruleset, [dict(f) for f in WARM_UP_FACTS])
-    except Exception as exc:  # a missing/odd rule set is reported when it is really used
-        log.warning("warm-up of %s skipped: %s", ruleset, exc)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from pyoxigraph import DefaultGraph, Literal, NamedNode, Quad, QuerySolutions, QueryTriples, Store
+from pyoxigraph import DefaultGraph, Literal, NamedNode, Quad, QueryBoolean, QuerySolutions, QueryTriples, Store
 
 from gateway.rdf.terms import CSPARQL_FN, XSD_INTEGER, Term, Triple
 
@@ -69,7 +69,8 @@ def evaluate_oxigraph(sparql: str, window: WindowData) -> Evaluation:
 
 
 def _collect(result: Any) -> tuple[list[str], list[Row]]:
-    if isinstance(result, bool):
+    if isinstance(result, (bool, QueryBoolean)):
+        result = bool(result)
         return ["ask"], [{"ask": Literal("true" if result else "false",
                                          datatype=NamedNode("http://www.w3.org/2001/XMLSchema#boolean"))}]
     if isinstance(result, QuerySolutions):

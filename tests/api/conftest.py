@@ -2,24 +2,14 @@
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
 
 from gateway.config import Settings
 
-
-def make_settings(tmp: Path, **api: object) -> Settings:
-    rules_dir = tmp / "rules"
-    rules_dir.mkdir(parents=True, exist_ok=True)
-    return Settings.model_validate(
-        {"data_dir": str(tmp / "var"), "engine": {"rules_dir": str(rules_dir)}, "api": api}
-    )
+from api_helpers import ServerThread, make_settings
 
 
 @pytest.fixture(scope="session")
@@ -55,38 +45,6 @@ def secured(api_settings: Settings, engine) -> Iterator[TestClient]:
     )
     with TestClient(create_app(settings, engine)) as c:
         yield c
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class ServerThread:
-    """A real uvicorn server on 127.0.0.1 in a thread (stopped by ``stop``)."""
-
-    def __init__(self, app, port: int | None = None) -> None:
-        import uvicorn
-
-        self.port = port or free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        config = uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning", access_log=False)
-        self.server = uvicorn.Server(config)
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-
-    def start(self, timeout: float = 30.0) -> "ServerThread":
-        self.thread.start()
-        deadline = time.monotonic() + timeout
-        while not self.server.started:
-            if time.monotonic() > deadline or not self.thread.is_alive():
-                raise RuntimeError("uvicorn did not start")
-            time.sleep(0.02)
-        return self
-
-    def stop(self) -> None:
-        self.server.should_exit = True
-        self.thread.join(timeout=10)
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from rulesets import BROKEN, FACTS, TYPES, files
+from api_helpers import BROKEN, FACTS, TYPES, files
 
 DSL = '[when]There is a customer=$c : Customer()\n[then]Say hello=actions.say("pepper", "hello " + $c.getId());\n'
 DSLR = (
@@ -170,3 +170,15 @@ def test_openapi_docs(client):
     assert "/api/rulesets/{name}/fire" in spec["paths"]
     assert "/kie-server/services/rest/server/containers/instances/{container_id}" in spec["paths"]
     assert client.get("/docs").status_code == 200
+
+
+def test_fire_in_a_worker_thread_when_not_inline(api_settings, engine, deployed):
+    from fastapi.testclient import TestClient
+
+    from gateway.api.app import create_app
+
+    settings = api_settings.model_copy(update={"api": api_settings.api.model_copy(update={"inline_fire": False})})
+    with TestClient(create_app(settings, engine, include_optional=False)) as c:
+        r = c.post("/api/rulesets/rest/fire", json={"facts": FACTS})
+        assert r.status_code == 200 and r.json()["version"] == 2
+        assert c.post("/api/rulesets/rest/fire", json={"facts": [{"type": "Dragon"}]}).status_code == 422

@@ -15,7 +15,6 @@ from fastapi.testclient import TestClient
 
 from gateway.api import streams
 from gateway.config import Settings
-from gateway.stream import StreamEngine
 
 from csparql_scenarios import CUSTOMER_QUERY, ENTRANCE, approaching, messages
 

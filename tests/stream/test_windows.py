@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 from pyoxigraph import Literal, NamedNode
 
-from gateway.config import StreamSettings
 from gateway.rdf.terms import XSD_INTEGER
 from gateway.stream import QueryParseError, StreamEngine, StreamError
 
@@ -143,3 +142,35 @@ def test_a_failing_subscriber_does_not_stop_the_stream(engine):
     engine.push(S1, 100, [triple(1)])
     engine.push(S1, 1100, [triple(2)])
     assert rows(events) and engine.subscriber_errors == 1
+
+
+def test_construct_and_ask_queries(engine):
+    engine.register(HEAD.format(name="c") + "CONSTRUCT { ?s ex:seen true } FROM STREAM <" + S1
+                    + "> [RANGE 1s STEP 1s] WHERE { ?s ex:v ?v FILTER(?v > 1) }")
+    engine.register(HEAD.format(name="a").replace("REGISTER QUERY", "REGISTER STREAM") + "ASK FROM STREAM <" + S1
+                    + "> [RANGE 1s STEP 1s] WHERE { ?s ex:v 2 }")
+    events = collect(engine)
+    engine.push(S1, 100, [triple(1), triple(2)])
+    engine.advance(1000)
+    by_query = {e["query"]: e["rows"] for e in events if e["kind"] == "result"}
+    assert by_query["c"] == [{"subject": EX + "r2", "predicate": EX + "seen", "object": True}]
+    assert by_query["a"] == [{"ask": True}]
+
+
+def test_inexact_numbers_fall_back_to_the_general_path(engine):
+    from csparql_scenarios import CUSTOMER_QUERY
+
+    engine.register(CUSTOMER_QUERY)
+    P = "http://printeps.org/cafe/entrance/"
+    double = NamedNode("http://www.w3.org/2001/XMLSchema#double")
+    events = collect(engine)
+    for i, (ts, d) in enumerate([(500, "3.9"), (1500, "3.6"), (2500, "3.3"), (3500, "3.0"), (4500, "2.7")]):
+        node = NamedNode(f"{P}r{i}")
+        engine.push("http://printeps.org/cafe/entrance", ts, [
+            (NamedNode(P + "c1"), NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type"), NamedNode(P + "Customer")),
+            (NamedNode(P + "c1"), NamedNode(P + "positionAtTime"), node),
+            (node, NamedNode(P + "distance"), Literal(d, datatype=double)),
+        ])
+    (event,) = [e for e in events if e["kind"] == "result"]
+    assert event["path"] == "oxigraph" and event["rows"][0]["cnt"] == 3
+    assert engine.query_info("CustomerDetectionQuery")["stats"]["fallbacks"] >= 1
