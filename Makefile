@@ -30,7 +30,7 @@ browser:
 	@command -v chromium >/dev/null || ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q chromium)
 
 run: install
-	$(BIN)/printeps demo --serve
+	$(BIN)/printeps demo
 
 serve: install
 	$(BIN)/printeps serve

@@ -96,32 +96,48 @@ def serve(
     load_rules: bool = typer.Option(True, help="Deploy rules/drl/* (settings.engine.rules_dir) at start."),
 ) -> None:
     """Run the gateway (REST API, KIE Server compatible API, /docs) with uvicorn."""
-    import uvicorn
-
-    from gateway.api.app import create_app
-    from gateway.engine import Engine, EngineError
-
-    settings = _settings(config)
-    engine = Engine(settings)
-    if load_rules:
-        try:
-            engine.load_rules_dir()
-        except EngineError as exc:
-            _fail(f"loading {settings.engine.rules_dir}: {exc}")
-    application = create_app(settings, engine)
     import gc
 
+    import uvicorn
+
+    from gateway.server import build_gateway
+
+    settings = _settings(config)
+    gateway = build_gateway(settings, load_rules=load_rules)
     gc.collect()
     gc.freeze()  # startup objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
-    uvicorn.run(
-        application,
-        host=host or settings.api.host,
-        port=port or settings.api.port,
-        loop="auto",
-        http="auto",
-        log_level="info",
-        access_log=False,
-    )
+    try:
+        uvicorn.run(
+            gateway.app,
+            host=host or settings.api.host,
+            port=port or settings.api.port,
+            loop="auto",
+            http="auto",
+            log_level="info",
+            access_log=False,
+        )
+    finally:
+        gateway.close()
+
+
+@app.command()
+def demo(
+    headless: bool = typer.Option(False, help="Play the scenario and exit (no browser-facing gateway left running)."),
+    speed: float = typer.Option(1.0, help="Replay speed of the sensor scenario (2 = twice as fast)."),
+    scenario: Optional[Path] = typer.Option(None, help="Scenario file (default: scenarios/teahouse-reception.yaml)."),
+    config: Optional[Path] = ConfigOption,
+) -> None:
+    """The teahouse reception end to end: gateway, embedded database, ROS node, sensor and Pepper
+    simulators; prints what happens and a summary. Without --headless the gateway keeps running
+    (workbench at http://127.0.0.1:8080/workbench) until Ctrl-C."""
+    import sys as _sys
+
+    from gateway.demo import run_demo
+
+    _sys.setswitchinterval(0.001)  # short GIL hand-offs between the ROS executor and the worker
+    summary = run_demo(_settings(config), headless=headless, scenario=scenario, speed=speed)
+    if summary.get("failed"):
+        raise typer.Exit(1)
 
 
 @rules_app.command("validate")

@@ -40,20 +40,21 @@ class Printer:
             self.out(f"[{time.monotonic() - self.t0:6.2f}s] {text}")
 
 
-def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable[[], dict], say: Printer):
-    """The REST API + workbench on a free loopback port (None when the API package is not there)."""
+def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable[[], dict], say: Printer,
+                headless: bool = True):
+    """The REST API + workbench on loopback: the configured port (8080) when it is free and the
+    demo is interactive, else any free port. (None, None) when the API package is not there."""
     try:
         import uvicorn
 
-        from gateway.api.app import create_app
+        from gateway.server import build_app
     except ImportError as exc:
         say(f"REST API not available ({exc}); continuing without it")
         return None, None
     from gateway.store.embedded import free_port
 
-    app = create_app(settings, engine, health_checks={"store": store.health, "ros": ros_check})
-    app.state.store = store
-    port = free_port()
+    app, _ = build_app(settings, engine, store, health_checks={"ros": ros_check})
+    port = settings.api.port if not headless and _port_is_free(settings.api.port) else free_port()
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
     thread.start()
@@ -61,6 +62,17 @@ def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable
     while not server.started and time.monotonic() < deadline and thread.is_alive():
         time.sleep(0.05)
     return server, f"http://127.0.0.1:{port}"
+
+
+def _port_is_free(port: int) -> bool:
+    import socket
+
+    with socket.socket() as sock:
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
 
 
 def _sim(module: str, args: list[str], env: dict[str, str], logfile: Path) -> subprocess.Popen:
@@ -128,7 +140,7 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         def ros_check() -> dict[str, Any]:
             return {"status": "ok", "domain_id": domain, "node": settings.ros.node_name}
 
-        server, url = _start_rest(settings, engine, store, ros_check, say)
+        server, url = _start_rest(settings, engine, store, ros_check, say, headless)
         if url:
             say(f"REST API + workbench: {url}/  (Information State: {url}/api/state/actions)")
 

@@ -337,9 +337,15 @@ def compile_files(files: dict[str, str], label: str = "ruleset") -> CompiledRule
         return _build(files, sources, expanded, label)
 
 
+_PACKAGE = re.compile(r"^\s*package\s+([A-Za-z_][\w.]*)\s*;?", re.MULTILINE)
+
+
 def _resource_path(label: str, source: _Source) -> str:
+    """Where a DRL goes in the KieFileSystem: the folder of its package, as Drools expects."""
     name = source.file if source.file.endswith(".drl") else source.file + ".drl"
-    return f"src/main/resources/{re.sub(r'[^A-Za-z0-9_]', '_', label)}/{name}"
+    package = _PACKAGE.search(source.drl)
+    folder = package.group(1).replace(".", "/") if package else re.sub(r"[^A-Za-z0-9_]", "_", label)
+    return f"src/main/resources/{folder}/{name}"
 
 
 def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, str], label: str) -> CompiledRuleSet:
