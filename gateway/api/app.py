@@ -26,6 +26,7 @@ log = logging.getLogger(__name__)
 # Routers owned by other modules: (module, attribute). Missing modules are skipped.
 OPTIONAL_ROUTERS = (
     ("gateway.api.streams", "router"),
+    ("gateway.api.knowledge", "router"),
     ("gateway.api.state", "router"),
     ("gateway.api.workflows", "router"),
     ("gateway.workbench.router", "router"),

@@ -39,12 +39,9 @@ class ScenarioError(AssertionError):
 class Gateway:
     """The running gateway as an owner's tools see it: its REST API (and its knowledge files)."""
 
-    def __init__(self, base_url: str, *, ontology_file: str | Path, swrl_file: str | Path,
-                 token: str | None = None, timeout: float = 30.0) -> None:
+    def __init__(self, base_url: str, *, token: str | None = None, timeout: float = 30.0) -> None:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.http = httpx.Client(base_url=base_url, headers=headers, timeout=timeout)
-        self.ontology_file = Path(ontology_file)
-        self.swrl_file = Path(swrl_file)
         self.failed_requests: list[str] = []
 
     def close(self) -> None:
@@ -91,17 +88,12 @@ class Gateway:
         return self._call("POST", "/api/reason", json={"individuals": individuals}).json()
 
     def knowledge_text(self, kind: str) -> str:
-        return self._knowledge_path(kind).read_text(encoding="utf-8")
+        return self._call("GET", f"/api/knowledge/{kind}").json()["text"]
 
     def put_knowledge(self, kind: str, text: str) -> None:
-        """Write the file the gateway watches (atomically: a reader never sees half a file)."""
-        path = self._knowledge_path(kind)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
+        """Replace the ontology or the SWRL rules through the REST API (checked, then live)."""
+        self._call("PUT", f"/api/knowledge/{kind}", json={"text": text, "comment": "Table 2 change request"})
 
-    def _knowledge_path(self, kind: str) -> Path:
-        return self.ontology_file if kind == "ontology" else self.swrl_file
 
 
 # ---------------------------------------------------------------- what the robots did
@@ -477,9 +469,9 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
 
     import uvicorn
 
-    from gateway.api.app import create_app
     from gateway.config import PROJECT_ROOT, Settings
     from gateway.engine import Engine
+    from gateway.server import build_app
 
     workdir = Path(workdir)
     knowledge = workdir / "ontology"
@@ -493,11 +485,8 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
     })
     engine = Engine(settings)
     engine.load_rules_dir()
-    app = create_app(settings, engine)
-    if getattr(app.state, "stream_services", None) is None:
-        from gateway.api.streams import build_services
-
-        app.state.stream_services = build_services(settings, engine)
+    app, _ = build_app(settings, engine, None)  # as `printeps serve` wires it (no Information State)
+    engine.warm_up(background=False)  # as a gateway that has been up a while: `serve` warms up at start
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -509,8 +498,7 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
         if time.monotonic() > deadline or not thread.is_alive():
             raise RuntimeError("the gateway did not start")
         time.sleep(0.05)
-    gw = Gateway(f"http://127.0.0.1:{port}", ontology_file=settings.streams.ontology_file,
-                 swrl_file=settings.streams.swrl_file, token=token)
+    gw = Gateway(f"http://127.0.0.1:{port}", token=token)
     try:
         yield gw
     finally:
