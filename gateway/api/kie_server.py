@@ -212,11 +212,25 @@ def run_batch(engine: Any, name: str, commands: list[tuple[str, dict[str, Any]]]
                 objs = [fact_to_kie(f, run.packages, run.default_package) for f in _current_facts(run)
                         if wanted is None or f.get("type") == wanted]
                 run.results.append({"key": args.get("out-identifier") or "objects", "value": objs})
-            elif cmd in ("set-global", "get-global", "query"):
-                raise BatchError(
-                    f"{where}: not supported by this gateway (rule sets use the global 'actions' only; "
-                    "return data through facts or actions instead)"
-                )
+            elif cmd == "set-global":
+                _flush(run, session)
+                identifier = _required(args, "identifier", where)
+                _engine_call(where, session.set_global, identifier, _unwrap_object(args.get("object")))
+                if args.get("out-identifier"):
+                    run.results.append({"key": args["out-identifier"], "value": args.get("object")})
+            elif cmd == "get-global":
+                identifier = _required(args, "identifier", where)
+                value = _engine_call(where, session.get_global, identifier)
+                run.results.append({"key": args.get("out-identifier") or identifier, "value": value})
+            elif cmd == "query":
+                _flush(run, session)
+                query_name = _required(args, "name", where)
+                arguments = args.get("arguments") or []
+                if not isinstance(arguments, list):
+                    raise BatchError(f"{where}: 'arguments' must be a list")
+                answer = _engine_call(where, session.query, query_name, arguments)
+                run.results.append({"key": args.get("out-identifier") or query_name,
+                                    "value": flat_query_results(answer, run.packages, run.default_package)})
             elif cmd == "dispose":
                 pass
         _flush(run, session)
@@ -224,6 +238,44 @@ def run_batch(engine: Any, name: str, commands: list[tuple[str, dict[str, Any]]]
         engine.close_session(session.id)
     _returned_objects(run)
     return run
+
+
+def _required(args: dict[str, Any], key: str, where: str) -> str:
+    value = args.get(key)
+    if not isinstance(value, str) or not value:
+        raise BatchError(f"{where}: '{key}' is required")
+    return value
+
+
+def _engine_call(where: str, fn: Any, *args: Any) -> Any:
+    from gateway.engine import EngineError
+
+    try:
+        return fn(*args)
+    except EngineError as exc:
+        raise BatchError(f"{where}: {exc}") from None
+
+
+def _unwrap_object(value: Any) -> Any:
+    """KIE clients send typed values, ``{"java.lang.Integer": 18}``; plain JSON works too."""
+    if isinstance(value, dict) and len(value) == 1:
+        key = next(iter(value))
+        if "." in key:
+            return value[key]
+    return value
+
+
+def flat_query_results(answer: dict[str, Any], packages: dict[str, str], default_package: str) -> dict[str, Any]:
+    """A query answer in KIE Server's marshalled ``FlatQueryResults`` shape."""
+    def value(v: Any) -> Any:
+        return fact_to_kie(v, packages, default_package) if isinstance(v, dict) and "type" in v else v
+
+    rows = [{"element": [{"key": k, "value": value(v)} for k, v in row.items()]} for row in answer["rows"]]
+    return {"org.drools.core.runtime.rule.impl.FlatQueryResults": {
+        "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": []},
+        "idResultMaps": {"type": "LIST", "componentType": None, "element": rows},
+        "identifiers": {"type": "SET", "componentType": None, "element": answer["identifiers"]},
+    }}
 
 
 def _insert(run: BatchRun, session: Any, facts: list[dict[str, Any]], out_id: str | None, ret: bool) -> None:

@@ -81,6 +81,18 @@ class StatefulSession:
     def retract(self, fact_id: str) -> None:
         _check(self._live().retract(str(fact_id)))
 
+    def query(self, name: str, arguments: list[Any] | None = None) -> dict[str, Any]:
+        """Runs the rule set's DRL ``query name(...)``: ``{"identifiers": [...], "rows": [{id: value}]}``."""
+        data = _check(self._live().query(str(name), json.dumps(list(arguments or []), allow_nan=False)))
+        return {"identifiers": data["identifiers"], "rows": data["rows"]}
+
+    def set_global(self, name: str, value: Any) -> None:
+        """Sets a global the rule set declares (``global java.util.List seats;``), strictly typed."""
+        _check(self._live().setGlobal(str(name), json.dumps(value, allow_nan=False)))
+
+    def get_global(self, name: str) -> Any:
+        return _check(self._live().getGlobal(str(name)))["value"]
+
     def advance_clock(self, ms: int) -> int:
         return int(self._live().advanceBy(int(ms)))
 

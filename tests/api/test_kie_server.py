@@ -93,7 +93,8 @@ def test_failures_are_kie_shaped(kie):
         ({"commands": [{"start-process": {"process-id": "p"}}]}, "not supported"),
         ({"commands": [{"insert": {"object": {f"{PKG}.Dragon": {"id": "d"}}}}, {"fire-all-rules": {}}]}, "Dragon"),
         ({"commands": [{"insert": {"object": {f"{PKG}.Customer": {"age": "old"}}}}, {"fire-all-rules": {}}]}, "age"),
-        ({"commands": [{"set-global": {"identifier": "list", "object": []}}]}, "not supported"),
+        ({"commands": [{"set-global": {"identifier": "list", "object": []}}]}, "declares no global 'list'"),
+        ({"commands": [{"query": {"name": "nope", "out-identifier": "q"}}]}, "query 'nope' failed"),
         ({"commands": []}, "no commands"),
     ):
         body = kie.post(f"{BASE}/containers/instances/kie", json=batch).json()
@@ -101,3 +102,39 @@ def test_failures_are_kie_shaped(kie):
         assert expected in body["msg"], body["msg"]
     r = kie.post(f"{BASE}/containers/instances/kie", content=b"{not json")
     assert r.status_code == 400 and "not valid JSON" in r.json()["error"]
+
+
+def test_batch_query_and_globals(kie, client):
+    qfiles = files("kq")
+    qfiles["queries.drl"] = f"""package {PKG};
+global java.util.List names;
+
+query "customers older than" (int limit)
+    $c: Customer(age > limit)
+end
+
+rule "collect names"
+when
+    $c: Customer()
+then
+    names.add($c.getId());
+end
+"""
+    assert client.put("/api/rulesets/kieq", json={"files": qfiles}).status_code == 201
+    batch = {"lookup": "defaultKieSession", "commands": [
+        {"set-global": {"identifier": "names", "object": {"java.util.ArrayList": []}}},
+        {"insert": {"object": {f"{PKG}.Customer": {"id": "c1", "age": 30}}}},
+        {"insert": {"object": {f"{PKG}.Customer": {"id": "c2", "age": 5}}}},
+        {"fire-all-rules": {}},
+        {"query": {"name": "customers older than", "arguments": [18], "out-identifier": "older"}},
+        {"get-global": {"identifier": "names", "out-identifier": "names"}},
+    ]}
+    body = kie.post(f"{BASE}/containers/instances/kieq", json=batch).json()
+    assert body["type"] == "SUCCESS", body
+    results = {r["key"]: r["value"] for r in body["result"]["execution-results"]["results"]}
+    flat = results["older"]["org.drools.core.runtime.rule.impl.FlatQueryResults"]
+    rows = flat["idResultMaps"]["element"]
+    found = [e["value"][f"{PKG}.Customer"]["id"] for row in rows for e in row["element"] if e["key"] == "$c"]
+    assert found == ["c1"]
+    assert "$c" in flat["identifiers"]["element"]
+    assert sorted(results["names"]) == ["c1", "c2"]

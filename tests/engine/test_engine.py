@@ -419,3 +419,43 @@ end
     errors = _errors(engine, {"types.drl": TYPES, "teahouse.dsl": dsl, "greet.dslr": dslr})
     assert (errors[0].file, errors[0].line) == ("greet.dslr", 8)
     assert "$c" in errors[0].message and "does not bind" in errors[0].message
+
+
+def test_queries_and_globals_in_a_stateful_session(engine):
+    rules = TYPES + """
+global java.lang.Integer minimumAge;
+global java.util.List seen;
+
+query "adults older than" (int limit)
+    $c: Customer(age > limit)
+end
+
+rule "remember adults"
+when
+    $c: Customer(age >= minimumAge)
+then
+    seen.add($c.getId());
+end
+"""
+    engine.deploy("q", {"rules.drl": rules})
+    session = engine.open_session("q")
+    try:
+        session.set_global("minimumAge", 18)
+        session.set_global("seen", [])
+        session.insert([FIVE_FACTS[0], FIVE_FACTS[1]])
+        session.fire()
+        assert session.get_global("seen") == ["c1"]
+        answer = session.query("adults older than", [20])
+        assert answer["identifiers"] == ["$c", "limit"] or "$c" in answer["identifiers"]
+        assert [row["$c"]["id"] for row in answer["rows"]] == ["c1"]
+        with pytest.raises(FactError, match="declares no global"):
+            session.set_global("nope", 1)
+        with pytest.raises(FactError, match="expected Integer"):
+            session.set_global("minimumAge", "eighteen")
+        with pytest.raises(FactError, match="belongs to the gateway"):
+            session.set_global("actions", None)
+        with pytest.raises(FactError, match="query 'missing' failed"):
+            session.query("missing")
+    finally:
+        session.close()
+    assert engine.sessions() == []

@@ -124,5 +124,95 @@ public final class Session {
         return n;
     }
 
+    /** Runs a DRL {@code query} with positional arguments (a JSON list); rows keyed by identifier. */
+    public synchronized String query(String name, String argsJson) {
+        Object parsed;
+        try {
+            parsed = Json.parse(argsJson);
+        } catch (Json.ParseException e) {
+            return Runner.factError(-1, null, "arguments", null, "query arguments are not valid JSON: " + e.getMessage());
+        }
+        if (!(parsed instanceof List)) return Runner.factError(-1, null, "arguments", null, "query arguments must be a JSON list");
+        Object[] args = ((List<?>) parsed).toArray();
+        try {
+            Class<?>[] types = queryParameterTypes(name);
+            for (int k = 0; types != null && k < args.length && k < types.length; k++) {
+                args[k] = runner.types().convertValue("argument " + k, types[k], args[k]);
+            }
+        } catch (TypeRegistry.FactProblem p) {
+            return Runner.factError(-1, null, "arguments", name, "query '" + name + "': " + p.getMessage());
+        }
+        org.kie.api.runtime.rule.QueryResults results;
+        try {
+            results = session.getQueryResults(name, args);
+        } catch (RuntimeException e) {
+            return Runner.factError(-1, null, "query", name, "query '" + name + "' failed: " + Runner.rootMessage(e));
+        }
+        String[] ids = results.getIdentifiers();
+        StringBuilder b = new StringBuilder("{\"ok\":true,\"identifiers\":");
+        Json.write(b, java.util.Arrays.asList(ids), null);
+        b.append(",\"rows\":[");
+        boolean first = true;
+        for (org.kie.api.runtime.rule.QueryResultsRow row : results) {
+            if (!first) b.append(',');
+            first = false;
+            b.append('{');
+            for (int k = 0; k < ids.length; k++) {
+                if (k > 0) b.append(',');
+                Json.quote(b, ids[k]);
+                b.append(':');
+                Json.write(b, row.get(ids[k]), runner.types());
+            }
+            b.append('}');
+        }
+        return b.append("]}").toString();
+    }
+
+    /** The declared parameter types of a query (JSON numbers must become the declared int/long/...). */
+    private Class<?>[] queryParameterTypes(String name) {
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Query q : p.getQueries()) {
+                if (q.getName().equals(name) && q instanceof org.drools.core.definitions.rule.impl.QueryImpl) {
+                    org.drools.core.rule.Declaration[] ds = ((org.drools.core.definitions.rule.impl.QueryImpl) q).getParameters();
+                    Class<?>[] out = new Class<?>[ds.length];
+                    for (int k = 0; k < ds.length; k++) out[k] = ds[k].getDeclarationClass();
+                    return out;
+                }
+            }
+        }
+        return null;
+    }
+
+    /** Sets a global declared by the rule set (not {@code actions}: that one is the gateway's). */
+    public synchronized String setGlobal(String name, String valueJson) {
+        if ("actions".equals(name)) {
+            return Runner.factError(-1, null, "identifier", name, "the global 'actions' belongs to the gateway and cannot be set");
+        }
+        String typeName = null;
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) if (g.getName().equals(name)) typeName = g.getType();
+        }
+        if (typeName == null) return Runner.factError(-1, null, "identifier", name, "the rule set declares no global '" + name + "'");
+        try {
+            Object value = Json.parse(valueJson);
+            Class<?> type = runner.types().declaredClass(typeName);
+            if (type == null) type = Class.forName(typeName, false, Session.class.getClassLoader());
+            session.setGlobal(name, runner.types().convertValue(name, type, value));
+        } catch (TypeRegistry.FactProblem p) {
+            return Runner.factError(-1, null, "object", name, "global '" + name + "': " + p.getMessage());
+        } catch (Exception e) {
+            return Runner.factError(-1, null, "object", name, "global '" + name + "': " + Runner.rootMessage(e));
+        }
+        return "{\"ok\":true}";
+    }
+
+    /** The value of a global, as JSON. */
+    public synchronized String getGlobal(String name) {
+        StringBuilder b = new StringBuilder("{\"ok\":true,\"value\":");
+        Object v = "actions".equals(name) ? null : session.getGlobals().get(name);
+        Json.write(b, v, runner.types());
+        return b.append('}').toString();
+    }
+
     public synchronized void dispose() { session.dispose(); }
 }

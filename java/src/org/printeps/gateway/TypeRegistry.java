@@ -174,6 +174,17 @@ public final class TypeRegistry {
         return obj;
     }
 
+    /** Converts a JSON value to {@code type} with the same strict rules as fact fields (for globals). */
+    Object convertValue(String name, Class<?> type, Object v) throws FactProblem {
+        return convert(new FieldInfo(name, type, null, null), v, 0);
+    }
+
+    /** A declared type's class by simple or full name, or null. */
+    Class<?> declaredClass(String name) {
+        TypeInfo t = byName.get(name);
+        return t == null ? null : t.cls;
+    }
+
     private Object convert(FieldInfo f, Object v, int depth) throws FactProblem {
         Class<?> t = f.type;
         String where = "field '" + f.name + "'";
