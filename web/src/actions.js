@@ -3,25 +3,22 @@
 
 import { h } from "./dom.js";
 
-const ICONS = { say: "🗣", move: "🚶", gesture: "👋" };
-
 /** One action ({module, params}) as a sentence a teahouse owner understands. */
 export function describeAction(action) {
   const params = (action && action.params) || {};
   const robot = params.robot || "the robot";
   const module = (action && action.module) || "?";
-  const icon = ICONS[module] || "⚙";
   if (module === "say" && params.text !== undefined) {
-    return h("span", { class: "action" }, `${icon} ${robot} says `, h("q", { class: "speech" }, String(params.text)));
+    return h("span", { class: "action" }, h("b", {}, robot), " says ", h("q", { class: "speech" }, String(params.text)));
   }
   if (module === "move" && (params.location || params.to)) {
-    return h("span", { class: "action" }, `${icon} ${robot} goes to `, h("b", {}, String(params.location || params.to)));
+    return h("span", { class: "action" }, h("b", {}, robot), " goes to ", h("b", {}, String(params.location || params.to)));
   }
   if (module === "gesture" && (params.name || params.gesture)) {
-    return h("span", { class: "action" }, `${icon} ${robot} makes the gesture `, h("b", {}, String(params.name || params.gesture)));
+    return h("span", { class: "action" }, h("b", {}, robot), " makes the gesture ", h("b", {}, String(params.name || params.gesture)));
   }
   const rest = Object.entries(params).map(([k, v]) => `${k}=${typeof v === "string" ? v : JSON.stringify(v)}`);
-  return h("span", { class: "action" }, `${icon} ${module}`, rest.length ? ` (${rest.join(", ")})` : "");
+  return h("span", { class: "action" }, h("b", {}, module), rest.length ? ` (${rest.join(", ")})` : "");
 }
 
 /** The rule name of a "fired" entry (the engine gives {rule, facts}; older records a string). */

@@ -14,7 +14,7 @@ const theme = EditorView.theme({
 });
 
 /** A new editor in `parent`. onChange(text) is called after every edit of the text. */
-export function createEditor(parent, { doc, fileName, readOnly = false, onChange = null, label = "" }) {
+export function createEditor(parent, { doc, fileName, readOnly = false, onChange = null, onCursor = null, label = "" }) {
   const extensions = [
     basicSetup,
     lintGutter(),
@@ -31,7 +31,20 @@ export function createEditor(parent, { doc, fileName, readOnly = false, onChange
       if (update.docChanged) onChange(update.state.doc.toString());
     }));
   }
+  if (onCursor) {
+    extensions.push(EditorView.updateListener.of((update) => {
+      if (update.selectionSet) onCursor(update.state.doc.lineAt(update.state.selection.main.head).number);
+    }));
+  }
   return new EditorView({ parent, state: EditorState.create({ doc, extensions }) });
+}
+
+/** Scroll line `number` into view ("start" or "center"), without moving the reader's cursor. */
+export function scrollToLine(view, number, where = "center") {
+  const doc = view.state.doc;
+  if (!doc.length) return;
+  const line = doc.line(Math.min(Math.max(number, 1), doc.lines));
+  view.dispatch({ effects: EditorView.scrollIntoView(line.from, { y: where, yMargin: 8 }) });
 }
 
 /** Replace the whole text (e.g. discard edits) as one undoable change. */
@@ -52,13 +65,24 @@ function toDiagnostic(doc, problem) {
   let to = line.to;
   if (problem.column > 0) {
     from = Math.min(line.from + problem.column - 1, line.to);
-    to = problem.endColumn > problem.column ? Math.min(line.from + problem.endColumn - 1, line.to) : wordEnd(doc, line, from);
+    to = problem.endColumn > problem.column
+      ? Math.min(line.from + problem.endColumn - 1, line.to)
+      : quotedEnd(doc, line, from, problem.message) || wordEnd(doc, line, from);
   }
   if (to <= from) {
     if (from >= line.to && from > line.from) from -= 1; // past the end of the line: mark its last character
     to = Math.min(from + 1, line.to);
   }
   return { from, to, severity: problem.severity || "error", message: problem.message, source: problem.source };
+}
+
+/** When the message quotes the text found at `from` ("mismatched input ')'"), mark exactly that. */
+function quotedEnd(doc, line, from, message) {
+  const rest = doc.sliceString(from, line.to);
+  for (const match of String(message || "").matchAll(/'([^'\n]+)'/g)) {
+    if (rest.startsWith(match[1])) return from + match[1].length;
+  }
+  return 0;
 }
 
 function wordEnd(doc, line, from) {

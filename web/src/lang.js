@@ -21,7 +21,7 @@ function inLineComment(stream) {
 }
 
 /** One DRL token; shared by the DRL/DSLR modes and the code side of DSL entries. */
-function drlToken(stream, state) {
+function drlToken(stream, state, colourTypes = true) {
   if (state.inBlockComment) {
     if (stream.skipTo("*/")) {
       stream.pos += 2;
@@ -60,7 +60,7 @@ function drlToken(stream, state) {
       word = stream.current();
     }
     if (KEYWORDS.has(word)) return "keyword";
-    return /^[A-Z]/.test(word) ? "typeName" : null;
+    return colourTypes && /^[A-Z]/.test(word) ? "typeName" : null;
   }
   if (stream.match(/^[=!<>]=?|^&&|^\|\||^[+\-*/%:]/)) return "operator";
   stream.next();
@@ -105,14 +105,19 @@ const dslMode = {
   languageData: { commentTokens: { line: "#" } },
 };
 
+// In a .dslr, capitalised words are mostly ordinary words of sentences, not fact types.
+const dslrMode = { ...drlMode, name: "dslr", token: (stream, state) => drlToken(stream, state, false) };
+
 const drlLanguage = StreamLanguage.define(drlMode);
+const dslrLanguage = StreamLanguage.define(dslrMode);
 const dslLanguage = StreamLanguage.define(dslMode);
 
 /** The language support for a file name ([] for plain text). */
 export function languageFor(fileName) {
   const lower = fileName.toLowerCase();
   if (lower.endsWith(".dsl")) return new LanguageSupport(dslLanguage);
-  if (lower.endsWith(".drl") || lower.endsWith(".dslr")) return new LanguageSupport(drlLanguage);
+  if (lower.endsWith(".dslr")) return new LanguageSupport(dslrLanguage);
+  if (lower.endsWith(".drl")) return new LanguageSupport(drlLanguage);
   if (lower.endsWith(".json")) return json();
   return [];
 }

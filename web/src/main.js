@@ -17,8 +17,10 @@ const ctx = {
     if (location.hash === hash && force) route();
     else location.hash = hash;
   },
+  /** A message that survives the next navigation (e.g. "rolled back" while the view reloads). */
   flash(kind, text) {
-    fill(flashEl, h("div", { class: `message ${kind}`, role: "status" }, text));
+    ctx.pendingFlash = h("div", { class: `message ${kind}`, role: "status" }, text);
+    fill(flashEl, ctx.pendingFlash);
   },
   refreshRulesets: () => loadRulesets(),
 };
@@ -58,9 +60,11 @@ async function route() {
   if (ctx.view?.dispose) ctx.view.dispose();
   ctx.view = null;
   for (const a of navEl.querySelectorAll("a[data-section]")) a.classList.toggle("active", a.dataset.section === section);
-  if (section !== "rules" || name) fill(flashEl);
+  fill(flashEl, ctx.pendingFlash);
+  ctx.pendingFlash = null;
   if (section === "signin" || !ctx.user) return showSignIn();
   renderList();
+  if (name) ctx.lastRuleset = name;
   if (section === "decisions") ctx.view = await showDecisions(mainEl, ctx);
   else if (!name) showChooser(section);
   else if (section === "history") ctx.view = await showHistory(mainEl, ctx, name, params);
@@ -68,7 +72,8 @@ async function route() {
 }
 
 function showChooser(section) {
-  const target = ctx.rulesets[0];
+  // Stay with the rule set the user was looking at (Rules -> History and back).
+  const target = ctx.rulesets.find((r) => r.name === ctx.lastRuleset) || ctx.rulesets[0];
   if (target) {
     location.replace(`#/${section === "history" ? "history" : "rules"}/${encodeURIComponent(target.name)}`);
     return;

@@ -4,7 +4,7 @@
 
 import { h, fill, when, debounce } from "./dom.js";
 import { api, rulesetPath } from "./api.js";
-import { createEditor, setText, showProblems, reveal } from "./editor.js";
+import { createEditor, setText, showProblems, reveal, scrollToLine } from "./editor.js";
 import { localProblems } from "./checks.js";
 import { actionList, firedList } from "./actions.js";
 
@@ -119,7 +119,7 @@ class RulesView {
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
           h("h2", { class: "small" }, "Problems"), this.problemsEl),
-        h("div", { class: "right" }, this.buildTry(), this.buildDeploy()))));
+        h("div", { class: "right" }, this.buildDeploy(), this.buildTry()))));
     this.renderLive();
   }
 
@@ -135,7 +135,7 @@ class RulesView {
       this.hosts[fileName] = host;
       this.views[fileName] = createEditor(host, {
         doc: files[fileName], fileName, readOnly: !this.editable,
-        label: `Editor for ${fileName}`, onChange: () => this.changed(),
+        label: `Editor for ${fileName}`, onChange: () => this.changed(), onCursor: (line) => this.followCursor(fileName, line),
       });
       const tab = h("button", { class: "tab", role: "tab", "data-file": fileName, onclick: () => this.select(fileName) },
         h("span", { class: "tab-name" }, fileName), h("span", { class: "tab-kind" }, kindOf(fileName).label),
@@ -147,6 +147,8 @@ class RulesView {
 
   select(fileName) {
     this.active = fileName;
+    const view = this.views[fileName];
+    this.cursorLine = view ? view.state.doc.lineAt(view.state.selection.main.head).number : 1;
     for (const [name, host] of Object.entries(this.hosts)) host.hidden = name !== fileName;
     for (const [name, tab] of Object.entries(this.tabs)) tab.setAttribute("aria-selected", String(name === fileName));
     this.views[fileName]?.requestMeasure();
@@ -243,7 +245,10 @@ class RulesView {
   allProblems() {
     const order = orderedFiles(Object.keys(this.views));
     const rank = (p) => (order.includes(p.file) ? order.indexOf(p.file) : -1);
-    return [...this.server, ...this.local].sort((a, b) => rank(a) - rank(b) || a.line - b.line || a.column - b.column);
+    // The server's compiler knows best: drop a browser-side note on a line it already reported.
+    const reported = new Set(this.server.map((p) => `${p.file}:${p.line}`));
+    const local = this.local.filter((p) => !reported.has(`${p.file}:${p.line}`));
+    return [...this.server, ...local].sort((a, b) => rank(a) - rank(b) || a.line - b.line || a.column - b.column);
   }
 
   renderProblems(pending) {
@@ -265,8 +270,8 @@ class RulesView {
     let kind;
     if (pending) [text, kind] = ["Checking…", "pending"];
     else if (this.checkError) [text, kind] = [`Could not check: ${this.checkError}`, "error"];
-    else if (errors) [text, kind] = [`✗ ${errors} problem${errors > 1 ? "s" : ""}`, "error"];
-    else if (warnings) [text, kind] = [`⚠ ${warnings} warning${warnings > 1 ? "s" : ""}`, "warning"];
+    else if (errors) [text, kind] = [`✗ ${plural(errors, "problem")}${warnings ? `, ${plural(warnings, "warning")}` : ""}`, "error"];
+    else if (warnings) [text, kind] = [`⚠ ${plural(warnings, "warning")}`, "warning"];
     else [text, kind] = ["✓ No problems", "ok"];
     this.statusEl.className = `check-status ${kind}`;
     this.statusEl.textContent = text;
@@ -296,8 +301,7 @@ class RulesView {
       this.expandError = "";
     } catch (err) {
       if (seq !== this.seq) return;
-      this.expanded = {};
-      this.expandError = err.message;
+      this.expandError = err.message; // keep showing the last good expansion below the note
     }
     this.renderPreview();
   }
@@ -309,12 +313,24 @@ class RulesView {
     if (!isDslr) {
       this.previewTitle.textContent = `${this.active} is not a .dslr file: there is nothing to expand.`;
     } else if (this.expandError) {
-      this.previewTitle.textContent = `Cannot show the DRL: ${this.expandError}`;
+      this.previewTitle.textContent = `Cannot expand the current text (${this.expandError}). Showing the last good expansion.`;
+      text = (this.expanded && this.expanded[this.active]) || "";
     } else {
       this.previewTitle.textContent = `What the rule engine reads for ${this.active} (generated, read-only)`;
       text = (this.expanded && this.expanded[this.active]) || "";
     }
     if (this.previewView.state.doc.toString() !== text) setText(this.previewView, text);
+    if (isDslr) this.followCursor(this.active, this.cursorLine || 1);
+  }
+
+  /** Keep the generated DRL of the rule being edited in view. Expansion does not keep line
+   * numbers (constraint lines join their pattern), so the rule's header is what is matched. */
+  followCursor(fileName, line) {
+    this.cursorLine = line;
+    if (!this.previewOn || fileName !== this.active || !fileName.toLowerCase().endsWith(".dslr")) return;
+    const header = ruleHeaderAbove(this.views[fileName].state.doc, line);
+    const target = header ? findLine(this.previewView.state.doc, header) : 0;
+    scrollToLine(this.previewView, target || line, target ? "start" : "center");
   }
 
   // ---- Try it ---------------------------------------------------------------------------------
@@ -441,6 +457,26 @@ class RulesView {
           this.deploy();
         } }, `Deploy mine anyway (replaces version ${current}; it stays in the history)`))));
   }
+}
+
+/** The "rule ..." line of the rule that contains line `number` (trimmed), or "". */
+function ruleHeaderAbove(doc, number) {
+  for (let n = Math.min(number, doc.lines); n >= 1; n--) {
+    const text = doc.line(n).text.trim();
+    if (/^rule\s/.test(text)) return text;
+    if (n < number && text === "end") return "";
+  }
+  return "";
+}
+
+/** 1-based number of the first line whose trimmed text is `text` (0 when none). */
+function findLine(doc, text) {
+  for (let n = 1; n <= doc.lines; n++) if (doc.line(n).text.trim() === text) return n;
+  return 0;
+}
+
+function plural(n, word) {
+  return `${n} ${word}${n > 1 ? "s" : ""}`;
 }
 
 /** Server errors ({file, line, column, message}) as problems. */

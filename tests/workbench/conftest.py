@@ -1,0 +1,154 @@
+"""Fixtures of the workbench tests: the real gateway (JVM + Drools engine + REST API + workbench
+router) served by uvicorn on 127.0.0.1, and Debian's chromium driven by Playwright.
+
+One server and one browser per test session (starting them is the slow part); each test gets a
+fresh browser context (own localStorage) and, where it changes rules, its own rule set, deployed
+through the REST API from a copy of ``rules/drl/reception``, so tests do not depend on each other.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from gateway.config import PROJECT_ROOT, Settings
+
+AUTHOR_TOKEN = "wb-author-token"
+OTHER_AUTHOR_TOKEN = "wb-other-author-token"
+CALLER_TOKEN = "wb-caller-token"
+TOKENS = f"{AUTHOR_TOKEN}:author:alice,{OTHER_AUTHOR_TOKEN}:author:bob,{CALLER_TOKEN}:caller:carol"
+RECEPTION = PROJECT_ROOT / "rules" / "drl" / "reception"
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+    "--disable-sync", "--no-first-run",
+]
+START_TIMEOUT_S = 60
+
+_names = itertools.count(1)
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class Gateway:
+    """A running gateway: its base URL, its engine, and REST helpers that act as a given token."""
+
+    def __init__(self, base_url: str, engine) -> None:
+        self.base_url = base_url
+        self.engine = engine
+
+    def rest(self, token: str = AUTHOR_TOKEN) -> httpx.Client:
+        return httpx.Client(base_url=self.base_url, headers={"Authorization": f"Bearer {token}"}, timeout=30)
+
+    def deploy(self, name: str, files: dict[str, str], comment: str, base_version: int | None = None,
+               token: str = AUTHOR_TOKEN) -> httpx.Response:
+        with self.rest(token) as client:
+            return client.put(f"/api/rulesets/{name}",
+                              json={"files": files, "comment": comment, "base_version": base_version})
+
+    def fire(self, name: str, facts: list[dict]) -> dict:
+        with self.rest(CALLER_TOKEN) as client:
+            response = client.post(f"/api/rulesets/{name}/fire", json={"facts": facts})
+            response.raise_for_status()
+            return response.json()
+
+
+def reception_files() -> dict[str, str]:
+    """The teahouse reception rule set, as the REST API takes it."""
+    return {p.name: p.read_text(encoding="utf-8") for p in sorted(RECEPTION.iterdir()) if p.is_file()}
+
+
+@pytest.fixture(scope="session")
+def gateway(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Gateway]:
+    import uvicorn
+
+    from gateway.api.app import create_app
+    from gateway.engine import Engine
+
+    root = tmp_path_factory.mktemp("workbench")
+    shutil.copytree(RECEPTION, root / "rules" / "reception")
+    settings = Settings.model_validate({
+        "data_dir": str(root / "var"),
+        "engine": {"rules_dir": str(root / "rules")},
+        "api": {"tokens": TOKENS},
+    })
+    engine = Engine(settings)
+    engine.load_rules_dir()
+    port = _free_port()
+    server = uvicorn.Server(uvicorn.Config(create_app(settings, engine), host="127.0.0.1", port=port,
+                                           log_level="warning", lifespan="off"))
+    thread = threading.Thread(target=server.run, name="workbench-gateway", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            raise RuntimeError(f"the gateway did not start on 127.0.0.1:{port} within {START_TIMEOUT_S}s")
+        time.sleep(0.05)
+    yield Gateway(f"http://127.0.0.1:{port}", engine)
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture()
+def ruleset(gateway: Gateway) -> str:
+    """A fresh copy of the reception rule set (version 1) under a name of its own."""
+    name = f"teahouse-{os.getpid()}-{next(_names)}"
+    response = gateway.deploy(name, reception_files(), "copy of reception for a test")
+    assert response.status_code == 201, response.text
+    return name
+
+
+@pytest.fixture(scope="session")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is missing: apt-get install -y chromium")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+def new_page(browser, gateway: Gateway, token: str | None):
+    """A page in a fresh context; with ``token`` the user is already signed in."""
+    context = browser.new_context(viewport={"width": 1400, "height": 900}, base_url=gateway.base_url)
+    context.set_default_timeout(15_000)
+    if token:
+        context.add_init_script(f"localStorage.setItem('printeps.workbench.token', {token!r})")
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.js_errors = errors  # checked by the tests: a script error is a failure
+    return page
+
+
+@pytest.fixture()
+def author_page(browser, gateway: Gateway):
+    page = new_page(browser, gateway, AUTHOR_TOKEN)
+    yield page
+    page.context.close()
+    assert page.js_errors == []
+
+
+@pytest.fixture()
+def screenshots(tmp_path: Path) -> Path:
+    """Where screenshots go: docs/img when PRINTEPS_SCREENSHOTS=1 (to refresh the docs), else tmp."""
+    if os.environ.get("PRINTEPS_SCREENSHOTS") == "1":
+        target = PROJECT_ROOT / "docs" / "img"
+        target.mkdir(parents=True, exist_ok=True)
+        return target
+    return tmp_path

@@ -1,0 +1,50 @@
+"""Steps a rule author takes in the workbench, as Playwright actions (keyboard and mouse only)."""
+
+from __future__ import annotations
+
+import json
+
+from playwright.sync_api import Page, expect
+
+EDITOR = ".editor-host:not([hidden]) .cm-content"
+
+
+def open_ruleset(page: Page, name: str) -> None:
+    page.goto(f"/workbench#/rules/{name}")
+    expect(page.locator("[data-testid=check-status]")).to_have_text("✓ No problems")
+
+
+def replace_text(page: Page, old: str, new: str) -> None:
+    """Find ``old`` in the shown editor with the search box (Ctrl+F) and type ``new`` over it."""
+    page.locator(EDITOR).click()
+    page.keyboard.press("Control+Home")
+    page.keyboard.press("Control+f")
+    field = page.locator(".editor-host:not([hidden]) .cm-search input[name=search]")
+    field.fill(old)
+    field.press("End")  # the search box takes its query on key-up, not on input
+    field.press("Enter")
+    field.press("Escape")
+    page.keyboard.type(new)
+
+
+def choose_tab(page: Page, file_name: str) -> None:
+    page.locator(f".tab[data-file='{file_name}']").click()
+
+
+def try_example(page: Page, example: str) -> None:
+    page.get_by_role("button", name=example, exact=True).click()
+    page.get_by_test_id("try").click()
+
+
+def example_facts(files: dict[str, str], name: str) -> list[dict]:
+    return next(e["facts"] for e in json.loads(files["examples.json"]) if e["name"] == name)
+
+
+def said(result: dict) -> list[str]:
+    """What Pepper says in a fire result."""
+    return [a["params"]["text"] for a in result["actions"] if a["module"] == "say"]
+
+
+def line_of(text: str, needle: str) -> int:
+    """1-based line number of the first line containing ``needle``."""
+    return next(i for i, line in enumerate(text.split("\n"), 1) if needle in line)
