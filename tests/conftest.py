@@ -4,5 +4,28 @@ from __future__ import annotations
 
 import os
 
+import pytest
+
 # Keep the test runs' caches (compiled Java helpers) in one place across runs.
 os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printeps"))
+
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+    "--disable-sync", "--no-first-run", "--disable-quic",
+]
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """One headless Debian chromium for the whole run: Playwright's sync API allows only one
+    running instance per thread, so every browser test shares this one."""
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is missing: apt-get install -y chromium")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        launched = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        yield launched
+        launched.close()

@@ -22,16 +22,8 @@ import pytest
 
 from gateway.config import PROJECT_ROOT, Settings
 
-AUTHOR_TOKEN = "wb-author-token"
-OTHER_AUTHOR_TOKEN = "wb-other-author-token"
-CALLER_TOKEN = "wb-caller-token"
-TOKENS = f"{AUTHOR_TOKEN}:author:alice,{OTHER_AUTHOR_TOKEN}:author:bob,{CALLER_TOKEN}:caller:carol"
-RECEPTION = PROJECT_ROOT / "rules" / "drl" / "reception"
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-    "--disable-sync", "--no-first-run",
-]
+from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, RECEPTION, TOKENS, new_page, reception_files  # noqa: F401
+
 START_TIMEOUT_S = 60
 
 _names = itertools.count(1)
@@ -64,11 +56,6 @@ class Gateway:
             response = client.post(f"/api/rulesets/{name}/fire", json={"facts": facts})
             response.raise_for_status()
             return response.json()
-
-
-def reception_files() -> dict[str, str]:
-    """The teahouse reception rule set, as the REST API takes it."""
-    return {p.name: p.read_text(encoding="utf-8") for p in sorted(RECEPTION.iterdir()) if p.is_file()}
 
 
 @pytest.fixture(scope="session")
@@ -109,31 +96,6 @@ def ruleset(gateway: Gateway) -> str:
     response = gateway.deploy(name, reception_files(), "copy of reception for a test")
     assert response.status_code == 201, response.text
     return name
-
-
-@pytest.fixture(scope="session")
-def browser():
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is missing: apt-get install -y chromium")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
-
-
-def new_page(browser, gateway: Gateway, token: str | None):
-    """A page in a fresh context; with ``token`` the user is already signed in."""
-    context = browser.new_context(viewport={"width": 1400, "height": 900}, base_url=gateway.base_url)
-    context.set_default_timeout(15_000)
-    if token:
-        context.add_init_script(f"localStorage.setItem('printeps.workbench.token', {token!r})")
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    page.js_errors = errors  # checked by the tests: a script error is a failure
-    return page
 
 
 @pytest.fixture()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import expect
 
-from conftest import CALLER_TOKEN, OTHER_AUTHOR_TOKEN, new_page, reception_files
+from wb_helpers import CALLER_TOKEN, OTHER_AUTHOR_TOKEN, new_page, reception_files
 from wb_helpers import EDITOR, open_ruleset, replace_text, said, example_facts
 
 pytestmark = pytest.mark.browser

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import expect
 
-from conftest import reception_files
+from wb_helpers import reception_files
 from wb_helpers import EDITOR, example_facts, line_of, open_ruleset, replace_text, said, try_example
 
 pytestmark = pytest.mark.browser

@@ -6,6 +6,32 @@ import json
 
 from playwright.sync_api import Page, expect
 
+from gateway.config import PROJECT_ROOT
+
+AUTHOR_TOKEN = "wb-author-token"
+OTHER_AUTHOR_TOKEN = "wb-other-author-token"
+CALLER_TOKEN = "wb-caller-token"
+TOKENS = f"{AUTHOR_TOKEN}:author:alice,{OTHER_AUTHOR_TOKEN}:author:bob,{CALLER_TOKEN}:caller:carol"
+RECEPTION = PROJECT_ROOT / "rules" / "drl" / "reception"
+
+
+def reception_files() -> dict[str, str]:
+    """The teahouse reception rule set, as the REST API takes it."""
+    return {p.name: p.read_text(encoding="utf-8") for p in sorted(RECEPTION.iterdir()) if p.is_file()}
+
+
+def new_page(browser, gateway, token: str | None):
+    """A page in a fresh context; with ``token`` the user is already signed in."""
+    context = browser.new_context(viewport={"width": 1400, "height": 900}, base_url=gateway.base_url)
+    context.set_default_timeout(15_000)
+    if token:
+        context.add_init_script(f"localStorage.setItem('printeps.workbench.token', {token!r})")
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.js_errors = errors  # checked by the tests: a script error is a failure
+    return page
+
 EDITOR = ".editor-host:not([hidden]) .cm-content"
 
 

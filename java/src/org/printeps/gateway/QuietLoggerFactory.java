@@ -29,7 +29,10 @@ public final class QuietLoggerFactory implements ILoggerFactory {
 
         private void print(String level, FormattingTuple t) {
             String shortName = name.substring(name.lastIndexOf('.') + 1);
-            System.err.println("[java] " + level + " " + shortName + ": " + t.getMessage());
+            String message = String.valueOf(t.getMessage());
+            String[] lines = message.split("\n", 4);  // Drools puts whole stack traces into some messages
+            if (lines.length > 3) message = lines[0] + "\n" + lines[1] + "\n" + lines[2] + "\n  ...";
+            System.err.println("[java] " + level + " " + shortName + ": " + message);
             if (t.getThrowable() != null) System.err.println("[java]   caused by " + t.getThrowable());
         }
 
