@@ -7,6 +7,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import orjson
+
 from gateway.engine.errors import FactError, RuleRuntimeError, RunawayRules
 
 
@@ -75,7 +77,7 @@ def decode_result(answer: str, ruleset: str, version: int, duration_ms: float) -
     """Parses the Runner's answer; refusals and runaways become exceptions."""
     if answer == _NOTHING_FIRED:  # the common case on a stream: skip the JSON parse
         return FireResult(ruleset, version, [], [], [], 0, duration_ms)
-    data = json.loads(answer)
+    data = orjson.loads(answer)  # ~3x faster than json.loads on the per-event path
     if not data.get("ok"):
         kind = data.get("kind")
         if kind == "facts":

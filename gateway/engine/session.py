@@ -12,6 +12,8 @@ import json
 import time
 from typing import Any, Callable
 
+import orjson
+
 from gateway.engine.errors import EngineError, FactError
 from gateway.engine.results import FireResult, decode_result, encode_facts
 
@@ -20,7 +22,7 @@ _NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
 
 
 def _check(answer: Any) -> dict[str, Any]:
-    data = json.loads(str(answer))
+    data = orjson.loads(str(answer))
     if not data.get("ok"):
         raise FactError(data.get("errors", []), data.get("errorCount"))
     return data
