@@ -39,6 +39,12 @@ class EngineSettings(BaseModel):
 class StoreSettings(BaseModel):
     """The Information State (MongoDB, mongodb_store style): where it is and how writes survive outages."""
 
+    record_fires: bool = Field(
+        default=True,
+        description="Record every fire (REST, KIE Server, workflows) in rule_firings; rule set changes and "
+                    "the ROS pipeline's decisions are recorded regardless.",
+    )
+
     mongo_uri: str | None = Field(
         default=None,
         description="A real MongoDB to use ($MONGO_URI also works); none: start the embedded SecantusDB.",

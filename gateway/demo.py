@@ -190,6 +190,9 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
             rt.shutdown()
         if server:
             server.should_exit = True
+            writer = getattr(server.config.app.state, "store_writer", None)
+            if writer is not None:
+                writer.close()  # queued Information State records are written before the store closes
         health = store.health()
         store.close()
     calls = _read_calls(calls_log)

@@ -23,16 +23,17 @@ RULE_FIRINGS = "rule_firings"
 RULESET_EVENTS = "ruleset_events"
 
 
-def information_state_recorder(store: Any) -> Callable[[str, dict[str, Any]], None]:
+def information_state_recorder(store: Any, record_fires: bool = True) -> Callable[[str, dict[str, Any]], None]:
     """An engine listener that keeps every decision and every rule set change in the store.
 
-    Firings that the ROS pipeline records itself (``context.origin == "ros"``, with the sensor
-    reading they came from) are not written twice.
+    ``store`` should be a :class:`~gateway.store.write_behind.WriteBehind`, so that firing never
+    waits for the database. Firings that the ROS pipeline records itself
+    (``context.origin == "ros"``, with the sensor reading they came from) are not written twice.
     """
 
     def on_engine_event(kind: str, payload: dict[str, Any]) -> None:
         if kind == "fire":
-            if (payload.get("context") or {}).get("origin") == "ros":
+            if not record_fires or (payload.get("context") or {}).get("origin") == "ros":
                 return
             doc = {k: payload.get(k) for k in ("ruleset", "version", "facts", "fired", "actions", "fire_count", "duration_ms")}
             doc["context"] = payload.get("context") or {"origin": "api"}
@@ -56,6 +57,9 @@ class Gateway:
     _owns_store: bool = field(default=True, repr=False)
 
     def close(self) -> None:
+        writer = getattr(self.app.state, "store_writer", None)
+        if writer is not None:
+            writer.close()  # everything queued reaches the store before it closes
         if self._owns_store and self.store is not None:
             self.store.close()
 
@@ -71,12 +75,17 @@ def build_app(
     """The REST app around an existing engine (and store): returns ``(app, stream_services)``."""
     from gateway.api.app import create_app
 
+    from gateway.store.write_behind import WriteBehind
+
     checks = dict(health_checks or {})
+    writer = None
     if store is not None:
         checks.setdefault("store", store.health)
-        engine.add_listener(information_state_recorder(store))
+        writer = WriteBehind(store)
+        engine.add_listener(information_state_recorder(writer, settings.store.record_fires))
     app = create_app(settings, engine, health_checks=checks)
     app.state.store = store
+    app.state.store_writer = writer
     services = None
     if streams:
         try:

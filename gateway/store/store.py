@@ -101,21 +101,46 @@ class InformationState:
                inserted_by: str = "gateway") -> str:
         """Store one document with its ``_meta``; returns its id. Never raises on a DB outage."""
         check_collection(collection)
-        body = _clean(dict(doc), collection)
-        body.pop("_meta", None)
-        oid = body.get("_id") or ObjectId()
-        body["_id"] = oid
-        body["_meta"] = {"stored_type": stored_type, "inserted_at": utcnow(), "inserted_by": inserted_by}
+        body = self._body(collection, doc, stored_type, inserted_by)
         with self._lock:
             if not self._degraded:
                 try:
                     self._ensure_indexes(collection)
                     self.db[collection].insert_one(body)
-                    return str(oid)
+                    return str(body["_id"])
                 except PyMongoError as exc:
                     self._go_degraded(exc)
             self._spool(collection, body)
-        return str(oid)
+        return str(body["_id"])
+
+    def record_many(self, collection: str, docs: list[Mapping[str, Any]], *, stored_type: str,
+                    inserted_by: str = "gateway") -> list[str]:
+        """Like :meth:`record` for several documents of one kind, in one round trip (in order).
+
+        On an outage all of them go to the spool; any that did reach the database are skipped
+        when the spool is flushed (inserts are idempotent by ``_id``).
+        """
+        check_collection(collection)
+        bodies = [self._body(collection, doc, stored_type, inserted_by) for doc in docs]
+        with self._lock:
+            if not self._degraded:
+                try:
+                    self._ensure_indexes(collection)
+                    self.db[collection].insert_many(bodies, ordered=True)
+                    return [str(b["_id"]) for b in bodies]
+                except PyMongoError as exc:
+                    self._go_degraded(exc)
+            for body in bodies:
+                self._spool(collection, body)
+        return [str(b["_id"]) for b in bodies]
+
+    @staticmethod
+    def _body(collection: str, doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
+        body = _clean(dict(doc), collection)
+        body.pop("_meta", None)
+        body["_id"] = body.get("_id") or ObjectId()
+        body["_meta"] = {"stored_type": stored_type, "inserted_at": utcnow(), "inserted_by": inserted_by}
+        return body
 
     def _spool(self, collection: str, body: dict[str, Any]) -> None:
         try:
