@@ -45,9 +45,7 @@ def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable
     """The REST API + workbench on loopback: the configured port (8080) when it is free and the
     demo is interactive, else any free port. (None, None) when the API package is not there."""
     try:
-        import uvicorn
-
-        from gateway.server import build_app
+        from gateway.server import build_app, serve_in_thread
     except ImportError as exc:
         say(f"REST API not available ({exc}); continuing without it")
         return None, None
@@ -55,12 +53,7 @@ def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable
 
     app, _ = build_app(settings, engine, store, health_checks={"ros": ros_check})
     port = settings.api.port if not headless and _port_is_free(settings.api.port) else free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not server.started and time.monotonic() < deadline and thread.is_alive():
-        time.sleep(0.05)
+    server, _ = serve_in_thread(app, port)
     return server, f"http://127.0.0.1:{port}"
 
 

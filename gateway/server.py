@@ -98,6 +98,26 @@ def build_app(
     return app, services
 
 
+def serve_in_thread(app: FastAPI, port: int, name: str = "uvicorn", timeout_s: float = 30.0) -> tuple[Any, Any]:
+    """Serve ``app`` with uvicorn on 127.0.0.1:``port`` in a daemon thread; returns once it accepts
+    requests as ``(server, thread)`` (stop with ``server.should_exit = True``, then join)."""
+    import threading
+    import time
+
+    import uvicorn
+
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, name=name, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + timeout_s
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            server.should_exit = True
+            raise RuntimeError(f"the gateway did not start on 127.0.0.1:{port} within {timeout_s:.0f} s")
+        time.sleep(0.05)
+    return server, thread
+
+
 def build_gateway(
     settings: Settings,
     *,

@@ -288,15 +288,6 @@ def _sources(files: dict[str, str]) -> tuple[list[_Source], dict[str, str], list
     return sources, expanded, errors
 
 
-def check(files: dict[str, str]) -> list[CompileError]:
-    """All compile errors of a file set ([] when it compiles)."""
-    try:
-        compile_files(files)
-    except CompileFailed as failed:
-        return failed.errors
-    return []
-
-
 _cache: "OrderedDict[str, CompiledRuleSet]" = OrderedDict()
 CACHE_SIZE = 16
 

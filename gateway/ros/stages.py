@@ -48,9 +48,7 @@ def engine_stage(settings: Any) -> tuple[Any, Rules]:
     from gateway import jvm
     from gateway.engine import Engine
 
-    if "-Xrs" not in settings.jvm.extra_options:  # the JVM must leave SIGINT/SIGTERM to us (clean ROS exit)
-        settings.jvm.extra_options.append("-Xrs")
-    jvm.start(settings.jvm)  # before Engine: its compiler starts the JVM without our options otherwise
+    jvm.start(settings.jvm)  # from this (the main) thread; jvm.start adds -Xrs for a clean ROS exit
     engine = Engine(settings)
     engine.load_rules_dir()
     rules = engine_rules(engine)

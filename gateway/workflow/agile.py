@@ -465,13 +465,10 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
     never touch the repository). Robots and humans are simulated."""
     import shutil
     import socket
-    import threading
-
-    import uvicorn
 
     from gateway.config import PROJECT_ROOT, Settings
     from gateway.engine import Engine
-    from gateway.server import build_app
+    from gateway.server import build_app, serve_in_thread
 
     workdir = Path(workdir)
     knowledge = workdir / "ontology"
@@ -490,14 +487,7 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True, name="agile-gateway")
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not server.started:
-        if time.monotonic() > deadline or not thread.is_alive():
-            raise RuntimeError("the gateway did not start")
-        time.sleep(0.05)
+    server, thread = serve_in_thread(app, port, name="agile-gateway")
     gw = Gateway(f"http://127.0.0.1:{port}", token=token)
     try:
         yield gw
