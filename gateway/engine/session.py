@@ -9,16 +9,20 @@ from __future__ import annotations
 
 import itertools
 import json
+import threading
 import time
 from typing import Any, Callable
 
+import jpype.nio
 import orjson
 
 from gateway.engine.errors import EngineError, FactError
-from gateway.engine.results import FireResult, decode_result, encode_facts
+from gateway.engine.feed import EventFeed
+from gateway.engine.results import FireResult, decode_result, encode_facts, encode_facts_bytes
 
 _ids = itertools.count(1)
 _NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
+BUFFER_BYTES = 64 * 1024  # per direction and session: a push of more facts than fit takes the String path
 
 
 def _check(answer: Any) -> dict[str, Any]:
@@ -48,6 +52,27 @@ class StatefulSession:
         self._max_facts = max_facts
         self.closed = False
         self._on_close = on_close
+        self._feeds: list[Any] = []  # EventFeeds into this session, stopped when it closes
+        # push() shares these with the Java session (see Session.attachBuffers): the facts go in
+        # and the answer comes out as UTF-8 bytes, and the call itself carries only numbers.
+        self._push_lock = threading.Lock()
+        self._in = bytearray(BUFFER_BYTES)
+        self._out = bytearray(BUFFER_BYTES)
+        self._in_view = memoryview(self._in)
+        java_session.attachBuffers(jpype.nio.convertToDirectBuffer(self._in), jpype.nio.convertToDirectBuffer(self._out))
+
+    @property
+    def java(self) -> Any:
+        """The Java ``Session`` (for the engine's own adapters, such as :class:`EventFeed`)."""
+        return self._live()
+
+    @property
+    def max_facts(self) -> int:
+        return self._max_facts
+
+    @property
+    def fire_limit(self) -> int:
+        return self._fire_limit
 
     def _live(self) -> Any:
         if self.closed:
@@ -70,12 +95,37 @@ class StatefulSession:
     def push(self, facts: list[dict[str, Any]], timestamp_ms: int | None = None, return_facts: bool = False) -> FireResult:
         """Inserts ``facts`` (stamped with ``timestamp_ms`` if given) and fires, in one JVM call.
 
-        The stream path: each event (or small batch) is answered with the actions it caused.
+        The stream path: each event (or small batch) is answered with the actions it caused. Facts
+        and answer travel through the session's shared buffers, so the one JPype crossing converts
+        no strings (a push costs ~2x the bare Drools insert + fire; see bench/engine_bench_notes.md).
         """
         started = time.perf_counter()
         stamp = _NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
-        answer = str(self._live().pushAt(encode_facts(facts, self._max_facts), stamp, self._fire_limit, return_facts))
-        return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
+        data = encode_facts_bytes(facts, self._max_facts)
+        java = self._live()
+        size = len(data)
+        if size > BUFFER_BYTES:
+            answer = str(java.pushAt(data.decode("utf-8"), stamp, self._fire_limit, return_facts))
+            return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
+        with self._push_lock:  # the buffers are the session's: one push at a time uses them
+            self._in_view[:size] = data
+            length = java.pushBuffered(size, stamp, self._fire_limit, return_facts)
+            answer = self._out[:length] if length >= 0 else str(java.takeOverflow())
+            return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
+
+    def feed(
+        self,
+        on_result: Callable[[FireResult], None],
+        on_error: Callable[[Exception], None] | None = None,
+        capacity: int = 4096,
+        return_facts: bool = False,
+        linger_ms: float = 1.0,
+    ) -> "EventFeed":
+        """A pipelined feed into this session: ``submit`` one event at a time without waiting for
+        its answer; answers reach ``on_result`` in order (see :class:`EventFeed`)."""
+        feed = EventFeed(self, on_result, on_error, capacity, return_facts, linger_ms)
+        self._feeds.append(feed)
+        return feed
 
     def update(self, fact: dict[str, Any]) -> None:
         _check(self._live().update(json.dumps(fact, allow_nan=False)))
@@ -122,6 +172,8 @@ class StatefulSession:
     def close(self) -> None:
         """Disposes the Drools session and forgets it in the engine."""
         if not self.closed:
+            for feed in self._feeds:
+                feed.abort()
             self.closed = True
             self._java.dispose()
             if self._on_close is not None:

@@ -1,8 +1,6 @@
 package org.printeps.gateway;
 
-import java.util.ArrayList;
 import java.util.LinkedHashMap;
-import java.util.List;
 import java.util.Map;
 
 /**
@@ -13,22 +11,26 @@ import java.util.Map;
  * dispatches to the robot's ROS service. The rule that requested it is recorded too.
  */
 public class Actions {
-    private final List<Map<String, Object>> recorded = new ArrayList<Map<String, Object>>();
+    /** The recorded actions as JSON objects separated by commas: written at once, so a then-part's
+     *  parameters are captured as they were when it ran, and no maps are built per action. */
+    private final StringBuilder json = new StringBuilder(256);
+    private int count;
     private String currentRule;
+    private TypeRegistry types;  // writes declared facts passed as parameters
 
     /** Make {@code robot} say {@code text}. */
     public void say(String robot, String text) {
-        record("say", params("robot", robot, "text", text));
+        record("say", "robot", robot, "text", text);
     }
 
     /** Move {@code robot} to a named {@code location} (e.g. "entrance", "table1"). */
     public void move(String robot, String location) {
-        record("move", params("robot", robot, "location", location));
+        record("move", "robot", robot, "location", location);
     }
 
     /** Make {@code robot} perform the gesture {@code name} (e.g. "bow", "wave"). */
     public void gesture(String robot, String name) {
-        record("gesture", params("robot", robot, "name", name));
+        record("gesture", "robot", robot, "name", name);
     }
 
     /** Call any module (a ROS service or workflow module) with parameters. */
@@ -42,30 +44,74 @@ public class Actions {
 
     /** Same as {@link #call(String, Map)} with alternating key/value arguments. */
     public void call(String module, Object... keyValues) {
-        call(module, params(keyValues));
+        Map<String, Object> m = new LinkedHashMap<String, Object>();
+        for (int k = 0; k + 1 < keyValues.length; k += 2) m.put(String.valueOf(keyValues[k]), keyValues[k + 1]);
+        record(module, m);
     }
 
-    private static Map<String, Object> params(Object... kv) {
-        Map<String, Object> m = new LinkedHashMap<String, Object>();
-        for (int k = 0; k + 1 < kv.length; k += 2) m.put(String.valueOf(kv[k]), kv[k + 1]);
-        return m;
+    private void record(String module, String key1, Object value1, String key2, Object value2) {
+        int mark = begin(module);
+        try {
+            json.append('{');
+            Json.quote(json, key1);
+            json.append(':');
+            Json.write(json, value1, types);
+            json.append(',');
+            Json.quote(json, key2);
+            json.append(':');
+            Json.write(json, value2, types);
+            json.append('}');
+        } catch (RuntimeException | StackOverflowError e) {
+            json.setLength(mark);
+            throw e;
+        }
+        end();
     }
 
     private void record(String module, Map<String, Object> params) {
+        int mark = begin(module);
+        try {
+            Json.write(json, params, types);
+        } catch (RuntimeException | StackOverflowError e) {  // e.g. a parameter that contains itself
+            json.setLength(mark);
+            throw e;
+        }
+        end();
+    }
+
+    /** Opens {"module":...,"params": and returns where this action starts (to undo on failure). */
+    private int begin(String module) {
         if (module == null || module.isEmpty()) throw new IllegalArgumentException("an action needs a module name");
-        Map<String, Object> a = new LinkedHashMap<String, Object>();
-        a.put("module", module);
-        a.put("params", params);
-        if (currentRule != null) a.put("rule", currentRule);
-        recorded.add(a);
+        int mark = json.length();
+        if (count > 0) json.append(',');
+        json.append("{\"module\":");
+        Json.quote(json, module);
+        json.append(",\"params\":");
+        return mark;
+    }
+
+    private void end() {
+        if (currentRule != null) {
+            json.append(",\"rule\":");
+            Json.quote(json, currentRule);
+        }
+        json.append('}');
+        count++;
     }
 
     void setCurrentRule(String rule) { this.currentRule = rule; }
 
-    /** The actions recorded since the last drain, in order. */
-    List<Map<String, Object>> drain() {
-        List<Map<String, Object>> out = new ArrayList<Map<String, Object>>(recorded);
-        recorded.clear();
-        return out;
+    void setTypes(TypeRegistry types) { this.types = types; }
+
+    /** Appends the actions recorded since the last drain as a JSON list, in order, and forgets them. */
+    void drainInto(StringBuilder b) {
+        b.append('[').append(json).append(']');
+        clear();
+    }
+
+    /** Forgets the recorded actions. */
+    void clear() {
+        json.setLength(0);
+        count = 0;
     }
 }

@@ -24,6 +24,7 @@ final class Recorder extends DefaultAgendaEventListener {
     Recorder(Actions actions, TypeRegistry types, boolean recordFacts) {
         this.actions = actions;
         this.types = types;
+        actions.setTypes(types);
         this.recordFacts = recordFacts;
     }
 
@@ -57,7 +58,7 @@ final class Recorder extends DefaultAgendaEventListener {
     /** Appends {"ok":true,"fireCount":n,"actions":[...],"fired":[...]} minus the closing brace. */
     void writeSuccess(StringBuilder b, int fireCount) {
         b.append("{\"ok\":true,\"fireCount\":").append(fireCount).append(",\"actions\":");
-        Json.write(b, actions.drain(), types);
+        actions.drainInto(b);
         b.append(",\"fired\":[").append(fired).append(']');
         reset();
     }
@@ -67,15 +68,16 @@ final class Recorder extends DefaultAgendaEventListener {
         StringBuilder b = new StringBuilder("{\"ok\":false,\"kind\":\"runaway\",\"limit\":").append(limit).append(",\"counts\":");
         Json.write(b, counts, null);
         b.append('}');
-        actions.drain();
+        actions.clear();
         reset();
         return b.toString();
     }
 
     void reset() {
-        fired = new StringBuilder();
+        if (fired.length() > 4096) fired = new StringBuilder(); else fired.setLength(0);
         firedCount = 0;
         counts.clear();
         actions.setCurrentRule(null);
+        actions.clear();
     }
 }

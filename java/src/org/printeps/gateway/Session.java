@@ -1,5 +1,7 @@
 package org.printeps.gateway;
 
+import java.nio.ByteBuffer;
+import java.nio.charset.StandardCharsets;
 import java.util.ArrayList;
 import java.util.HashMap;
 import java.util.List;
@@ -42,33 +44,83 @@ public final class Session {
      * every event is pushed and answered on its own (one JPype crossing instead of two).
      */
     public synchronized String pushAt(String factsJson, long timestampMs, int limit, boolean returnFacts) {
-        String inserted = insertAt(factsJson, timestampMs);
-        if (!inserted.startsWith("{\"ok\":true")) return inserted;
+        String error = insertFacts(factsJson, timestampMs);
+        if (error != null) return error;
         return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
     }
 
     /** Inserts facts stamped with {@code timestampMs}: the clock first advances to it (never back). */
     public synchronized String insertAt(String factsJson, long timestampMs) {
-        List<Object> facts = new ArrayList<Object>();
+        String error = insertFacts(factsJson, timestampMs);
+        if (error != null) return error;
+        return "{\"ok\":true,\"inserted\":" + lastInserted + "}";
+    }
+
+    private int lastInserted;
+
+    /** Builds and inserts the facts; returns the error answer, or null (count in lastInserted). */
+    private String insertFacts(String factsJson, long timestampMs) {
+        List<Object> facts = new ArrayList<Object>(4);
         String error = Runner.buildFacts(runner.types(), factsJson, facts);
         if (error != null) return error;
-        for (Object f : facts) {
-            if (runner.types().isEvent(f)) continue;  // events are not kept by id
-            String id = runner.types().idOf(f);
+        TypeRegistry types = runner.types();
+        for (int k = 0; k < facts.size(); k++) {
+            Object f = facts.get(k);
+            if (types.isEvent(f)) continue;  // events are not kept by id
+            String id = types.idOf(f);
             if (id != null && byId.containsKey(id)) {
-                return Runner.factError(facts.indexOf(f), null, "id", id,
+                return Runner.factError(k, null, "id", id,
                         "a fact with id '" + id + "' is already in the session: update or retract it");
             }
         }
         if (timestampMs != Long.MIN_VALUE) advanceTo(timestampMs);
-        StringBuilder ids = new StringBuilder("{\"ok\":true,\"inserted\":").append(facts.size()).append('}');
         for (Object f : facts) {
             FactHandle h = session.insert(f);
-            if (runner.types().isEvent(f)) continue;
-            String id = runner.types().idOf(f);
+            if (types.isEvent(f)) continue;
+            String id = types.idOf(f);
             if (id != null) byId.put(id, h);
         }
-        return ids.toString();
+        lastInserted = facts.size();
+        return null;
+    }
+
+    private ByteBuffer inBuffer;
+    private ByteBuffer outBuffer;
+    private String overflow;
+
+    /**
+     * Shares two direct buffers with the caller (JPype wraps Python bytearrays): {@link #pushBuffered}
+     * then reads the facts' UTF-8 JSON from {@code in} and writes its answer to {@code out}, so the
+     * per-event call crosses JPype with numbers only (no String conversion either way).
+     */
+    public synchronized void attachBuffers(ByteBuffer in, ByteBuffer out) {
+        this.inBuffer = in;
+        this.outBuffer = out;
+    }
+
+    /**
+     * {@link #pushAt} with the facts in the first {@code length} bytes of the input buffer. Returns
+     * the answer's length in the output buffer, or -1 when it did not fit (then {@link #takeOverflow}
+     * hands it over as a String).
+     */
+    public synchronized int pushBuffered(int length, long timestampMs, int limit, boolean returnFacts) {
+        byte[] bytes = new byte[length];
+        inBuffer.get(0, bytes, 0, length);
+        String answer = pushAt(new String(bytes, StandardCharsets.UTF_8), timestampMs, limit, returnFacts);
+        byte[] out = answer.getBytes(StandardCharsets.UTF_8);
+        if (out.length > outBuffer.capacity()) {
+            overflow = answer;
+            return -1;
+        }
+        outBuffer.put(0, out, 0, out.length);
+        return out.length;
+    }
+
+    /** The answer of the last {@link #pushBuffered} that did not fit its buffer. */
+    public synchronized String takeOverflow() {
+        String s = overflow;
+        overflow = null;
+        return s;
     }
 
     /** Replaces the fact with the same "id" by the given one (a JSON object). */
@@ -119,7 +171,7 @@ public final class Session {
         if (error != null) throw new IllegalArgumentException(error);
         for (Object f : facts) session.insert(f);
         int n = session.fireAllRules(limit);
-        actions.drain();
+        actions.clear();
         recorder.reset();
         return n;
     }
