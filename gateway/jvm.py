@@ -21,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import shutil
 import threading
 from pathlib import Path
 from typing import Iterable
@@ -225,6 +226,7 @@ def _ensure_helpers_compiled(sources: dict[str, str], out_dir: Path) -> None:
         dest = out_dir / file.relative_to(tmp)
         dest.parent.mkdir(parents=True, exist_ok=True)
         os.replace(file, dest)
+    shutil.rmtree(tmp, ignore_errors=True)  # only empty package folders are left in it
     marker.write_text("ok")
     log.info("compiled %d Java helper classes into %s", len(compiled), out_dir)
 

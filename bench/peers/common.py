@@ -56,6 +56,13 @@ def timed_rate(n: int, seconds: float) -> float:
 
 
 ROUNDS = 3
+WARMUP_ROUNDS = 3  # untimed rounds before the timed ones, the same for every engine 
+
+
+def warm_up(run_round: Callable[[], int], rounds: int = WARMUP_ROUNDS) -> None:
+    """Runs ``run_round`` untimed, so each engine is measured warm (the JVM's JIT needs ~100k events)."""
+    for _ in range(rounds):
+        run_round()
 
 
 def best_of(run_round: Callable[[], int], rounds: int = ROUNDS) -> dict[str, float]:

@@ -11,7 +11,7 @@ import json
 import sys
 from collections import Counter
 
-from common import Clock, best_of, emit, event, expected_counts, rss_mb
+from common import Clock, best_of, warm_up, emit, event, expected_counts, rss_mb
 
 
 def _cmp(op: str, field: str, value: int) -> dict:
@@ -59,8 +59,6 @@ def main(n: int) -> None:
         for name in CONDITIONS:
             rs.add_rule(Rule(name, lambda match, name=name: counts.__setitem__(name, counts[name] + 1)))
     events = [event(i) for i in range(n)]
-    for e in events[: min(5000, n)]:  # warm-up (JIT)
-        rs.assert_event(json.dumps(e))
     rounds: list[dict[str, int]] = []
 
     def one_round() -> int:
@@ -70,6 +68,7 @@ def main(n: int) -> None:
         rounds.append(dict(counts))
         return n
 
+    warm_up(one_round)
     rate = best_of(one_round)
     ok = all(r == expected_counts(n) for r in rounds)
     emit({"peer": "drools-jpy", "events": n, "one_at_a_time_per_s": rate,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from collections import Counter
 
-from common import Clock, best_of, emit, event, expected_counts, rss_mb
+from common import Clock, best_of, warm_up, emit, event, expected_counts, rss_mb
 
 BATCH = 1000
 
@@ -41,8 +41,6 @@ def main(n: int) -> None:
         define("visitors_single", single)
         define("visitors_batch", batched)
     events = [event(i) for i in range(n)]
-    for e in events[: min(5000, n)]:  # warm-up
-        post("visitors_single", dict(e, id=f"warm-{e['id']}"))
     checks: list[bool] = []
     want = expected_counts(n)
     rounds = iter(range(1_000_000))
@@ -63,7 +61,9 @@ def main(n: int) -> None:
         checks.append(dict(batched) == want)
         return n
 
+    warm_up(one_round)
     one = best_of(one_round)
+    warm_up(batch_round)
     batch = best_of(batch_round)
     emit({"peer": "durable_rules", "events": n, "one_at_a_time_per_s": one, "batched_per_s": batch,
           "setup_s": setup.seconds, "correct": all(checks), "checks": checks, "counts": dict(single), "batch_counts": dict(batched), **rss_mb()})

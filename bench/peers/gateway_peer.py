@@ -1,7 +1,8 @@
 """The gateway's engine (Drools 8.31 in-process through JPype), measured through its public API.
 
 Usage (project venv): .venv/bin/python bench/peers/gateway_peer.py MODE [N]
-  simple N    the simple 4-rule logic of common.RULES: events one at a time and batched
+  simple N    the simple 4-rule logic of common.RULES: events one at a time (synchronous push and the
+              pipelined EventFeed) and batched
   reception   the 32-rule teahouse set: fire latency, warm redeploy, RSS
   cold        a fresh JVM: JVM start and the first compile of the 32-rule set
 Each mode runs in a process of its own (the orchestrator, bench/engine_bench.py, starts them).
@@ -16,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import Clock, best_of, emit, event, expected_counts, rss_mb
+from common import Clock, best_of, warm_up, emit, event, expected_counts, rss_mb
 
 ROOT = Path(__file__).resolve().parents[2]
 RECEPTION = ROOT / "rules" / "drl" / "reception"
@@ -66,9 +67,10 @@ def simple(n: int) -> None:
     want = expected_counts(n)
     checks: list[bool] = []
     one = _one_at_a_time(engine, events, want, checks)
+    fed = _feed(engine, events, want, checks)
     batch = _batched(engine, events * 4, checks)  # 4 copies: a round long enough to time
     stateless = _stateless_batches(engine, events * 2)
-    emit({"peer": "gateway", "events": n, "one_at_a_time_per_s": one, "batched_per_s": batch,
+    emit({"peer": "gateway", "events": n, "one_at_a_time_per_s": one, "feed_per_s": fed, "batched_per_s": batch,
           "stateless_batch_per_s": stateless, "correct": all(checks), **rss_mb()})
 
 
@@ -87,30 +89,60 @@ def _one_at_a_time(engine, events: list[dict], want: dict[str, int], checks: lis
         checks.append(counts == want)
         return len(events)
 
-    for _ in range(2):  # warm-up: let the JIT compile the Drools and helper paths
-        one_round()
-    checks.clear()
+    warm_up(one_round)  # let the JIT compile the Drools and helper paths
     rate = best_of(one_round)
     session.close()
     return rate
 
 
+def _feed(engine, events: list[dict], want: dict[str, int], checks: list[bool]) -> dict[str, float]:
+    """One event per ``EventFeed.submit`` call; each event is inserted and fired on its own and its
+    answer (the ``FireResult``) reaches a callback that counts the fired rules. A round ends when
+    every answer has been delivered (``flush``)."""
+    session = engine.open_session("visitors", record_facts=False)
+    counts: dict[str, int] = {}
+    errors: list[Exception] = []
+
+    def on_result(result) -> None:
+        for f in result.fired:
+            counts[f["rule"]] = counts.get(f["rule"], 0) + 1
+
+    feed = session.feed(on_result, on_error=errors.append)
+    clock = [0]
+
+    def one_round() -> int:
+        counts.clear()
+        for e in events:
+            clock[0] += 1
+            feed.submit([e], clock[0])
+        feed.flush()
+        checks.append(counts == want and not errors)
+        return len(events)
+
+    warm_up(one_round)
+    rate = best_of(one_round)
+    feed.close()
+    session.close()
+    return rate
+
+
 def _batched(engine, events: list[dict], checks: list[bool]) -> dict[str, float]:
-    """BATCH events per call (JSON encoding included); then the clock moves on so they expire."""
+    """BATCH events per call (JSON encoding with the engine's encoder included); then the clock
+    moves on so they expire."""
+    from gateway.engine.results import encode_facts
+
     session = engine.open_session("visitors", record_facts=False)
     chunks = [events[k : k + BATCH] for k in range(0, len(events), BATCH)]
 
     def one_round() -> int:
         fired = 0
         for chunk in chunks:
-            fired += session.insert_and_fire_count(json.dumps(chunk, separators=(",", ":")))
+            fired += session.insert_and_fire_count(encode_facts(chunk, BATCH))
             session.advance_clock(2000)
         checks.append(fired == len(events))  # each event matches exactly one rule
         return len(events)
 
-    for _ in range(3):  # warm-up: the JIT needs a few hundred thousand facts
-        one_round()
-    checks[:] = checks[:-3]
+    warm_up(one_round)  # the JIT needs a few hundred thousand facts
     rate = best_of(one_round)
     session.close()
     return rate

@@ -464,10 +464,8 @@ class StreamEngine:
             if binding.mode == "stateful":
                 if runtime.session is None:
                     runtime.session = self.rules_engine.open_session(binding.ruleset)
-                    runtime.session.advance_to(data.end_ms)
-                runtime.session.insert_events(facts, data.end_ms)
-                runtime.session.advance_to(data.end_ms)
-                result = runtime.session.fire()
+                # insert stamped with the window's end (the clock moves there first) and fire: one JVM call
+                result = runtime.session.push(facts, data.end_ms)
             else:
                 result = self.rules_engine.fire(binding.ruleset, facts)
         except Exception as exc:
