@@ -94,6 +94,7 @@ class EventFeed:
         self.delivered = 0
         self.errors = 0
         self.closed = False
+        self._aborted = False
         self._finished = False
         self._thread = threading.Thread(target=self._deliver_lingering, name=f"feed-{session.id}", daemon=True)
         self._thread.start()
@@ -108,9 +109,12 @@ class EventFeed:
         stamp = _NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
         size = len(data)
         while self.submitted - self.delivered >= self._capacity and not self._finished:
-            self._send_buffered()
-            if not self._deliver(timeout_ms=50) and self._delivering is threading.current_thread():
+            if self._delivering is threading.current_thread():
                 break  # a callback submitting while it is being delivered: let it through
+            self._send_buffered()
+            if not self._deliver(timeout_ms=50):
+                with self._delivered_cond:  # another thread is handing answers over
+                    self._delivered_cond.wait(0.005)
         with self._lock:
             if self.closed:
                 raise EngineError(f"the event feed of session {self.session.id} is closed")
@@ -138,6 +142,9 @@ class EventFeed:
         """Hands the gathered events to Java; returns how many answers wait to be collected."""
         if not self._buffered:
             return 0
+        if self._aborted:  # the session closed: they will never fire (flush reports them)
+            self._buffered = self._buffered_bytes = 0
+            return 0
         count = self._buffered
         self._buffered = self._buffered_bytes = 0
         self._sent += count
@@ -162,6 +169,9 @@ class EventFeed:
             if not self._deliver(timeout_ms=min(left_ms, 200)):
                 with self._delivered_cond:  # another thread is delivering: wait for its progress
                     self._delivered_cond.wait(0.05)
+        if self._aborted and self.delivered < target:
+            raise EngineError(f"session {self.session.id} was closed: {target - self.delivered} submitted "
+                              "events were dropped before they fired")
         return self.delivered >= target
 
     @property
@@ -175,14 +185,22 @@ class EventFeed:
             if self.closed:
                 return
             self.closed = True
+        if self._delivering is threading.current_thread():  # closing from a callback: cannot wait for
+            self._send_buffered()                             # the deliveries it is part of
+            self._java.close()
+            return
         self.flush(timeout)
         self._java.close()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout)
 
     def abort(self) -> None:
-        """Stops at once, dropping events not yet fired (used when the session closes under it)."""
-        self.closed = True
+        """Stops after the event being fired (used when the session closes under the feed): events
+        not yet fired are dropped, answers already written are still delivered."""
+        with self._lock:
+            self.closed = True
+            self._aborted = True
+            self._buffered = self._buffered_bytes = 0
         self._java.abort()
 
     # ------------------------------------------------------------------ delivering
@@ -211,6 +229,7 @@ class EventFeed:
         finally:
             self._delivering = None
             self._deliver_lock.release()
+        self._send_buffered()  # gathered by a submit that still counted those answers in flight
         with self._delivered_cond:
             self._delivered_cond.notify_all()
         return True
@@ -219,13 +238,10 @@ class EventFeed:
         """The feed's thread: hands over answers nobody collected within the linger time."""
         while not self._finished:
             try:
-                if self._java.awaitLingering(self._linger_us, 500):
-                    if not self._deliver(timeout_ms=0):
-                        self._send_buffered()
-                        if self._java.backlog() == 0 and self.closed and self.delivered >= self.submitted:
-                            self._java.close()
-                else:
-                    self._send_buffered()
+                if self._java.awaitLingering(self._linger_us, 500) and not self._deliver(timeout_ms=0) \
+                        and not self._finished:
+                    with self._delivered_cond:  # another thread is handing answers over: let it
+                        self._delivered_cond.wait(0.005)
             except Exception:  # the JVM is shutting down, or the session went away
                 log.debug("event feed thread stopped", exc_info=True)
                 break

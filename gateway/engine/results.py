@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import enum
 import json
 import math
+import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,8 +39,18 @@ class FireResult:
         }
 
 
+def _uuid_or_enum(value: Any) -> Any:
+    """What orjson writes for a UUID (its text) and an Enum (its value), and the strict encoder
+    therefore must write too: the same fact must not be accepted or refused by which path it took."""
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    if isinstance(value, enum.Enum):
+        return value.value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
+
+
 # The strict encoder: what JSON allows, nothing else. Built once (streams encode per event).
-_STRICT = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+_STRICT = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=_uuid_or_enum)
 # orjson is ~8x faster; these options make it refuse (TypeError) what the strict encoder refuses
 # instead of quietly writing datetimes and dataclasses as strings and objects.
 _ORJSON_OPTIONS = orjson.OPT_PASSTHROUGH_DATETIME | orjson.OPT_PASSTHROUGH_DATACLASS
@@ -49,7 +61,8 @@ def encode_facts_bytes(facts: Any, max_facts: int) -> bytes:
 
     Why two encoders: orjson is the fast path; it writes NaN and infinity as ``null`` and refuses
     non-string keys and huge integers, so any output with a ``null`` in it and any refusal is redone
-    by the strict standard encoder, whose answer (or error) is the one that counts.
+    by the strict standard encoder, whose answer (or error) is the one that counts. Both write a
+    UUID as its text and an Enum as its value.
     """
     if not isinstance(facts, (list, tuple)):
         raise FactError([{"index": -1, "type": None, "id": None, "field": None,
@@ -83,8 +96,11 @@ def _locate_unencodable(facts: Any, exc: Exception) -> dict[str, Any]:
         if not isinstance(fact, dict):
             continue
         for key, value in fact.items():
+            if not isinstance(key, (str, int, float, bool)) and key is not None:
+                return {"index": index, "type": fact.get("type"), "id": fact.get("id"), "field": repr(key),
+                        "message": f"field name {key!r}: a {type(key).__name__} is not a JSON object key"}
             try:
-                json.dumps(value, allow_nan=False)
+                json.dumps(value, allow_nan=False, default=_uuid_or_enum)
             except (ValueError, TypeError, RecursionError):
                 bad = "NaN or infinity" if isinstance(value, float) and not math.isfinite(value) else type(value).__name__
                 return {"index": index, "type": fact.get("type"), "id": fact.get("id"), "field": str(key),

@@ -124,7 +124,7 @@ class StatefulSession:
         """A pipelined feed into this session: ``submit`` one event at a time without waiting for
         its answer; answers reach ``on_result`` in order (see :class:`EventFeed`)."""
         feed = EventFeed(self, on_result, on_error, capacity, return_facts, linger_ms)
-        self._feeds.append(feed)
+        self._feeds = [f for f in self._feeds if not f.closed] + [feed]
         return feed
 
     def update(self, fact: dict[str, Any]) -> None:

@@ -97,17 +97,20 @@ public final class Feed {
         pending.add(item);
     }
 
+    private volatile boolean aborted;
+
     private void wakeWorker() {
         if (workerParked) LockSupport.unpark(worker);
     }
 
     private Item next() throws InterruptedException {
         while (true) {
+            if (aborted) return STOP;
             Item item = pending.poll();
             if (item != null) return item;
             workerParked = true;
             item = pending.poll();  // re-check: a submit may have missed the flag
-            if (item == null) LockSupport.park(this);
+            if (item == null && !aborted) LockSupport.park(this);
             workerParked = false;
             if (item != null) return item;
             if (Thread.interrupted()) throw new InterruptedException();
@@ -120,10 +123,13 @@ public final class Feed {
                 Item item = next();
                 if (item == STOP) break;
                 String answer;
-                try {
-                    answer = session.pushAt(item.facts, item.timestampMs, limit, returnFacts);
-                } catch (Throwable t) {  // the answers must stay one per event, in order
-                    answer = Runner.runtimeError(null, Runner.rootMessage(t));
+                synchronized (session) {  // abort() is called before the session is disposed: checked
+                    if (aborted) break;   // under its monitor, no event fires after the dispose
+                    try {
+                        answer = session.pushAt(item.facts, item.timestampMs, limit, returnFacts);
+                    } catch (Throwable t) {  // the answers must stay one per event, in order
+                        answer = Runner.runtimeError(null, Runner.rootMessage(t));
+                    }
                 }
                 byte[] bytes = answer.getBytes(StandardCharsets.UTF_8);
                 synchronized (answers) {
@@ -166,9 +172,12 @@ public final class Feed {
             }
             int pos = 0;
             out.put(pos++, (byte) '[');
-            while (!answers.isEmpty() && pos + answers.peek().length + 2 <= out.capacity()) {
-                byte[] a = answers.poll();
-                if (pos > 1) out.put(pos++, (byte) ',');
+            while (!answers.isEmpty()) {
+                byte[] a = answers.peek();
+                int comma = pos > 1 ? 1 : 0;
+                if (pos + comma + a.length + 1 > out.capacity()) break;  // + 1: the closing bracket
+                answers.poll();
+                if (comma == 1) out.put(pos++, (byte) ',');
                 out.put(pos, a, 0, a.length);
                 pos += a.length;
             }
@@ -221,10 +230,14 @@ public final class Feed {
         LockSupport.unpark(worker);
     }
 
-    /** Stops at once: events not yet fired are dropped (the session is going away). */
+    /**
+     * Stops after the event being fired: the events not yet fired are dropped (the session is going
+     * away); the answers already written can still be collected, then {@link #poll} says FINISHED.
+     */
     public void abort() {
         closing = true;
+        aborted = true;
         pending.clear();
-        worker.interrupt();
+        LockSupport.unpark(worker);
     }
 }
