@@ -1,4 +1,4 @@
-"""Where the time of one event goes on the gateway's one-at-a-time path (insert_event + fire).
+"""Where the time of one event goes on the gateway's one-at-a-time paths (push, and the feed).
 
 Usage (project venv): cd bench/peers && ../../.venv/bin/python gateway_profile.py [N]
 Each stage is timed alone on the same events (best of 5 rounds of N, after a JIT warm-up), in
@@ -7,9 +7,10 @@ microseconds per event. Not part of engine_bench.py's report: it explains it.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
+
+import orjson
 
 from common import event
 from gateway_peer import SIMPLE_DRL, new_engine
@@ -26,55 +27,57 @@ def best_us(fn, n: int, rounds: int = 5) -> float:
 
 
 def main(n: int) -> None:
-    from gateway.engine.results import decode_result, encode_facts
-    from gateway.engine.session import _check
+    from gateway.engine.results import decode_result, encode_facts_bytes
 
     engine = new_engine()
     engine.deploy("visitors", {"visitors.drl": SIMPLE_DRL})
-    session = engine.open_session("visitors")
-    java = session._java
+    session = engine.open_session("visitors", record_facts=False)
+    java = session.java
     events = [event(i) for i in range(n)]
-    encoded = [encode_facts([e], 10**6) for e in events]
+    first = encode_facts_bytes([events[0]], 10)
+    size = len(first)
     clock = [0]
 
-    def public(i: int) -> None:
+    def push(i: int) -> None:
         clock[0] += 1
-        session.insert_event(events[i], clock[0])
-        session.fire()
+        session.push([events[i]], clock[0]).fired
 
-    def raw_java(i: int) -> None:  # the two Java calls with pre-encoded input, answers left in Java
+    def raw_push(i: int) -> None:  # the one JVM call alone, input already in the shared buffer
         clock[0] += 1
-        java.insertAt(encoded[i], clock[0])
-        java.fire(10_000, False)
+        session._in_view[:size] = first
+        java.pushBuffered(size, clock[0], 10_000, False)
 
-    def raw_java_no_clock(i: int) -> None:
-        java.insertAt(encoded[i], clock[0])
-        java.fire(10_000, False)
+    fired: list[int] = [0]
+    feed = session.feed(lambda result: fired.__setitem__(0, fired[0] + len(result.fired)))
 
-    for _ in range(3):  # warm-up
-        best_us(public, n, 1)
-        best_us(raw_java, n, 1)
-    clock[0] += 10_000
-    java.advanceBy(10_000)
-    clock[0] += 1
-    java.insertAt(encoded[0], clock[0])
-    answer_java = java.fire(10_000, False)
-    answer = str(answer_java)
-    insert_answer = str(java.insertAt(encoded[1], clock[0]))
-    java.fire(10_000, False)
+    def fed_round() -> float:
+        start = time.perf_counter()
+        for e in events:
+            clock[0] += 1
+            feed.submit([e], clock[0])
+        feed.flush()
+        return (time.perf_counter() - start) / n * 1e6
+
+    for _ in range(4):  # warm-up: the JIT needs ~100k events
+        best_us(push, n, 1)
+        best_us(raw_push, n, 1)
+        fed_round()
+    session._in_view[:size] = first
+    answer = bytes(session._out[: java.pushBuffered(size, clock[0] + 5_000, 10_000, False)])
+    clock[0] += 6_000
     rows = [
-        ("public path: session.insert_event + session.fire", best_us(public, n)),
-        ("  Java side, 2 JPype calls, pre-encoded input (parse, build, clock, insert, fire, answer)", best_us(raw_java, n)),
-        ("  the same without moving the pseudo clock (no expiry work)", best_us(raw_java_no_clock, n)),
+        ("session.push([event], ts).fired (the public synchronous path)", best_us(push, n)),
+        ("  its JVM call alone: pushBuffered (parse, build, clock, insert, fire, answer)", best_us(raw_push, n)),
         ("  one JPype call doing nothing (session.now()), for scale", best_us(lambda i: java.now(), n)),
-        ("  Python: encode_facts([event])", best_us(lambda i: encode_facts([events[i]], 10**6), n)),
-        ("  Python: _check(insert answer) (str + json.loads)", best_us(lambda i: _check(insert_answer), n)),
-        ("  Python: str(fire answer)", best_us(lambda i: str(answer_java), n)),
-        ("  Python: decode_result(fire answer) (json.loads + FireResult)", best_us(lambda i: decode_result(answer, "v", 1, 0.0), n)),
+        ("  Python: encode_facts_bytes([event])", best_us(lambda i: encode_facts_bytes([events[i]], 10**6), n)),
+        ("  Python: decode_result(answer) (orjson + FireResult)", best_us(lambda i: decode_result(answer, "v", 1, 0.0), n)),
+        ("  Python: orjson.loads(answer) alone", best_us(lambda i: orjson.loads(answer), n)),
+        ("EventFeed.submit + callback, whole round incl. flush (the pipelined path)", min(fed_round() for _ in range(5))),
     ]
-    print(f"fire answer: {len(answer)} chars: {answer}")
+    print(f"answer: {len(answer)} bytes: {answer.decode()}")
     for label, us in rows:
         print(f"{us:8.2f} us  {label}")
+    feed.close()
     session.close()
 
 
