@@ -28,12 +28,10 @@ import jpype.nio
 import orjson
 
 from gateway.engine.errors import EngineError
-from gateway.engine.results import FireResult, encode_facts_bytes, raise_refusal
+from gateway.engine.results import BUFFER_BYTES, NO_TIMESTAMP, FireResult, encode_facts_bytes, raise_refusal
 
 log = logging.getLogger(__name__)
 
-BUFFER_BYTES = 64 * 1024
-_NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
 _NONE, _OVERFLOW, _FINISHED = 0, -1, -2  # Feed.poll's answers besides a length
 # At most this many events are gathered before they cross: the crossing also lets the delivery
 # thread take the GIL, so answers flow back while the caller keeps submitting.
@@ -106,7 +104,7 @@ class EventFeed:
         ``timestamp_ms``. JSON problems are refused here; type and field problems come back
         through ``on_error``."""
         data = encode_facts_bytes(facts, self._max_facts)
-        stamp = _NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
+        stamp = NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
         size = len(data)
         while self.submitted - self.delivered >= self._capacity and not self._finished:
             if self._delivering is threading.current_thread():

@@ -14,6 +14,11 @@ import orjson
 from gateway.engine.errors import FactError, RuleRuntimeError, RunawayRules
 
 
+# The JVM boundary's shared settings for stateful sessions and their feeds:
+BUFFER_BYTES = 64 * 1024  # each direct buffer shared with the Java side (bigger inputs/answers take a String path)
+NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
+
+
 @dataclass(slots=True)
 class FireResult:
     """The outcome of one fire: actions requested by then-parts (in order), rules fired with the

@@ -18,11 +18,9 @@ import orjson
 
 from gateway.engine.errors import EngineError, FactError
 from gateway.engine.feed import EventFeed
-from gateway.engine.results import FireResult, decode_result, encode_facts, encode_facts_bytes
+from gateway.engine.results import BUFFER_BYTES, NO_TIMESTAMP, FireResult, decode_result, encode_facts, encode_facts_bytes
 
 _ids = itertools.count(1)
-_NO_TIMESTAMP = -(2**63)  # Java's Long.MIN_VALUE: "do not move the clock"
-BUFFER_BYTES = 64 * 1024  # per direction and session: a push of more facts than fit takes the String path
 
 
 def _check(answer: Any) -> dict[str, Any]:
@@ -100,7 +98,7 @@ class StatefulSession:
         no strings (a push costs ~2x the bare Drools insert + fire; see bench/engine_bench_notes.md).
         """
         started = time.perf_counter()
-        stamp = _NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
+        stamp = NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
         data = encode_facts_bytes(facts, self._max_facts)
         java = self._live()
         size = len(data)

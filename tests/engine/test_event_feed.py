@@ -419,7 +419,7 @@ def answer_overhead(session) -> int:
 @pytest.mark.timeout(60)
 def test_answers_around_the_output_buffer_size(session):
     # Feed.poll wraps the answers in [...]: an answer of BUFFER_BYTES - 3 bytes fits, BUFFER_BYTES - 1 overflows
-    # (BUFFER_BYTES - 2 exactly wedges the feed: test_an_answer_of_exactly_the_buffer_minus_two_bytes)
+    # (BUFFER_BYTES - 2, the exact fit, has its own regression test below)
     overhead = answer_overhead(session)
     got = Collector()
     feed = session.feed(got.on_result, got.on_error)
@@ -457,13 +457,14 @@ feed.submit([{"type": "Ping", "seq": 11, "kind": "plain", "text": "a" * (64 * 10
 feed.submit([{"type": "Ping", "seq": 12, "kind": "plain"}])
 flushed = feed.flush(3)
 print(json.dumps({"flushed": flushed, "texts": texts, "delivered": feed.delivered}), flush=True)
-os._exit(0)  # the feed's thread may be spinning: do not wait for it
+os._exit(0)  # should the feed wedge again, its thread would spin: do not wait for it
 """
 
 
 @pytest.mark.timeout(90)
 def test_an_answer_of_exactly_the_buffer_minus_two_bytes():
-    # in a child process: the wedged feed's thread would keep spinning in this one
+    # regression (the exact fit once wedged the feed for good); in a child process, so a wedged
+    # feed's spinning thread could not stay in this one
     done = subprocess.run([sys.executable, "-c", WEDGE_SCRIPT, FEED_DRL], capture_output=True, text=True, timeout=80)
     assert done.returncode == 0, done.stderr[-2000:]
     report = json.loads(done.stdout.strip().splitlines()[-1])
