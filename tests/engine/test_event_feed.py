@@ -13,9 +13,10 @@ import time
 import jpype
 import pytest
 
-from gateway.config import Settings
 from gateway.engine import Engine, EngineError, FactError, FireResult, RuleRuntimeError, RunawayRules
-from gateway.engine.feed import BUFFER_BYTES
+from gateway.engine.results import BUFFER_BYTES
+
+from engine_samples import engine_with
 
 FIRE_LIMIT = 500  # the runaway guard for these tests (the default 10 000 only makes the loop slower)
 BIG_TEXT = 100_000  # characters: an event of this size cannot be gathered in the 64 KiB input buffer
@@ -81,11 +82,7 @@ end
 
 @pytest.fixture(scope="module")
 def feed_engine(tmp_path_factory) -> Engine:
-    root = tmp_path_factory.mktemp("feed")
-    engine = Engine(Settings(data_dir=str(root / "data"),
-                             engine={"rules_dir": str(root / "rules"), "fire_limit": FIRE_LIMIT}))
-    engine.deploy("feed", {"rules.drl": FEED_DRL})
-    return engine
+    return engine_with(tmp_path_factory.mktemp("feed"), "feed", {"rules.drl": FEED_DRL}, fire_limit=FIRE_LIMIT)
 
 
 @pytest.fixture()

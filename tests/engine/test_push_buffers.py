@@ -13,10 +13,10 @@ import uuid
 
 import pytest
 
-from gateway.config import Settings
 from gateway.engine import Engine, FactError, FireResult, RuleRuntimeError, RunawayRules
-from gateway.engine.results import decode_result, encode_facts, encode_facts_bytes, raise_refusal
-from gateway.engine.session import BUFFER_BYTES
+from gateway.engine.results import BUFFER_BYTES, decode_result, encode_facts, encode_facts_bytes, raise_refusal
+
+from engine_samples import engine_with
 
 PUSH_DRL = """package org.printeps.pushtest;
 import org.printeps.gateway.Actions;
@@ -52,10 +52,7 @@ end
 
 @pytest.fixture(scope="module")
 def push_engine(tmp_path_factory) -> Engine:
-    root = tmp_path_factory.mktemp("push")
-    engine = Engine(Settings(data_dir=str(root / "data"), engine={"rules_dir": str(root / "rules")}))
-    engine.deploy("push", {"rules.drl": PUSH_DRL})
-    return engine
+    return engine_with(tmp_path_factory.mktemp("push"), "push", {"rules.drl": PUSH_DRL})
 
 
 @pytest.fixture()

@@ -6,7 +6,6 @@ import java.nio.charset.StandardCharsets;
 import java.util.ArrayDeque;
 import java.util.concurrent.ConcurrentLinkedQueue;
 import java.util.concurrent.TimeUnit;
-import java.util.concurrent.atomic.AtomicInteger;
 import java.util.concurrent.locks.LockSupport;
 
 /**
@@ -43,13 +42,13 @@ public final class Feed {
     private final int limit;
     private final boolean returnFacts;
     private final ConcurrentLinkedQueue<Item> pending = new ConcurrentLinkedQueue<Item>();
-    private final AtomicInteger inFlight = new AtomicInteger();  // submitted, answer not yet written
     private final ArrayDeque<byte[]> answers = new ArrayDeque<byte[]>();  // guarded by itself
     private final ByteBuffer in;
     private final ByteBuffer out;
     private final Thread worker;
     private volatile boolean workerParked;
     private volatile boolean closing;
+    private volatile boolean aborted;
     private boolean finished;  // guarded by answers
     private long oldestNanos;  // when the oldest uncollected answer was written; guarded by answers
     private String overflow;   // guarded by answers
@@ -93,11 +92,8 @@ public final class Feed {
 
     private void enqueue(Item item) {
         if (closing) throw new IllegalStateException("the feed is closed");
-        inFlight.incrementAndGet();
         pending.add(item);
     }
-
-    private volatile boolean aborted;
 
     private void wakeWorker() {
         if (workerParked) LockSupport.unpark(worker);
@@ -138,7 +134,6 @@ public final class Feed {
                         answers.notifyAll();
                     }
                     answers.add(bytes);
-                    inFlight.decrementAndGet();
                 }
             }
         } catch (InterruptedException e) {
@@ -218,9 +213,6 @@ public final class Feed {
             return s;
         }
     }
-
-    /** Events submitted whose answers are not written yet. */
-    public int backlog() { return inFlight.get(); }
 
     /** Lets the submitted events finish, then stops the worker (poll then reports FINISHED). */
     public void close() {

@@ -68,7 +68,6 @@ final class Recorder extends DefaultAgendaEventListener {
         StringBuilder b = new StringBuilder("{\"ok\":false,\"kind\":\"runaway\",\"limit\":").append(limit).append(",\"counts\":");
         Json.write(b, counts, null);
         b.append('}');
-        actions.clear();
         reset();
         return b.toString();
     }

@@ -171,8 +171,7 @@ public final class Session {
         if (error != null) throw new IllegalArgumentException(error);
         for (Object f : facts) session.insert(f);
         int n = session.fireAllRules(limit);
-        actions.clear();
-        recorder.reset();
+        recorder.reset();  // forgets the firings and the recorded actions
         return n;
     }
 
