@@ -9,7 +9,7 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: install system-deps browser run serve test bench clean
 
-$(STAMP): pyproject.toml ros/install.sh ros/requirements-jazzy.txt
+$(STAMP): pyproject.toml ros/install.sh ros/requirements-jazzy.txt $(wildcard ros/printeps_interfaces/msg/*.msg ros/printeps_interfaces/srv/*.srv)
 	$(MAKE) system-deps
 	[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip

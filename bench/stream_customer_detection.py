@@ -46,7 +46,7 @@ def scenario(people: int, hz: float, seconds: float, seed: int = 1) -> list[tupl
         for i, kind in enumerate(kinds):
             base = starts[i] + {"approach": -0.4 * t, "past": 0.0, "leave": 0.4 * t}[kind]
             customers.append({"id": f"c{i}", "distance": round(max(0.3, base + rnd.uniform(-0.02, 0.02)), 3)})
-        out.append((int(round(t * 1000)), {"id": "entrance1", "number_of_customers": people, "has_customers": customers}))
+        out.append((int(round(t * 1000)), {"id": "entrance1", "number_of_customers": people, "customers": customers}))
     return out
 
 

@@ -92,32 +92,49 @@ def _print_json(value: Any) -> None:
 def serve(
     host: Optional[str] = typer.Option(None, help="Listen address (default: settings.api.host, 127.0.0.1)."),
     port: Optional[int] = typer.Option(None, help="Listen port (default: settings.api.port, 8080)."),
+    workers: int = typer.Option(1, min=1, max=64, help="Worker processes on one port, each a full gateway member."),
+    ros: Optional[bool] = typer.Option(None, "--ros/--no-ros",
+                                       help="Run the ROS node (default: when rclpy is importable; worker 0 only)."),
     config: Optional[Path] = ConfigOption,
-    load_rules: bool = typer.Option(True, help="Deploy rules/drl/* (settings.engine.rules_dir) at start."),
 ) -> None:
-    """Run the gateway (REST API, KIE Server compatible API, /docs) with uvicorn."""
-    import gc
-
-    import uvicorn
-
-    from gateway.server import build_gateway
-
+    """Run the gateway: REST API, KIE Server compatible API, workbench, stream engine and the ROS
+    node, over the Information State (MONGO_URI, or the embedded database)."""
     settings = _settings(config)
-    gateway = build_gateway(settings, load_rules=load_rules)
-    gc.collect()
-    gc.freeze()  # startup objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
+    if workers > 1:
+        from gateway.serve import Supervisor, config_path
+
+        supervisor = Supervisor(workers, host or settings.api.host, port or settings.api.port,
+                                config=config_path(config), ros=ros)
+        raise typer.Exit(supervisor.run(settings))
+    from gateway.app import run
+
+    sys.setswitchinterval(0.001)  # GIL hand-offs between the ROS executor and the workers: see docs/ros.md
+    _run_or_explain(lambda: run(settings, rest=True, ros=ros, host=host, port=port))
+
+
+@app.command("ros")
+def ros_node(
+    rest: bool = typer.Option(False, "--rest/--no-rest", help="Also serve the REST API and workbench."),
+    port: Optional[int] = typer.Option(None, help="Listen port with --rest (default: settings.api.port)."),
+    config: Optional[Path] = ConfigOption,
+) -> None:
+    """The ROS launcher (no `ros2 launch` here): the gateway with its ROS node, until Ctrl-C."""
+    from gateway.app import run
+
+    sys.setswitchinterval(0.001)
+    _run_or_explain(lambda: run(_settings(config), rest=rest, ros=True, port=port))
+
+
+def _run_or_explain(start: Any) -> None:
+    """Run; a gateway that cannot start (database held by another process, …) says why, no traceback."""
+    from gateway.store.embedded import EmbeddedDbError
+    from gateway.store.store import StoreUnavailable
+    from gateway.versions import CatalogUnavailable
+
     try:
-        uvicorn.run(
-            gateway.app,
-            host=host or settings.api.host,
-            port=port or settings.api.port,
-            loop="auto",
-            http="auto",
-            log_level="info",
-            access_log=False,
-        )
-    finally:
-        gateway.close()
+        start()
+    except (EmbeddedDbError, StoreUnavailable, CatalogUnavailable) as exc:
+        _fail(f"printeps: cannot start: {exc}", code=3)
 
 
 @app.command()
@@ -127,17 +144,82 @@ def demo(
     scenario: Optional[Path] = typer.Option(None, help="Scenario file (default: scenarios/teahouse-reception.yaml)."),
     config: Optional[Path] = ConfigOption,
 ) -> None:
-    """The teahouse reception end to end: gateway, embedded database, ROS node, sensor and Pepper
-    simulators; prints what happens and a summary. Without --headless the gateway keeps running
-    (workbench at http://127.0.0.1:8080/workbench) until Ctrl-C."""
-    import sys as _sys
-
+    """The teahouse reception end to end: the gateway (as `printeps serve` builds it, with its ROS
+    node) and the sensor and Pepper simulators; prints what happens and a summary. Without
+    --headless the gateway keeps running (workbench at http://127.0.0.1:8080/workbench) until Ctrl-C."""
     from gateway.demo import run_demo
 
-    _sys.setswitchinterval(0.001)  # short GIL hand-offs between the ROS executor and the worker
-    summary = run_demo(_settings(config), headless=headless, scenario=scenario, speed=speed)
+    sys.setswitchinterval(0.001)  # short GIL hand-offs between the ROS executor and the workers
+    summary: dict[str, Any] = {}
+    _run_or_explain(lambda: summary.update(run_demo(_settings(config), headless=headless, scenario=scenario,
+                                                    speed=speed)))
     if summary.get("failed"):
         raise typer.Exit(1)
+
+
+@app.command("export")
+def export_cmd(
+    folder: Path = typer.Argument(..., help="Folder to write (the repository's seed layout)."),
+    config: Optional[Path] = ConfigOption,
+) -> None:
+    """Write the current version of every rule set, workflow, knowledge file, query and mapping
+    from the Information State into FOLDER (for git). Joins a running embedded database."""
+    from gateway.store import open_store
+    from gateway.store.catalog import MongoCatalog
+    from gateway.transfer import export_to
+
+    settings = _settings(config)
+    store = _open_store_or_fail(open_store, settings)
+    try:
+        written = export_to(MongoCatalog(store.db, "export"), folder)
+    finally:
+        store.close()
+    for rel in written:
+        typer.echo(f"{folder / rel}")
+    typer.echo(f"exported {len(written)} files to {folder}")
+
+
+@app.command("import")
+def import_cmd(
+    folder: Path = typer.Argument(..., help="A folder in the seed layout (e.g. written by `printeps export`)."),
+    comment: str = typer.Option("", help="Version comment for what changes."),
+    author: str = typer.Option(os.environ.get("USER", "import"), help="Author recorded with the new versions."),
+    config: Optional[Path] = ConfigOption,
+) -> None:
+    """Make each item of FOLDER that differs from the current version a new version, checked like a
+    deploy; running gateways follow within a second. Exit 1 if any item was refused."""
+    from gateway.app import build_gateway
+    from gateway.store import open_store
+    from gateway.transfer import import_from
+
+    if not folder.is_dir():
+        _fail(f"{folder}: no such folder", code=2)
+    settings = _settings(config)
+    store = _open_store_or_fail(open_store, settings)
+    try:
+        gateway = build_gateway(settings, rest=False, ros=False, store=store, seed=False, warm_up=False, follow=False)
+        try:
+            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}")
+        finally:
+            gateway.close()
+    finally:
+        store.close()
+    for item, outcome in report:
+        typer.echo(f"{item}: {outcome}")
+    if any(outcome.startswith("failed") for _, outcome in report):
+        raise typer.Exit(1)
+
+
+def _open_store_or_fail(open_store: Any, settings: Any) -> Any:
+    from gateway.store.embedded import EmbeddedDbError
+
+    try:
+        store = open_store(settings, join_running=True)
+        store.ping()
+        return store
+    except (EmbeddedDbError, Exception) as exc:  # noqa: B014 - any start failure is reported, not traced
+        _fail(f"printeps: cannot reach the Information State: {exc}", code=3)
+    raise AssertionError  # unreachable
 
 
 @rules_app.command("validate")
@@ -223,10 +305,10 @@ def fire(
         return
     from gateway.engine import Engine, EngineError
 
-    engine = Engine(_settings(config))
+    engine = Engine(_settings(config))  # local: the rule sets of the rules dir, in memory
     try:
-        engine.load_rules_dir()
-        result = engine.fire(ruleset, facts)
+        engine.seed_from()
+        result = engine.fire(ruleset, facts, origin="cli")
     except EngineError as exc:
         _print_json(exc.to_dict())
         raise typer.Exit(1)

@@ -41,8 +41,7 @@ class StoreSettings(BaseModel):
 
     record_fires: bool = Field(
         default=True,
-        description="Record every fire (REST, KIE Server, workflows) in rule_firings; rule set changes and "
-                    "the ROS pipeline's decisions are recorded regardless.",
+        description="Record every decision (every fire from every origin) in the Information State.",
     )
 
     mongo_uri: str | None = Field(
@@ -55,23 +54,55 @@ class StoreSettings(BaseModel):
     timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation.")
     spool_max_docs: int = Field(default=200_000, description="Bound of the on-disk write buffer (documents).")
     retry_interval_s: float = Field(default=1.0, description="How often a degraded store tries to reconnect.")
+    journal_fsync: bool = Field(
+        default=False,
+        description="fsync every journalled write: survives a machine crash, not only a killed process (slower).")
+    decision_facts_max: int = Field(default=1000, description="Facts kept per decision record (the count is kept).")
+
+
+ENTRANCE_STREAM = "http://printeps.org/cafe/entrance"
+
+
+class RosSubscription(BaseModel):
+    """A topic the gateway node reads: its messages become RDF on ``stream`` (the same stream
+    engine the REST API shows), mapped by ``mapping`` — a mapping's name (``ontology/mappings``,
+    ``/api/mappings``), an inline mapping, or none (introspected from the message type)."""
+
+    topic: str = Field(min_length=1)
+    type: str = Field(pattern=r"^[A-Za-z_]\w*/msg/[A-Za-z]\w*$", description="pkg/msg/Type")
+    stream: str = Field(min_length=1, description="The RDF stream IRI the readings go to.")
+    mapping: str | dict[str, Any] | None = None
+    select: str | None = Field(default=None, description="Map this nested field instead of the whole message.")
+    stamp_field: str = Field(default="stamp", description="builtin_interfaces/Time field with the event time.")
+    check: str | None = Field(default=None, description="A plausibility check by name ('entrance').")
+
+
+def _default_subscriptions() -> list[RosSubscription]:
+    return [
+        RosSubscription(topic="entrance", type="printeps_interfaces/msg/Entrance", stream=ENTRANCE_STREAM,
+                        mapping="entrance", check="entrance"),
+        RosSubscription(topic="entrance_sensor", type="printeps_interfaces/msg/EntranceSensor", stream=ENTRANCE_STREAM,
+                        mapping="entrance", select="entrance", check="entrance"),
+    ]
 
 
 class RosSettings(BaseModel):
-    """The gateway ROS node: topics it reads, rule set it fires, and where each robot's services live."""
+    """The gateway ROS node: topics it reads, the robots it commands, and how."""
 
+    enabled: bool | None = Field(
+        default=None, description="Run the ROS node in `printeps serve`; default: when rclpy is importable.")
+    domain_id: int | None = Field(default=None, description="ROS_DOMAIN_ID (default: the environment's).")
     node_name: str = "printeps_gateway"
-    entrance_topics: list[str] = Field(default_factory=lambda: ["entrance"])
-    entrance_sensor_topics: list[str] = Field(default_factory=lambda: ["entrance_sensor"])
-    ruleset: str = "reception"
+    subscriptions: list[RosSubscription] = Field(default_factory=_default_subscriptions)
+    ruleset: str = Field(default="reception", description="fire_business_rules' rule set when a request names none.")
     robots: dict[str, str] = Field(
         default_factory=lambda: {"pepper": "/pepper"},
         description="Robot name -> service namespace (pepper -> /pepper/speak, /pepper/move_to, ...).",
     )
     call_timeout_s: float = Field(default=2.0, description="Per robot-service call timeout.")
     call_retries: int = Field(default=2, description="Retries after a failed/timed-out call (bounded).")
-    max_customers: int = Field(default=100, description="Readings with more customers are rejected.")
-    max_distance_m: float = Field(default=20.0, description="Readings farther than this are rejected.")
+    max_customers: int = Field(default=100, description="Entrance readings with more customers are rejected.")
+    max_distance_m: float = Field(default=20.0, description="Entrance readings farther than this are rejected.")
     queue_size: int = Field(default=1000, description="Bound of the node's work queue.")
     robot_start: dict[str, str] = Field(
         default_factory=lambda: {"pepper": "counter"}, description="Where each robot is at start (Robot facts).")
@@ -126,7 +157,6 @@ class ApiSettings(BaseModel):
     )
     max_body_bytes: int = Field(default=10 * 1024 * 1024, description="Larger request bodies get 413.")
     max_json_depth: int = Field(default=64, description="Deeper JSON request bodies get 400.")
-    decisions_kept: int = Field(default=500, description="Recent fire decisions kept for GET /api/decisions.")
     inline_fire: bool = Field(
         default=True,
         description="Run REST fires on the event loop (~0.2 ms faster each); false: in a worker thread, so a "
@@ -177,7 +207,11 @@ class StreamSettings(BaseModel):
     swrl_file: str = str(PROJECT_ROOT / "ontology" / "teahouse.swrl")
     queries_dir: str | None = Field(
         default=str(PROJECT_ROOT / "ontology" / "queries"),
-        description="*.rq files registered at start-up (None: none).",
+        description="*.rq files (+ <stem>.binding.yaml) that seed an empty Information State (None: none).",
+    )
+    mappings_dir: str | None = Field(
+        default=str(PROJECT_ROOT / "ontology" / "mappings"),
+        description="Message -> RDF mappings (*.yaml) that seed an empty Information State (None: none).",
     )
     stream_mappings: dict[str, str] = Field(
         default_factory=lambda: {"http://printeps.org/cafe/entrance": "entrance"},
@@ -191,6 +225,14 @@ class StreamSettings(BaseModel):
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 
 
+class SyncSettings(BaseModel):
+    """How gateway processes follow each other's changes (deploys, workflows, knowledge, queries)."""
+
+    change_streams: bool = Field(default=True, description="Wake on MongoDB change streams where the server has them.")
+    poll_interval_s: float = Field(default=0.25, description="Polling of the change log where it has none.")
+    reconcile_interval_s: float = Field(default=30.0, description="Full comparison with the catalog, as a safety net.")
+
+
 class Settings(BaseModel):
     """All gateway settings. Sections are added by the adapters that use them."""
 
@@ -202,6 +244,7 @@ class Settings(BaseModel):
     ros: RosSettings = Field(default_factory=RosSettings)
     workflows: WorkflowSettings = Field(default_factory=WorkflowSettings)
     streams: StreamSettings = Field(default_factory=StreamSettings)
+    sync: SyncSettings = Field(default_factory=SyncSettings)
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @property
@@ -217,6 +260,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),
     "PRINTEPS_API_OPEN": ("api", "open"),
+    "PRINTEPS_ROS": ("ros", "enabled"),
 }
 
 

@@ -1,10 +1,11 @@
 """``printeps demo``: the teahouse reception, end to end, on one machine.
 
-Starts the embedded database (or uses MONGO_URI), the rules engine, the REST API + workbench
-(uvicorn on 127.0.0.1), the gateway ROS node, and the two simulators as their own processes (a
-Pepper-like robot and a Kinect-like entrance sensor replaying scenarios/teahouse-reception.yaml).
-Prints what happens as it happens and returns a summary. Headless: stops when the scenario is over.
-Otherwise it opens the workbench and keeps running until Ctrl-C.
+A thin launcher of the one composition root: it builds the gateway exactly as ``printeps serve``
+does (Information State, rules engine, knowledge, stream engine, ROS node, REST API + workbench),
+then starts the two simulators as their own processes (a Pepper-like robot and a Kinect-like
+entrance sensor replaying scenarios/teahouse-reception.yaml) and narrates what the gateway does,
+from the gateway's own events. Headless: stops when the scenario is over. Otherwise the gateway
+keeps running for the workbench until Ctrl-C.
 """
 
 from __future__ import annotations
@@ -40,21 +41,34 @@ class Printer:
             self.out(f"[{time.monotonic() - self.t0:6.2f}s] {text}")
 
 
-def _start_rest(settings: Settings, engine: Any, store: Any, ros_check: Callable[[], dict], say: Printer,
-                headless: bool = True):
-    """The REST API + workbench on loopback: the configured port (8080) when it is free and the
-    demo is interactive, else any free port. (None, None) when the API package is not there."""
-    try:
-        from gateway.server import build_app, serve_in_thread
-    except ImportError as exc:
-        say(f"REST API not available ({exc}); continuing without it")
-        return None, None
-    from gateway.store.embedded import free_port
+class Narrator:
+    """Turns the gateway's events into the demo's lines and counts what happened."""
 
-    app, _ = build_app(settings, engine, store, health_checks={"ros": ros_check})
-    port = settings.api.port if not headless and _port_is_free(settings.api.port) else free_port()
-    server, _ = serve_in_thread(app, port)
-    return server, f"http://127.0.0.1:{port}"
+    def __init__(self, say: Printer) -> None:
+        self.say = say
+        self.detections = 0
+
+    def on_stream_event(self, event: dict[str, Any]) -> None:
+        if event.get("kind") == "actions":
+            self.detections += 1
+            people = [f.get("id") for f in event.get("facts", []) if f.get("type") == "Customer"]
+            if people:
+                self.say(f"detected entering customers: {', '.join(str(p) for p in people)}")
+            self.say(f"rules {event.get('ruleset')} v{event.get('version')} fired: "
+                     f"{', '.join(f.get('rule', '?') for f in event.get('fired', []))} "
+                     f"(decision {event.get('decision_id')})")
+        elif event.get("kind") == "error":
+            self.say(f"stream error: {event.get('error')}")
+
+    def on_ros_event(self, kind: str, payload: dict[str, Any]) -> None:
+        if kind == "rejected":
+            self.say(f"rejected a sensor reading: {payload['error']}")
+
+    def on_outcome(self, o: dict[str, Any]) -> None:
+        p = o["action"].get("params", {})
+        what = p.get("text") or p.get("location") or p.get("name") or ""
+        self.say(f"  -> {p.get('robot', '?')} {o['action'].get('module')} {what!r}: {o['status']}"
+                 + ("" if o["status"] == "ok" else f" ({o['message']})"))
 
 
 def _port_is_free(port: int) -> bool:
@@ -101,14 +115,14 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
              speed: float = 1.0, domain_id: int | None = None, out: Callable[[str], None] = print,
              stop_event: threading.Event | None = None) -> dict[str, Any]:
     """Play the teahouse reception end to end; returns the summary (also printed)."""
-    from gateway.ros.node import GatewayNode
-    from gateway.ros.runtime import RosRuntime, ros_env_defaults
+    from gateway.app import build_gateway
+    from gateway.ros.runtime import ros_env_defaults
     from gateway.ros.scenario import load_scenario
-    from gateway.ros.stages import engine_stage, pipeline_factory
-    from gateway.store import open_store
+    from gateway.serve import free_port, serve_in_thread
 
     settings = settings or load_settings()
     say = Printer(out)
+    narrator = Narrator(say)
     scenario_path = Path(scenario or DEFAULT_SCENARIO)
     plan = load_scenario(scenario_path)  # bad files fail here, before anything starts
     ros_env_defaults()
@@ -122,40 +136,20 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
 
     say(f"scenario: {plan.name} ({plan.duration:.0f} s of sensor data, replay speed x{speed:g}); "
         f"ROS_DOMAIN_ID={domain}")
-    store = open_store(settings)
-    say(f"Information State: {store.health()['backend']} MongoDB at {store.health()['uri']}")
-    rt = server = robot = sensor = None
+    gateway = build_gateway(settings, rest=True, ros=True, domain_id=domain, on_ros_event=narrator.on_ros_event)
+    server = robot = sensor = None
     try:
-        engine, rules = engine_stage(settings)
-        say("rules engine: " + ", ".join(f"{i.name} v{i.version}" for i in engine.list_rulesets()))
-        rt = RosRuntime(domain_id=domain)
-
-        def ros_check() -> dict[str, Any]:
-            return {"status": "ok", "domain_id": domain, "node": settings.ros.node_name}
-
-        server, url = _start_rest(settings, engine, store, ros_check, say, headless)
-        if url:
-            say(f"REST API + workbench: {url}/  (Information State: {url}/api/state/actions)")
-
-        def on_event(kind: str, payload: dict[str, Any]) -> None:
-            if kind == "detected":
-                say(f"detected entering customers: {', '.join(payload['customers'])}")
-            elif kind == "fired":
-                say(f"rules {payload['ruleset']} v{payload['version']} fired: {', '.join(payload['rules'])}")
-            elif kind == "rejected":
-                say(f"rejected a sensor reading: {payload['error']}")
-
-        def on_outcome(o: dict[str, Any]) -> None:
-            p = o["action"].get("params", {})
-            what = p.get("text") or p.get("location") or p.get("name") or ""
-            say(f"  -> {p.get('robot', '?')} {o['action'].get('module')} {what!r}: {o['status']}"
-                + ("" if o["status"] == "ok" else f" ({o['message']})"))
-
-        node = rt.make(GatewayNode, settings.ros, pipeline_factory(settings, store, rules, on_event=on_event,
-                                                                   on_outcome=on_outcome),
-                       rules=rules, store=store)
+        health = gateway.store.health()
+        say(f"Information State: {health['backend']} MongoDB at {health['uri']}")
+        say("rules engine: " + ", ".join(f"{i.name} v{i.version}" for i in gateway.engine.live_versions()))
+        gateway.streams.subscribe(narrator.on_stream_event)
+        gateway.ros.dispatcher.add_listener(narrator.on_outcome)
+        port = settings.api.port if not headless and _port_is_free(settings.api.port) else free_port()
+        server, _ = serve_in_thread(gateway.app, port)
+        url = f"http://127.0.0.1:{port}"
+        say(f"REST API + workbench: {url}/  (decisions: {url}/api/decisions)")
         robot = _sim("gateway.ros.sim_robot", ["--name", "pepper", "--log", str(calls_log)], env, work / "robot.log")
-        client = node.caller.client("/pepper/speak", "Speak")
+        client = gateway.ros.caller.client("/pepper/speak", "printeps_interfaces/srv/Speak")
         if not client.wait_for_service(timeout_sec=30):
             raise RuntimeError(f"the robot simulator did not come up; see {work / 'robot.log'}")
         say("robot simulator (pepper) ready; starting the entrance sensor")
@@ -163,14 +157,14 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         deadline = time.monotonic() + plan.duration / speed + 60
         while sensor.poll() is None and time.monotonic() < deadline and not stop_event.is_set():
             time.sleep(0.1)
-        # let the last readings and robot calls finish
-        settle = time.monotonic() + 15
-        while time.monotonic() < settle and not node.queue.empty():
+        settle = time.monotonic() + 15  # let the last readings and robot calls finish
+        while time.monotonic() < settle and not gateway.ros.idle():
             time.sleep(0.05)
         time.sleep(0.5)
-        stats = dict(node.pipeline.stats)
+        stats = {**gateway.ros.stats, "detections": narrator.detections, "firings": narrator.detections}
+        gateway.store.flush(timeout_s=10)
         say("scenario over")
-        if not headless and url and not stop_event.is_set():
+        if not headless and not stop_event.is_set():
             say(f"gateway still running: open {url}/workbench to edit the rules; press Ctrl-C to stop")
             try:
                 stop_event.wait()
@@ -179,30 +173,25 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
     finally:
         _stop_proc(sensor)
         _stop_proc(robot)
-        if rt:
-            rt.shutdown()
         if server:
             server.should_exit = True
-            writer = getattr(server.config.app.state, "store_writer", None)
-            if writer is not None:
-                writer.close()  # queued Information State records are written before the store closes
-        health = store.health()
-        store.close()
+        store_health = gateway.store.health() if gateway.store is not None else {}
+        gateway.close()
     calls = _read_calls(calls_log)
     summary = {
         "scenario": plan.name, "domain_id": domain, "duration_s": round(time.monotonic() - started, 1),
         **stats, "robot_calls": [{k: v for k, v in c.items() if k not in ("x", "y")} for c in calls],
         "greetings": [c["text"] for c in calls if c["service"] == "speak"],
-        "store": health, "work_dir": str(work),
+        "store": store_health, "work_dir": str(work),
     }
     out("")
     out("Summary")
     out(f"  sensor readings: {stats['readings']} (rejected {stats['rejected']}); detections: {stats['detections']}; "
-        f"rule firings: {stats['firings']}; robot actions: {stats['actions']} (failed {stats['failed']})")
+        f"robot actions: {stats['actions']} (failed {stats['failed']})")
     for c in calls:
         what = c.get("text") or c.get("location") or c.get("name")
         out(f"  pepper {c['service']:<8} {what}")
-    out(f"  Information State: {health['status']} ({health['buffered']} buffered); logs in {work}")
+    out(f"  Information State: {store_health.get('status')} ({store_health.get('buffered')} buffered); logs in {work}")
     return summary
 
 

@@ -11,10 +11,14 @@ for tool in cmake g++; do
   command -v "$tool" >/dev/null || { echo "ros/install.sh: '$tool' not found (apt-get install cmake g++)" >&2; exit 1; }
 done
 "$PY" -m pip install -q -r "$HERE/requirements-jazzy.txt"
+# Rebuild when the .msg/.srv files changed since the installed build (their hash is kept beside it).
+SRC_HASH="$(cat "$HERE"/printeps_interfaces/msg/*.msg "$HERE"/printeps_interfaces/srv/*.srv | sha256sum | cut -c1-16)"
+HASH_FILE="$("$PY" -c 'import sys; print(sys.prefix)')/.printeps_interfaces.hash"
 if "$PY" -c "import printeps_interfaces.msg, printeps_interfaces.srv" 2>/dev/null \
-   && [ "${PRINTEPS_ROS_REBUILD:-0}" != "1" ]; then
+   && [ "$(cat "$HASH_FILE" 2>/dev/null)" = "$SRC_HASH" ] && [ "${PRINTEPS_ROS_REBUILD:-0}" != "1" ]; then
   echo "printeps_interfaces already installed (PRINTEPS_ROS_REBUILD=1 to rebuild)"
 else
-  "$PY" -m pip install -q --no-build-isolation "$HERE/printeps_interfaces"
+  "$PY" -m pip install -q --no-build-isolation --force-reinstall --no-deps "$HERE/printeps_interfaces"
+  echo "$SRC_HASH" > "$HASH_FILE"
 fi
 "$PY" -c "from printeps_interfaces.msg import Entrance; from printeps_interfaces.srv import Speak; print('printeps_interfaces OK')"

@@ -1,10 +1,14 @@
-"""Shared test set-up: every test process gets one real JVM (started on first use)."""
+"""Shared test set-up: every test process gets one real JVM (started on first use) and one real
+MongoDB-protocol server; gateways are built through the one composition root."""
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
+
+from gw_testing import open_test_store
 
 # Keep the test runs' caches (compiled Java helpers) in one place across runs.
 os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printeps"))
@@ -29,3 +33,24 @@ def browser():
         launched = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
         yield launched
         launched.close()
+
+
+# ---- the Information State: one real MongoDB-protocol server (SecantusDB, its own process) for
+# the whole run; each test or module gets a database of its own on it (tests that stop and start
+# the server, tests/store, start their own).
+
+@pytest.fixture(scope="session")
+def mongo(tmp_path_factory: pytest.TempPathFactory):
+    from gateway.store.embedded import EmbeddedMongo
+
+    db = EmbeddedMongo(tmp_path_factory.mktemp("mongo"))
+    db.start()
+    yield db
+    db.stop()
+
+
+@pytest.fixture
+def store(mongo, tmp_path: Path):
+    s = open_test_store(mongo, tmp_path)
+    yield s
+    s.close()

@@ -16,6 +16,13 @@ from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gateway.api.jsonio import JSON, BadBody
+from gateway.rdf.mapping import MappingError
+from gateway.rdf.terms import TermError
+from gateway.store.store import StoreUnavailable
+from gateway.stream.engine import QueryNotFound, StreamError
+from gateway.stream.lexer import QueryParseError
+from gateway.stream.rules import BindingError
+from gateway.versions import CatalogUnavailable
 from gateway.engine import (
     CompileFailed,
     EngineError,
@@ -94,6 +101,36 @@ def install_error_handlers(app: FastAPI) -> None:
         if status >= 500:
             log.error("engine error on %s %s: %s", request.method, request.url.path, exc)
         return JSON(body, status_code=status)
+
+    @app.exception_handler(QueryParseError)
+    async def _query_parse(request: Request, exc: QueryParseError) -> JSON:
+        count("query_parse")
+        return JSON(error_body(exc.message, line=exc.line, column=exc.column), status_code=422)
+
+    @app.exception_handler(QueryNotFound)
+    async def _query_not_found(request: Request, exc: QueryNotFound) -> JSON:
+        count("http_404")
+        return JSON(error_body(str(exc)), status_code=404)
+
+    @app.exception_handler(StreamError)
+    @app.exception_handler(BindingError)
+    async def _stream_error(request: Request, exc: Exception) -> JSON:
+        status = 409 if "already registered" in str(exc) else 422
+        count(f"http_{status}")
+        return JSON(error_body(str(exc)), status_code=status)
+
+    @app.exception_handler(MappingError)
+    @app.exception_handler(TermError)
+    async def _mapping_error(request: Request, exc: Any) -> JSON:
+        count("http_422")
+        return JSON(error_body(exc.message, where=exc.where), status_code=422)
+
+    @app.exception_handler(CatalogUnavailable)
+    @app.exception_handler(StoreUnavailable)
+    async def _store_down(request: Request, exc: Exception) -> JSON:
+        count("store_unavailable")
+        log.error("%s %s: %s", request.method, request.url.path, exc)
+        return JSON(error_body(f"{exc} (changes need the Information State; firing keeps working)"), status_code=503)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSON:

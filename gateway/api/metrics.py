@@ -1,4 +1,4 @@
-"""Prometheus metrics of one app: fires, fire latency, deploys, errors (``GET /metrics``).
+"""Prometheus metrics of one app: fires, fire latency, deploys, errors (served at ``GET /metrics``).
 
 Why a registry per app (not prometheus_client's global one): tests and embedders may build several
 apps in one process; each must count its own traffic. Deploys are counted from the engine's
@@ -9,10 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Request
-from fastapi.responses import Response
 from prometheus_client import (
-    CONTENT_TYPE_LATEST,
     CollectorRegistry,
     Counter,
     Gauge,
@@ -69,17 +66,3 @@ class Metrics:
 
     def render(self) -> bytes:
         return generate_latest(self.registry)
-
-
-router = APIRouter(tags=["operations"])
-
-
-@router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
-def metrics(request: Request) -> Response:
-    """Prometheus text format: printeps_fires_total, printeps_fire_seconds, printeps_deploys_total, …"""
-    state = request.app.state
-    try:
-        state.metrics.rulesets.set(len(state.engine.list_rulesets()))
-    except Exception:  # the gauge is best effort; the endpoint must answer even if the engine cannot
-        pass
-    return Response(state.metrics.render(), media_type=CONTENT_TYPE_LATEST)

@@ -4,7 +4,7 @@ See docs/engine-api.md for the contract. Import what you need from here.
 """
 
 from gateway.engine.compiler import CompiledRuleSet
-from gateway.engine.engine import Engine
+from gateway.engine.engine import Engine, LiveRuleSet, RuleSetVersion
 from gateway.engine.errors import (
     CompileError,
     CompileFailed,
@@ -17,12 +17,12 @@ from gateway.engine.errors import (
     VersionConflict,
     VersionNotFound,
 )
-from gateway.engine.registry import RuleSetVersion, VersionInfo
 from gateway.engine.results import FireResult
 from gateway.engine.session import StatefulSession
+from gateway.versions import VersionInfo
 
 __all__ = [
     "CompileError", "CompileFailed", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",
-    "InvalidRuleSet", "RuleRuntimeError", "RuleSetNotFound", "RuleSetVersion", "RunawayRules",
+    "InvalidRuleSet", "LiveRuleSet", "RuleRuntimeError", "RuleSetNotFound", "RuleSetVersion", "RunawayRules",
     "StatefulSession", "VersionConflict", "VersionInfo", "VersionNotFound",
 ]

@@ -1,10 +1,17 @@
 """The engine facade: deploy, version, roll back and fire rule sets.
 
-Why a facade: REST, ROS, the stream processor and the workbench all need the same few verbs and
-the same guarantees — a deploy compiles first and swaps in atomically (requests in flight finish on
-the version they started with), a failed build changes nothing, every version is kept. The live
-map holds ``name -> (VersionInfo, CompiledRuleSet)`` tuples; replacing one entry is atomic in
-Python, so firing needs no lock.
+Why a facade: REST, KIE, ROS, the stream processor, workflows and the workbench all need the same
+few verbs and the same guarantees — a deploy compiles first and swaps in atomically (requests in
+flight finish on the version they started with), a failed build changes nothing, every version is
+kept. The live map holds ``name -> LiveRuleSet`` entries; replacing one entry is atomic in Python,
+so firing needs no lock.
+
+Versions live in a catalog (:mod:`gateway.versions`): the Information State when the gateway has
+one, shared by every gateway process. A deploy made here is live here at once; a deploy made by
+another process reaches this one through :meth:`sync` (called by the change follower), which
+compiles the new version off the serving path and then swaps it in. Each live entry remembers the
+sequence number of the catalog change that produced it, so a slower swap can never replace a
+newer version.
 """
 
 from __future__ import annotations
@@ -13,8 +20,11 @@ import json
 import logging
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
+
+from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
@@ -27,26 +37,54 @@ from gateway.engine.errors import (
     InvalidRuleSet,
     RuleSetNotFound,
     VersionConflict,
+    VersionNotFound,
 )
-from gateway.engine.registry import RuleSetVersion, VersionInfo, VersionStore
 from gateway.engine.results import FireResult, decode_result, encode_facts
-from gateway.engine.ruleset import check_name, content_hash, read_folder
+from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
+from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
 Listener = Callable[[str, dict[str, Any]], None]
 DRAFT = "(draft)"
+KIND = "ruleset"
+
+
+@dataclass(frozen=True)
+class RuleSetVersion:
+    """A rule set version with its files."""
+
+    info: VersionInfo
+    files: dict[str, str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self.info.to_dict(), "files": dict(self.files)}
+
+
+@dataclass(frozen=True)
+class LiveRuleSet:
+    """What a rule set serves: the version, its compiled form, and the catalog change behind it."""
+
+    info: VersionInfo
+    compiled: CompiledRuleSet
+    seq: int
+
+
+def new_decision_id() -> str:
+    """A decision's id: an ObjectId's text (time-ordered, unique across processes), so the
+    Information State can use it as the document ``_id`` and page through decisions by it."""
+    return str(ObjectId())
 
 
 class Engine:
     """Rule sets by name, each with a live version; thread-safe."""
 
-    def __init__(self, settings: Settings | None = None):
+    def __init__(self, settings: Settings | None = None, catalog: Catalog | None = None):
         self.settings = settings or load_settings()
         jvm.configure(self.settings.jvm)
-        self.store = VersionStore(Path(self.settings.data_dir) / "registry")
-        self._live: dict[str, tuple[VersionInfo, CompiledRuleSet]] = {}
+        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
+        self._live: dict[str, LiveRuleSet] = {}
         self._lock = threading.RLock()
         self._listeners: list[Listener] = []
         self._sessions: dict[str, StatefulSession] = {}
@@ -87,53 +125,83 @@ class Engine:
 
     def _live_entry(self, name: str) -> tuple[VersionInfo, CompiledRuleSet]:
         entry = self._live.get(name)
-        if entry is not None:
-            return entry
+        if entry is None:
+            entry = self._load_live(name)
+        return entry.info, entry.compiled
+
+    def _load_live(self, name: str) -> LiveRuleSet:
+        """The serving entry of ``name``, compiled now if it was never loaded in this process."""
         with self._lock:
             entry = self._live.get(name)
             if entry is not None:
                 return entry
-            state = self.store.state(name)
-            if state.current is None or state.deleted:
+            head = self.catalog.head(KIND, name)
+            if head is None or not head.live:
                 raise RuleSetNotFound(name)
-            stored = self.store.load(name, state.current)
-            entry = (stored.info, self._compile(stored.files, name))
+            stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
+            entry = LiveRuleSet(stored.info, self._compile(stored.payload, name), head.seq)
             self._live[name] = entry
             return entry
 
-    def _names(self) -> list[str]:
-        return [n for n in self.store.names() if not self.store.state(n).deleted and self.store.state(n).current]
+    def _swap(self, name: str, entry: LiveRuleSet | None, seq: int) -> bool:
+        """Make ``entry`` live (None: stop serving) unless a newer change is live already."""
+        with self._lock:
+            old = self._live.get(name)
+            if old is not None and old.seq > seq:
+                return False
+            if entry is None:
+                self._live.pop(name, None)
+                for session in [s for s in self._sessions.values() if s.ruleset == name]:
+                    self.close_session(session.id)
+            else:
+                self._live[name] = entry
+            return True
+
+    def live_versions(self) -> list[VersionInfo]:
+        """What this process serves now, by name (no catalog read: health checks, metrics)."""
+        return [entry.info for _, entry in sorted(self._live.items())]
 
     def list_rulesets(self) -> list[VersionInfo]:
+        """The current version of every live rule set."""
         out = []
-        for name in self._names():
-            state = self.store.state(name)
-            out.append(self.store.info(name, state.current))  # type: ignore[arg-type]
+        for head in self.catalog.heads(KIND):
+            if head.live:
+                entry = self._live.get(head.name)
+                if entry is not None and entry.info.version == head.current:
+                    out.append(entry.info)
+                else:
+                    out.append(self.catalog.load(KIND, head.name, head.current).info)  # type: ignore[arg-type]
         return out
 
     def current(self, name: str) -> RuleSetVersion:
         check_name(name)
-        state = self.store.state(name)
-        if state.current is None or state.deleted:
+        head = self.catalog.head(KIND, name)
+        if head is None or not head.live:
             raise RuleSetNotFound(name)
-        return self.store.load(name, state.current)
+        return self.version(name, head.current)  # type: ignore[arg-type]
 
     def versions(self, name: str) -> list[VersionInfo]:
         check_name(name)
-        infos = self.store.list_versions(name)
+        infos = self.catalog.versions(KIND, name)
         if not infos:
             raise RuleSetNotFound(name)
         return infos
 
     def version(self, name: str, version: int) -> RuleSetVersion:
         check_name(name)
-        if not self.store.version_numbers(name):
-            raise RuleSetNotFound(name)
-        return self.store.load(name, int(version))
+        try:
+            stored = self.catalog.load(KIND, name, int(version))
+        except VersionMissing:
+            if not self.catalog.versions(KIND, name):
+                raise RuleSetNotFound(name) from None
+            raise VersionNotFound(name, int(version)) from None
+        return RuleSetVersion(stored.info, dict(stored.payload))
 
     def history(self, name: str) -> list[dict[str, Any]]:
+        """Deploys, rollbacks and deletes of ``name``, oldest first."""
         check_name(name)
-        return self.store.history(name)
+        return [{"at": c.at, "ts": c.ts, "event": c.event, "version": c.version, "author": c.author,
+                 "comment": c.comment, "seq": c.seq, "origin": c.origin} for c in self.catalog.history(KIND, name)]
 
     def deploy(
         self,
@@ -145,21 +213,20 @@ class Engine:
     ) -> VersionInfo:
         """Compiles ``files`` and, only if that succeeds, makes them the live version of ``name``.
 
-        ``base_version`` is the version the author's edit started from: if someone deployed in
-        between, :class:`VersionConflict` is raised and nothing changes.
+        ``base_version`` is the version the author's edit started from: if anyone (in any gateway
+        process) deployed in between, :class:`VersionConflict` is raised and nothing changes.
+        Compiling happens before anything is stored: requests keep hitting the old version until
+        the new one is ready.
         """
         check_name(name)
         started = time.perf_counter()
         compiled = self._compile(files, name)
-        with self._lock:
-            state = self.store.state(name)
-            current = None if state.deleted else state.current
-            if base_version is not None and int(base_version) != (current or 0):
-                raise VersionConflict(name, int(base_version), current or 0)
-            info = self.store.save_version(name, files, author, comment, compiled.hash)
-            self.store.set_state(name, info.version)
-            self._live[name] = (info, compiled)
-            self.store.append_history(name, {"event": "deploy", "version": info.version, "author": author, "comment": comment})
+        try:
+            info, seq = self.catalog.save(KIND, name, dict(files), author=author, comment=comment,
+                                          hash=compiled.hash, base_version=base_version)
+        except CatalogConflict as conflict:
+            raise VersionConflict(name, conflict.base, conflict.current) from None
+        self._swap(name, LiveRuleSet(info, compiled, seq), seq)
         elapsed = (time.perf_counter() - started) * 1000
         log.info("deployed %s version %d (%d rules) in %.0f ms", name, info.version, compiled.rule_count, elapsed)
         self._notify("deploy", {**info.to_dict(), "rules": compiled.rule_count, "duration_ms": elapsed})
@@ -167,29 +234,63 @@ class Engine:
 
     def rollback(self, name: str, version: int, author: str = "anonymous", comment: str = "") -> VersionInfo:
         """Makes an earlier (or any stored) version live again; history keeps the rollback."""
-        check_name(name)
         stored = self.version(name, int(version))
         compiled = self._compile(stored.files, name)
-        with self._lock:
-            self.store.set_state(name, stored.info.version)
-            self._live[name] = (stored.info, compiled)
-            self.store.append_history(name, {"event": "rollback", "version": stored.info.version, "author": author, "comment": comment})
-        self._notify("rollback", {**stored.info.to_dict(), "by": author})
-        return stored.info
+        info, seq = self.catalog.set_current(KIND, name, stored.info.version, author=author, comment=comment)
+        self._swap(name, LiveRuleSet(info, compiled, seq), seq)
+        self._notify("rollback", {**info.to_dict(), "by": author})
+        return info
 
     def delete(self, name: str, author: str = "anonymous") -> None:
         """Stops serving ``name``. Its versions stay stored; a new deploy continues the numbering."""
         check_name(name)
-        with self._lock:
-            state = self.store.state(name)
-            if state.current is None or state.deleted:
-                raise RuleSetNotFound(name)
-            self.store.set_state(name, None, deleted=True)
-            self._live.pop(name, None)
-            self.store.append_history(name, {"event": "delete", "author": author})
-            for session in [s for s in self._sessions.values() if s.ruleset == name]:
-                self.close_session(session.id)
+        try:
+            seq = self.catalog.delete(KIND, name, author=author)
+        except VersionMissing:
+            raise RuleSetNotFound(name) from None
+        self._swap(name, None, seq)
         self._notify("delete", {"name": name, "by": author})
+
+    # ------------------------------------------------------------------ following other processes
+
+    def sync(self, name: str) -> None:
+        """Converge ``name`` to the catalog's head: compile a new current version (off the serving
+        path: the old one keeps serving meanwhile), then swap; drop a deleted rule set."""
+        head = self.catalog.head(KIND, name)
+        live = self._live.get(name)
+        if head is None or not head.live:
+            if live is not None and self._swap(name, None, head.seq if head else live.seq + 1):
+                log.info("rule set %s: deleted elsewhere; no longer served", name)
+                self._notify("delete", {"name": name, "by": "(another process)"})
+            return
+        if live is not None and live.info.version == head.current and live.seq >= head.seq:
+            return
+        stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
+        compiled = self._compile(stored.payload, name)
+        if self._swap(name, LiveRuleSet(stored.info, compiled, head.seq), head.seq):
+            log.info("rule set %s: now serving version %d (changed elsewhere)", name, stored.info.version)
+            self._notify("sync", {**stored.info.to_dict()})
+
+    def reconcile(self) -> None:
+        """Converge every rule set (the follower's periodic safety net)."""
+        names = {h.name for h in self.catalog.heads(KIND)} | set(self._live)
+        for name in sorted(names):
+            self.sync(name)
+
+    def load_all(self) -> dict[str, str]:
+        """Compile every current version now (at start: serve at once, not on the first request).
+        A version that no longer compiles is reported and not served."""
+        report: dict[str, str] = {}
+        for head in self.catalog.heads(KIND):
+            if not head.live:
+                continue
+            try:
+                entry = self._load_live(head.name)
+                report[head.name] = f"serving v{entry.info.version}"
+            except EngineError as exc:
+                log.error("rule set %s v%s does not load: %s", head.name, head.current, exc)
+                report[head.name] = f"failed: {exc}"
+        return report
 
     def declared_types(self, name: str) -> dict[str, dict[str, str]]:
         return self._live_entry(name)[1].types
@@ -211,23 +312,36 @@ class Engine:
         return_facts: bool = True,
         record_facts: bool = True,
         context: dict[str, Any] | None = None,
+        *,
+        origin: str = "api",
+        correlation_id: str | None = None,
     ) -> FireResult:
         """Fires the live version of ``name`` on ``facts`` in a fresh session (stateless).
 
-        ``context`` (e.g. ``{"origin": "ros", "customers": [...]}``) is passed on to listeners, so
-        the Information State and the decision log can say where a decision came from.
+        Every fire is a decision: it gets a ``decision_id`` and listeners (the Information State's
+        decision record, metrics) hear of it with its ``origin`` (rest, kie, stream, ros,
+        workflow…), the caller's ``correlation_id`` and any ``context``.
         """
         info, compiled = self._live_entry(name)
         result = self._fire(compiled, name, info.version, facts, fire_limit, return_facts, record_facts)
-        if self._listeners:
-            payload = {"ruleset": name, "version": info.version, "facts": facts, **_summary(result)}
-            if context:
-                payload["context"] = context
-            self._notify("fire", payload)
+        result.decision_id = self.record_decision(result, facts, origin=origin, correlation_id=correlation_id,
+                                                  context=context)
         return result
 
+    def record_decision(self, result: FireResult, facts: list[dict[str, Any]], *, origin: str,
+                        correlation_id: str | None = None, context: dict[str, Any] | None = None) -> str:
+        """Announce a decision made on this engine (by :meth:`fire`, or in a session by a KIE
+        batch or a stream binding) to the listeners; returns its new ``decision_id``."""
+        decision_id = new_decision_id()
+        if self._listeners:
+            self._notify("fire", {"decision_id": decision_id, "ruleset": result.ruleset, "version": result.version,
+                                  "facts": facts, "origin": origin, "correlation_id": correlation_id,
+                                  "context": context or {}, **_summary(result)})
+        return decision_id
+
     def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None) -> FireResult:
-        """Fires undeployed text (the workbench's "try it"): compile errors raise CompileFailed."""
+        """Fires undeployed text (the workbench's "try it"): compile errors raise CompileFailed.
+        Not a decision: nothing is recorded."""
         compiled = self._compile(files, "draft")
         return self._fire(compiled, DRAFT, 0, facts, fire_limit, True, True)
 
@@ -292,11 +406,11 @@ class Engine:
         def work() -> None:
             for info in self.list_rulesets():
                 try:
-                    stored = self.store.load(info.name, info.version)
+                    files = self.version(info.name, info.version).files
                     for _ in range(rounds):
-                        compiler.compile_files(stored.files, f"warmup-{info.name}")
+                        compiler.compile_files(files, f"warmup-{info.name}")
                     _, compiled = self._live_entry(info.name)
-                    samples = _example_fact_sets(stored.files) or [[]]
+                    samples = _example_fact_sets(files) or [[]]
                     for k in range(fires):  # not through fire(): warm-up is no decision to log
                         try:
                             self._fire(compiled, info.name, info.version, samples[k % len(samples)], None, False, True)
@@ -312,13 +426,14 @@ class Engine:
         thread.start()
         return thread
 
-    # ------------------------------------------------------------------ files on disk
+    # ------------------------------------------------------------------ the seed folders
 
-    def load_rules_dir(self, rules_dir: str | None = None) -> dict[str, str]:
-        """Deploys each ``<rules_dir>/<name>/`` folder whose content is not stored yet.
+    def seed_from(self, rules_dir: str | None = None) -> dict[str, str]:
+        """Imports each ``<rules_dir>/<name>/`` folder the catalog has never seen (author "seed").
 
-        A folder that does not compile is reported and skipped: the stored version keeps serving.
-        Returns ``{name: "deployed v3" | "unchanged v2" | "failed: …"}``.
+        The folders are the seed of an empty store, nothing more: a rule set the catalog already
+        has (even deleted) is never overwritten by files. A folder that does not compile is
+        reported and skipped. Returns ``{name: "seeded v1" | "kept v3" | "failed: …"}``.
         """
         root = Path(rules_dir or self.settings.engine.rules_dir)
         report: dict[str, str] = {}
@@ -326,10 +441,10 @@ class Engine:
             log.warning("rules directory %s does not exist", root)
             return report
         for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-            report[folder.name] = self._load_folder(folder)
+            report[folder.name] = self._seed_folder(folder)
         return report
 
-    def _load_folder(self, folder: Path) -> str:
+    def _seed_folder(self, folder: Path) -> str:
         name = folder.name
         try:
             check_name(name)
@@ -339,20 +454,28 @@ class Engine:
             return f"failed: {exc}"
         if not files:
             return "skipped: no rule files"
-        digest = content_hash(files)
-        stored = self.store.list_versions(name)
-        state = self.store.state(name)
-        if stored and stored[-1].hash == digest:
-            if state.deleted:
-                return "deleted (unchanged on disk)"
-            self._live_entry(name)  # compile the serving version now, not on the first request
-            return f"unchanged v{state.current}"
+        head = self.catalog.head(KIND, name)
+        if head is not None:
+            return f"kept v{head.current}" if head.live else "kept (deleted)"
         try:
-            info = self.deploy(name, files, author="filesystem", comment=f"loaded from {folder}")
-        except CompileFailed as failed:
-            for err in failed.errors:
+            info = self.deploy(name, files, author="seed", comment=f"seeded from {folder}", base_version=0)
+        except VersionConflict:  # another process seeded it at the same moment
+            return "kept (seeded by another process)"
+        except (CompileFailed, InvalidRuleSet) as failed:
+            for err in getattr(failed, "errors", []) or [failed]:
                 log.error("%s/%s", folder, err)
             return f"failed: {failed}"
+        return f"seeded v{info.version}"
+
+    def import_folder(self, folder: Path, author: str, comment: str) -> str:
+        """Deploy ``folder`` as rule set ``folder.name`` when its files differ from the current
+        version (``printeps import``). Returns "deployed vN" or "unchanged vN"."""
+        name = check_name(folder.name)
+        files = check_files(read_folder(folder))
+        head = self.catalog.head(KIND, name)
+        if head is not None and head.live and self.current(name).info.hash == content_hash(files):
+            return f"unchanged v{head.current}"
+        info = self.deploy(name, files, author=author, comment=comment)
         return f"deployed v{info.version}"
 
 

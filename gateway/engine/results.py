@@ -31,9 +31,10 @@ class FireResult:
     facts: list[dict[str, Any]] = field(default_factory=list)
     fire_count: int = 0
     duration_ms: float = 0.0
+    decision_id: str | None = None  # set when the fire is a decision (recorded), not for drafts
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "ruleset": self.ruleset,
             "version": self.version,
             "actions": self.actions,
@@ -42,6 +43,9 @@ class FireResult:
             "fire_count": self.fire_count,
             "duration_ms": round(self.duration_ms, 3),
         }
+        if self.decision_id is not None:
+            out["decision_id"] = self.decision_id
+        return out
 
 
 def _uuid_or_enum(value: Any) -> Any:

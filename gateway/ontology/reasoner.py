@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 log = logging.getLogger(__name__)
 
@@ -46,11 +46,23 @@ class ReasonerError(ValueError):
         return {"error": self.message, "where": self.where}
 
 
+@dataclass(frozen=True)
+class KnowledgeText:
+    """The texts the reasoner works on: the ontology (Turtle or RDF/XML) and the SWRL rules
+    (one per line), with the file names errors should name, and a version that changes with them."""
+
+    version: int
+    ontology: str
+    swrl: str
+    ontology_file: str = "teahouse.ttl"
+    swrl_file: str = "teahouse.swrl"
+
+
 @dataclass
 class _OntologyText:
-    """The ontology as N-Triples plus its vocabulary, cached per file modification."""
+    """The ontology as N-Triples plus its vocabulary, cached per knowledge version."""
 
-    stamp: tuple[int, int, int, int]
+    stamp: int
     ntriples: bytes
     base: str
     ontology_iri: str
@@ -58,48 +70,65 @@ class _OntologyText:
     object_properties: set[str]
     data_properties: set[str]
     rules: list[tuple[int, str]] = field(default_factory=list)
+    swrl_file: str = "teahouse.swrl"
 
 
 class Reasoner:
-    """``reason(data)``: the facts Pellet infers from the ontology, SWRL rules and posted data."""
+    """``reason(data)``: the facts Pellet infers from the ontology, SWRL rules and posted data.
 
-    def __init__(self, ontology_file: str | Path, swrl_file: str | Path | None) -> None:
-        self.ontology_file = Path(ontology_file)
-        self.swrl_file = Path(swrl_file) if swrl_file else None
+    ``source()`` gives the current :class:`KnowledgeText` (the gateway's knowledge base, which
+    follows the catalog); the parsed ontology is cached per text version.
+    """
+
+    def __init__(self, source: Callable[[], KnowledgeText]) -> None:
+        self.source = source
         self._cache: _OntologyText | None = None
         self._lock = threading.Lock()
 
-    # -- the ontology --------------------------------------------------------------------------
-    def _stamp(self) -> tuple[int, int, int, int]:
-        try:
-            st = self.ontology_file.stat()
-            sw = self.swrl_file.stat() if self.swrl_file else None
-        except OSError as exc:
-            raise ReasonerError(f"cannot read: {exc.strerror or exc}", str(exc.filename), 500) from None
-        return (st.st_mtime_ns, st.st_size, sw.st_mtime_ns if sw else 0, sw.st_size if sw else 0)
+    @classmethod
+    def from_files(cls, ontology_file: str | Path, swrl_file: str | Path | None) -> "Reasoner":
+        """A reasoner over two files, re-read when they change (tools and tests; a gateway feeds
+        its reasoner from the knowledge base instead)."""
+        paths = [Path(ontology_file), Path(swrl_file) if swrl_file else None]
+        seen: dict[str, Any] = {"stamp": None, "text": None}
 
+        def source() -> KnowledgeText:
+            try:
+                stamp = tuple((p.stat().st_mtime_ns, p.stat().st_size) if p else None for p in paths)
+            except OSError as exc:
+                raise ReasonerError(f"cannot read: {exc.strerror or exc}", str(exc.filename), 500) from None
+            if stamp != seen["stamp"]:
+                version = (seen["text"].version + 1) if seen["text"] else 1
+                seen["text"] = KnowledgeText(version, _read_text(paths[0]), _read_text(paths[1]) if paths[1] else "",
+                                             paths[0].name, paths[1].name if paths[1] else "teahouse.swrl")
+                seen["stamp"] = stamp
+            return seen["text"]
+
+        return cls(source)
+
+    # -- the ontology --------------------------------------------------------------------------
     def _ontology(self) -> _OntologyText:
-        stamp = self._stamp()
-        if self._cache is not None and self._cache.stamp == stamp:
+        text = self.source()
+        if self._cache is not None and self._cache.stamp == text.version:
             return self._cache
         import rdflib
         from rdflib.namespace import OWL, RDF
 
         graph = rdflib.Graph()
-        fmt = "turtle" if self.ontology_file.suffix.lower() in (".ttl", ".n3") else "xml"
+        fmt = "turtle" if text.ontology_file.lower().endswith((".ttl", ".n3")) else "xml"
         try:
-            graph.parse(str(self.ontology_file), format=fmt)
+            graph.parse(data=text.ontology, format=fmt)
         except Exception as exc:
-            raise ReasonerError(f"the ontology does not parse: {exc}", str(self.ontology_file), 500) from None
+            raise ReasonerError(f"the ontology does not parse: {exc}", text.ontology_file, 422) from None
         onto_iris = [str(s) for s in graph.subjects(RDF.type, OWL.Ontology)]
         ontology_iri = onto_iris[0] if onto_iris else "http://printeps.org/cafe/entrance"
         classes = {str(s) for s in graph.subjects(RDF.type, OWL.Class)}
         objs = {str(s) for s in graph.subjects(RDF.type, OWL.ObjectProperty)}
         datas = {str(s) for s in graph.subjects(RDF.type, OWL.DatatypeProperty)}
         base = ontology_iri if ontology_iri.endswith(("/", "#")) else ontology_iri + "/"
-        rules = _read_rules(self.swrl_file) if self.swrl_file else []
-        self._cache = _OntologyText(stamp, graph.serialize(format="nt", encoding="utf-8"), base, ontology_iri,
-                                    classes, objs, datas, rules)
+        rules = _rules(text.swrl)
+        self._cache = _OntologyText(text.version, graph.serialize(format="nt", encoding="utf-8"), base, ontology_iri,
+                                    classes, objs, datas, rules, text.swrl_file)
         return self._cache
 
     def warm_up(self) -> None:
@@ -158,7 +187,7 @@ class Reasoner:
                 try:
                     owlready2.Imp(namespace=main).set_as_rule(text, namespaces=[namespace])
                 except Exception as exc:
-                    raise ReasonerError(f"invalid SWRL rule: {exc}", f"{self.swrl_file}:{line_no}", 500) from None
+                    raise ReasonerError(f"invalid SWRL rule: {exc}", f"{onto.swrl_file}:{line_no}", 422) from None
         buf = io.BytesIO()
         world.save(buf, format="rdfxml")
         world.close()
@@ -191,13 +220,16 @@ class Reasoner:
                     for node in reasoner.getObjectPropertyValues(ind, prop).getFlattened():
                         o = str(node.getIRI().toString())
                         if (s, p, o) not in asserted:
-                            inferred.append({"subject": s, "predicate": p, "object": o})
+                            inferred.append({"subject": s, "predicate": p, "object": o, "object_type": "iri"})
                 for prop in data_props:
                     p = str(prop.getIRI().toString())
                     for lit in reasoner.getDataPropertyValues(ind, prop):
-                        value = _literal_value(str(lit.getLiteral()), str(lit.getDatatype().getIRI().toString()))
+                        datatype = str(lit.getDatatype().getIRI().toString())
+                        lexical = str(lit.getLiteral())
+                        value = _literal_value(lexical, datatype)
                         if (s, p, _norm(value)) not in asserted:
-                            inferred.append({"subject": s, "predicate": p, "object": value})
+                            inferred.append({"subject": s, "predicate": p, "object": value, "object_type": "literal",
+                                             "lexical": lexical, "datatype": datatype})
         except ReasonerError:
             raise
         except Exception as exc:
@@ -211,12 +243,17 @@ class Reasoner:
 _RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 
 
-def _read_rules(path: Path) -> list[tuple[int, str]]:
+def _read_text(path: Path) -> str:
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        return path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ReasonerError(f"cannot read the SWRL rules: {exc.strerror or exc}", str(path), 500) from None
-    return [(i, line.strip()) for i, line in enumerate(lines, 1) if line.strip() and not line.lstrip().startswith("#")]
+        raise ReasonerError(f"cannot read: {exc.strerror or exc}", str(path), 500) from None
+
+
+def _rules(text: str) -> list[tuple[int, str]]:
+    """(line number, rule) per SWRL rule line; blank lines and ``#`` comments skipped."""
+    return [(i, line.strip()) for i, line in enumerate(text.splitlines(), 1)
+            if line.strip() and not line.lstrip().startswith("#")]
 
 
 def _iter_triples(world: Any) -> Any:

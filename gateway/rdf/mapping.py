@@ -15,13 +15,20 @@ not code. A :class:`NodeMap` says how one message (or nested message) becomes on
 
 Messages without a mapping get the generic default: one node per (nested) message, every field
 ``printeps:<field>``, ``id`` fields naming the node.
+
+Mappings are data: :func:`node_map_from_spec` reads the YAML/JSON form kept in the catalog and in
+``ontology/mappings/*.yaml`` (``subject``, ``type``, ``fields``, ``timed``, ``timed_link``,
+``children: {field: {link, ...a nested spec}}``), :func:`spec_of` writes it back, and
+:func:`check_against` compares a mapping with a message type's fields (rosidl names and types,
+nested messages and arrays) so a mapping that names a field the type lacks is refused by name.
+:func:`introspected_spec` derives a mapping from a message type alone.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from pyoxigraph import BlankNode, NamedNode
 
@@ -63,15 +70,18 @@ ENTRANCE = NodeMap(
     subject="printeps:entrance_{id}",
     rdf_type="printeps:EntranceObservation",
     fields={"number_of_customers": "printeps:numberOfCustomers"},
-    children={"has_customers": ("printeps:hasCustomer", CUSTOMER)},
+    children={"customers": ("printeps:hasCustomer", CUSTOMER)},
 )
 
-# Entrance sensing (Entrance.msg: id, number_of_customers, has_customers: Customer[]).
+# Entrance sensing (Entrance.msg: id, number_of_customers, customers: Customer[], stamp); the same
+# mapping ships as data in ontology/mappings/entrance.yaml, which is what a gateway serves.
 BUILTIN_MAPPINGS: dict[str, NodeMap] = {"entrance": ENTRANCE, "customer": CUSTOMER}
+SPEC_KEYS = {"subject", "type", "fields", "timed", "timed_link", "children", "message_type", "description",
+             "link", "mapping"}
 
 
 class MappingError(ValueError):
-    """A message that cannot be mapped; ``where`` is the field path (``message.has_customers[2].id``)."""
+    """A message that cannot be mapped; ``where`` is the field path (``message.customers[2].id``)."""
 
     def __init__(self, where: str, message: str) -> None:
         super().__init__(f"{where}: {message}")
@@ -100,7 +110,7 @@ def _plain(value: Any, where: str, depth: int) -> Any:
 
 
 class Mapper:
-    """Maps messages to triples with named mappings (built-ins plus any added)."""
+    """Maps messages to triples with named mappings (built-ins plus any added or replaced)."""
 
     def __init__(self, mappings: Mapping[str, NodeMap] | None = None,
                  prefixes: Mapping[str, str] | None = None) -> None:
@@ -232,3 +242,168 @@ class Mapper:
 def _iri_safe(text: str) -> str:
     """Characters allowed in an IRI path segment; others percent-encoded."""
     return re.sub(r"[^A-Za-z0-9._~-]", lambda m: "".join(f"%{b:02X}" for b in m.group().encode()), text)
+
+
+# --------------------------------------------------------------------------- mappings as data
+
+
+def node_map_from_spec(spec: Any, where: str = "mapping", resolve: Mapping[str, NodeMap] | None = None,
+                       prefixes: Mapping[str, str] | None = None) -> NodeMap:
+    """A NodeMap from its data form; MappingError names the bad key (``mapping.children.customers.link``).
+
+    ``children.<field>.mapping: <name>`` reuses another mapping (looked up in ``resolve``).
+    """
+    if not isinstance(spec, Mapping):
+        raise MappingError(where, "a mapping must be an object")
+    unknown = sorted(set(spec) - SPEC_KEYS)
+    if unknown:
+        raise MappingError(f"{where}.{unknown[0]}", f"unknown key; use {', '.join(sorted(SPEC_KEYS - {'link'}))}")
+    if "mapping" in spec:
+        name = spec["mapping"]
+        if not isinstance(name, str) or resolve is None or name not in resolve:
+            raise MappingError(f"{where}.mapping", f"no mapping named {name!r}")
+        return resolve[name]
+    check = Mapper(prefixes=prefixes)
+    subject = spec.get("subject")
+    if subject is not None and not isinstance(subject, str):
+        raise MappingError(f"{where}.subject", "must be an IRI template such as 'printeps:{id}', or null")
+    rdf_type = spec.get("type")
+    if rdf_type is not None:
+        check._iri(_text(rdf_type, f"{where}.type"), f"{where}.type")
+    fields = _predicates(spec.get("fields"), f"{where}.fields", check)
+    timed = _predicates(spec.get("timed"), f"{where}.timed", check)
+    timed_link = _text(spec.get("timed_link", "printeps:positionAtTime"), f"{where}.timed_link")
+    check._iri(timed_link, f"{where}.timed_link")
+    children_spec = spec.get("children") or {}
+    if not isinstance(children_spec, Mapping):
+        raise MappingError(f"{where}.children", "must map message fields to {link, ...nested mapping}")
+    children: dict[str, tuple[str, NodeMap]] = {}
+    for name, child in children_spec.items():
+        here = f"{where}.children.{name}"
+        if not isinstance(child, Mapping) or not isinstance(child.get("link"), str):
+            raise MappingError(here, "needs 'link': the predicate from this node to the nested one")
+        check._iri(child["link"], f"{here}.link")
+        nested = {k: v for k, v in child.items() if k != "link"}
+        children[str(name)] = (child["link"], node_map_from_spec(nested, here, resolve, prefixes))
+    return NodeMap(subject=subject, rdf_type=rdf_type, fields=fields, timed_link=timed_link, timed=timed,
+                   children=children)
+
+
+def spec_of(node: NodeMap) -> dict[str, Any]:
+    """The data form of a NodeMap (what :func:`node_map_from_spec` reads)."""
+    out: dict[str, Any] = {"subject": node.subject}
+    if node.rdf_type:
+        out["type"] = node.rdf_type
+    if node.fields:
+        out["fields"] = dict(node.fields)
+    if node.timed:
+        out["timed"] = dict(node.timed)
+        out["timed_link"] = node.timed_link
+    if node.children:
+        out["children"] = {name: {"link": link, **spec_of(child)} for name, (link, child) in node.children.items()}
+    return out
+
+
+def _text(value: Any, where: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise MappingError(where, "must be a non-empty text (an IRI or prefixed name)")
+    return value
+
+
+def _predicates(value: Any, where: str, check: "Mapper") -> dict[str, str]:
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise MappingError(where, "must map message fields to predicates")
+    out = {}
+    for name, pred in value.items():
+        check._iri(_text(pred, f"{where}.{name}"), f"{where}.{name}")
+        out[str(name)] = pred
+    return out
+
+
+# Message types as rosidl describes them: ``{"id": "string", "customers": "sequence<pkg/Customer>",
+# "stamp": "builtin_interfaces/Time"}``; ``describe`` (injected) gives the fields of a nested type.
+FieldTypes = Mapping[str, str]
+Describe = Callable[[str], FieldTypes]
+_SEQUENCE = re.compile(r"^(?:sequence<([^,>]+)(?:,\s*\d+)?>|([^\[]+)\[\d*\])$")
+_PRIMITIVES = {"boolean", "byte", "char", "float", "double", "float32", "float64", "int8", "uint8", "int16",
+               "uint16", "int32", "uint32", "int64", "uint64", "string", "wstring", "octet"}
+TIME_TYPES = {"builtin_interfaces/Time", "builtin_interfaces/Duration"}
+
+
+def element_type(field_type: str) -> tuple[str, bool]:
+    """(element type, is a sequence) of a rosidl field type (``sequence<pkg/X>``, ``int32[3]``…)."""
+    match = _SEQUENCE.match(field_type.strip())
+    if match:
+        return (match.group(1) or match.group(2)).strip(), True
+    base = field_type.strip()
+    if base.startswith(("string<", "wstring<")):
+        base = base.split("<", 1)[0]
+    return base, False
+
+
+def is_message_type(field_type: str) -> bool:
+    base, _ = element_type(field_type)
+    return "/" in base and base not in TIME_TYPES
+
+
+def check_against(node: NodeMap, type_name: str, describe: Describe, where: str = "mapping") -> None:
+    """MappingError naming the field and the type when ``node`` uses a field the type lacks, maps
+    a nested message as a scalar, or a scalar as nested."""
+    fields = describe(type_name)
+    for group in ("fields", "timed"):
+        for name in getattr(node, group):
+            if name not in fields:
+                raise MappingError(f"{where}.{group}.{name}",
+                                   f"message type {type_name} has no field {name!r} (fields: {', '.join(fields)})")
+            if is_message_type(fields[name]):
+                raise MappingError(f"{where}.{group}.{name}", f"{type_name}.{name} is a nested message "
+                                   f"({fields[name]}): map it under 'children'")
+    for var in re.findall(r"{(\w+)}", node.subject or ""):
+        if var not in fields:
+            raise MappingError(f"{where}.subject", f"message type {type_name} has no field {var!r} "
+                               f"(fields: {', '.join(fields)})")
+    for name, (_link, child) in node.children.items():
+        if name not in fields:
+            raise MappingError(f"{where}.children.{name}",
+                               f"message type {type_name} has no field {name!r} (fields: {', '.join(fields)})")
+        if not is_message_type(fields[name]):
+            raise MappingError(f"{where}.children.{name}", f"{type_name}.{name} is not a nested message "
+                               f"({fields[name]}): map it under 'fields'")
+        check_against(child, _qualified(element_type(fields[name])[0], type_name), describe,
+                      f"{where}.children.{name}")
+
+
+def introspected_spec(type_name: str, describe: Describe, depth: int = 0) -> dict[str, Any]:
+    """A mapping derived from the type alone: ``printeps:<Type>`` nodes named by an ``id`` field,
+    scalar fields as ``printeps:<field>``, nested messages and arrays of them as child nodes."""
+    if depth > MAX_DEPTH:
+        raise MappingError(type_name, f"nested deeper than {MAX_DEPTH} levels")
+    fields = describe(type_name)
+    local = type_name.rsplit("/", 1)[-1]
+    spec: dict[str, Any] = {"subject": "printeps:{id}" if fields.get("id", "").startswith("string") else None,
+                            "type": f"printeps:{local}", "fields": {}}
+    children: dict[str, Any] = {}
+    for name, field_type in fields.items():
+        base, _seq = element_type(field_type)
+        if base in TIME_TYPES:
+            continue  # stamps become the event time, not a triple
+        if is_message_type(field_type):
+            children[name] = {"link": f"printeps:{name}",
+                              **introspected_spec(_qualified(base, type_name), describe, depth + 1)}
+        else:
+            spec["fields"][name] = f"printeps:{name}"
+    if children:
+        spec["children"] = children
+    return spec
+
+
+def _qualified(base: str, parent: str) -> str:
+    """``Customer`` inside ``pkg/msg/Entrance`` → ``pkg/msg/Customer``; ``pkg/Customer`` → ``pkg/msg/Customer``."""
+    parts = base.split("/")
+    if len(parts) == 1:
+        return parent.rsplit("/", 1)[0] + "/" + base
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return base

@@ -1,17 +1,18 @@
-"""The gateway ROS node: entrance topics in, robot service calls out, ``fire_business_rules`` served.
+"""The gateway ROS node: configured topics in, robot service calls out, ``fire_business_rules`` served.
 
-Thin adapter around gateway.ros.pipeline.Pipeline: subscription callbacks only convert a message to
-a dict and queue it (bounded); one worker thread runs the pipeline in order, so rule firing and
-robot calls never block the executor, and service responses keep arriving while it waits.
-Parameters come from the config file (settings.ros) and can be overridden as ROS parameters:
-ruleset, call_timeout_s, call_retries, robots (["pepper=/pepper", ...]).
+Thin adapter: subscription callbacks turn a message into a dict and queue it for the ingress
+(:mod:`gateway.ros.ingress`); the rule firing behind ``fire_business_rules`` is the gateway's one
+engine; robot services are called through :class:`RosServiceCaller`, which the action dispatcher
+and the workflows' ROS modules share. Message and service types are imported by name from the
+configuration, so no code is written per type. Parameters come from the config file
+(settings.ros) and can be overridden as ROS parameters: ruleset, call_timeout_s, call_retries,
+robots (["pepper=/pepper", ...]).
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import queue
 import threading
 import time
 from typing import Any, Callable
@@ -21,107 +22,97 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rcl_interfaces.msg import SetParametersResult
 
-from gateway.ros.convert import entrance_sensor_to_dict, entrance_to_dict
-from gateway.store.store import SENSOR_MESSAGES
-
-from printeps_interfaces.msg import Entrance, EntranceSensor
-from printeps_interfaces.srv import FireBusinessRules, Gesture, MoveTo, Speak
+from gateway.ros.convert import ConversionError, fill, import_type, to_dict
 
 log = logging.getLogger(__name__)
 
-SRV_TYPES = {"Speak": Speak, "MoveTo": MoveTo, "Gesture": Gesture}
-
-
-def _request(kind: str, params: dict[str, Any]) -> Any:
-    robot = str(params.get("robot", ""))
-    if kind == "Speak":
-        return Speak.Request(robot=robot, text=str(params.get("text", "")))
-    if kind == "MoveTo":
-        return MoveTo.Request(robot=robot, location=str(params.get("location", "")),
-                              x=float(params.get("x", 0.0)), y=float(params.get("y", 0.0)))
-    return Gesture.Request(robot=robot, name=str(params.get("name", "")))
+Fire = Callable[[str, list[dict[str, Any]], str | None], Any]
 
 
 class RosServiceCaller:
-    """The dispatcher's ServiceCaller over rclpy clients (created once per service, then reused)."""
+    """Calls any ROS service by name and type (clients created once per service, then reused)."""
 
     def __init__(self, node: Node) -> None:
         self.node = node
-        self._clients: dict[str, Any] = {}
+        self._clients: dict[tuple[str, str], Any] = {}
         self._lock = threading.Lock()
         self._group = ReentrantCallbackGroup()
 
-    def client(self, service: str, kind: str) -> Any:
+    def client(self, service: str, type_name: str) -> Any:
         with self._lock:
-            if service not in self._clients:
-                self._clients[service] = self.node.create_client(SRV_TYPES[kind], service,
-                                                                 callback_group=self._group)
-            return self._clients[service]
+            key = (service, type_name)
+            if key not in self._clients:
+                self._clients[key] = self.node.create_client(import_type(type_name), service, callback_group=self._group)
+            return self._clients[key]
 
-    def __call__(self, service: str, kind: str, params: dict[str, Any], timeout_s: float) -> tuple[str, str]:
-        client = self.client(service, kind)
+    def call(self, service: str, type_name: str, params: dict[str, Any], timeout_s: float, *,
+             strict: bool = True) -> tuple[str, str, dict[str, Any]]:
+        """(status, message, response) with status ok / failed / timeout / no_service."""
+        client = self.client(service, type_name)
         deadline = time.monotonic() + timeout_s
         if not client.service_is_ready() and not client.wait_for_service(timeout_sec=timeout_s):
-            return "no_service", f"{service} is not available (waited {timeout_s:g} s)"
+            return "no_service", f"{service} is not available (waited {timeout_s:g} s)", {}
+        try:
+            request = fill(import_type(type_name).Request(), params, f"{service} request", strict=strict)
+        except ConversionError as exc:
+            return "failed", str(exc), {}
         done = threading.Event()
-        future = client.call_async(_request(kind, params))
+        future = client.call_async(request)
         future.add_done_callback(lambda _f: done.set())
         if not done.wait(max(0.0, deadline - time.monotonic())):
             client.remove_pending_request(future)
             future.cancel()
-            return "timeout", f"{service} did not answer within {timeout_s:g} s"
+            return "timeout", f"{service} did not answer within {timeout_s:g} s", {}
         if future.exception() is not None:
-            return "failed", f"{service}: {future.exception()}"
-        res = future.result()
-        return ("ok" if res.success else "failed"), res.message
+            return "failed", f"{service}: {future.exception()}", {}
+        response = to_dict(future.result())
+        ok = response.get("success", True) is not False
+        return ("ok" if ok else "failed"), str(response.get("message", "")), response
+
+    def __call__(self, service: str, type_name: str, params: dict[str, Any], timeout_s: float) -> tuple[str, str]:
+        """The dispatcher's ServiceCaller: rule actions may carry parameters the request lacks."""
+        status, message, _ = self.call(service, type_name, params, timeout_s, strict=False)
+        return status, message
 
 
 class GatewayNode(Node):
-    """Subscribes the entrance topics, feeds the pipeline from one worker, serves fire_business_rules."""
+    """Subscribes the configured topics, serves fire_business_rules, calls robot services."""
 
-    def __init__(self, ros_settings: Any, pipeline_factory: Callable[["GatewayNode"], Any],
-                 rules: Callable[[str, list[dict[str, Any]]], dict[str, Any]] | None = None,
-                 store: Any = None, context: Any = None) -> None:
+    def __init__(self, ros_settings: Any, *, enqueue: Callable[[int, dict[str, Any]], None], fire: Fire,
+                 dispatcher: Any = None, context: Any = None) -> None:
         super().__init__(ros_settings.node_name, context=context)
         self.cfg = ros_settings
-        self.store = store
-        self.rules = rules
+        self.fire = fire
+        self.dispatcher = dispatcher
+        self.caller = RosServiceCaller(self)
         self.declare_parameter("ruleset", ros_settings.ruleset)
         self.declare_parameter("call_timeout_s", float(ros_settings.call_timeout_s))
         self.declare_parameter("call_retries", int(ros_settings.call_retries))
         self.declare_parameter("robots", [f"{k}={v}" for k, v in ros_settings.robots.items()] or [""])
-        self.caller = RosServiceCaller(self)
-        self.pipeline = pipeline_factory(self)
+        self.ruleset = ros_settings.ruleset
         self._apply(self.get_parameters(["ruleset", "call_timeout_s", "call_retries", "robots"]))
         self.add_on_set_parameters_callback(self._on_params)
-        self.queue: queue.Queue[tuple[dict[str, Any], str]] = queue.Queue(maxsize=ros_settings.queue_size)
-        self._stop = threading.Event()
         group = ReentrantCallbackGroup()
-        for topic in ros_settings.entrance_topics:
-            self.create_subscription(Entrance, topic, lambda m, t=topic: self._enqueue(entrance_to_dict(m), t),
-                                     100, callback_group=group)
-        for topic in ros_settings.entrance_sensor_topics:
-            self.create_subscription(EntranceSensor, topic,
-                                     lambda m, t=topic: self._enqueue(entrance_sensor_to_dict(m), t), 100,
-                                     callback_group=group)
-        self.create_service(FireBusinessRules, "fire_business_rules", self._on_fire, callback_group=group)
-        self._worker = threading.Thread(target=self._work, name="gateway-pipeline", daemon=True)
-        self._worker.start()
-        self.get_logger().info(f"gateway node up: topics {ros_settings.entrance_topics} + "
-                               f"{ros_settings.entrance_sensor_topics}, robots {self.pipeline.dispatcher.robots}")
+        for index, sub in enumerate(ros_settings.subscriptions):
+            self.create_subscription(import_type(sub.type), sub.topic,
+                                     lambda m, i=index: enqueue(i, to_dict(m)), 100, callback_group=group)
+        from printeps_interfaces.srv import FireBusinessRules
 
-    # ---- parameters ---------------------------------------------------------------------------
+        self.create_service(FireBusinessRules, "fire_business_rules", self._on_fire, callback_group=group)
+
+    # ---- parameters --------------------------------------------------------------------------
     def _apply(self, params: list[Parameter]) -> None:
-        disp = self.pipeline.dispatcher
         for p in params:
             if p.name == "ruleset":
-                self.pipeline.ruleset = p.value
+                self.ruleset = str(p.value)
+            elif self.dispatcher is None:
+                continue
             elif p.name == "call_timeout_s":
-                disp.timeout_s = float(p.value)
+                self.dispatcher.timeout_s = float(p.value)
             elif p.name == "call_retries":
-                disp.retries = int(p.value)
+                self.dispatcher.retries = int(p.value)
             elif p.name == "robots":
-                disp.robots = dict(item.split("=", 1) for item in p.value if "=" in item)
+                self.dispatcher.robots = dict(item.split("=", 1) for item in p.value if "=" in item)
 
     def _on_params(self, params: list[Parameter]) -> SetParametersResult:
         for p in params:
@@ -134,37 +125,8 @@ class GatewayNode(Node):
         self._apply(params)
         return SetParametersResult(successful=True)
 
-    # ---- topics → worker ----------------------------------------------------------------------
-    def _enqueue(self, reading: dict[str, Any], topic: str) -> None:
-        try:
-            self.queue.put_nowait((reading, topic))
-        except queue.Full:
-            log.error("gateway queue full (%d): reading %s from %s recorded, not processed",
-                      self.queue.maxsize, reading.get("id"), topic)
-            if self.store is not None:
-                self.store.record(SENSOR_MESSAGES, {"source": topic, "reading": reading,
-                                                    "error": {"field": "", "message": "gateway queue full"}},
-                                  stored_type="printeps/RejectedEntrance", inserted_by="gateway_node")
-
-    def _work(self) -> None:
-        while not self._stop.is_set():
-            try:
-                reading, topic = self.queue.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            try:
-                self.pipeline.on_reading(reading, topic)
-            except Exception:
-                log.exception("pipeline failed on reading %s", reading.get("id"))
-
-    def stop(self) -> None:
-        """Let the worker finish the reading in hand, then stop (called by RosRuntime.shutdown)."""
-        self._stop.set()
-        if self._worker.is_alive() and threading.current_thread() is not self._worker:
-            self._worker.join(timeout=5.0)
-
     # ---- fire_business_rules ------------------------------------------------------------------
-    def _on_fire(self, req: FireBusinessRules.Request, res: FireBusinessRules.Response) -> Any:
+    def _on_fire(self, req: Any, res: Any) -> Any:
         res.success = False
         try:
             facts = json.loads(req.facts_json or "[]")
@@ -175,16 +137,14 @@ class GatewayNode(Node):
         if not isinstance(facts, list) or not all(isinstance(f, dict) for f in facts):
             res.error = json.dumps({"error": "facts_json must be a JSON list of objects"})
             return res
-        if self.rules is None:
-            res.error = json.dumps({"error": "no rules engine on this gateway"})
-            return res
         try:
-            result = self.rules(req.ruleset or self.pipeline.ruleset, facts)
+            result = self.fire(req.ruleset or self.ruleset, facts, req.request_id or None)
         except Exception as exc:
             body = exc.to_dict() if hasattr(exc, "to_dict") else {}
             res.error = json.dumps({**body, "error": str(exc) or type(exc).__name__}, default=str)
             return res
         res.success = True
-        res.actions_json = json.dumps(result.get("actions", []), default=str)
-        res.version = int(result.get("version") or 0)
+        res.actions_json = json.dumps(result.actions, default=str)
+        res.version = int(result.version or 0)
+        res.decision_id = result.decision_id or ""
         return res

@@ -56,6 +56,6 @@ def validate_entrance(reading: dict[str, Any], *, max_customers: int = 100, max_
         if isinstance(age, bool) or not isinstance(age, int) or age < -1 or age > 130:
             raise ReadingError(f"{where}.age", f"{age!r} is out of range [-1 (unknown), 130]")
     stamp = reading.get("stamp")
-    if stamp is not None:
+    if stamp is not None and not isinstance(stamp, dict):  # a builtin_interfaces/Time is checked by the ingress
         _number(stamp, "stamp", low=0.0, high=1e11)
     return reading

@@ -2,11 +2,19 @@
 
 Why a subprocess: SecantusDB is GPL-2.0, so the gateway never imports it; it runs its CLI daemon on a
 free loopback port with its data under the gateway's data dir, exactly as a real mongod would, so the
-store's pymongo code path is the same for the embedded and a real MongoDB.
+store's pymongo code path is the same for the embedded and a real MongoDB. It is started as a
+single-node replica set (no ``--standalone``), which is what gives the gateway change streams.
+
+One process owns a data dir's database: it holds an exclusive lock on ``<dir>/owner.lock`` and
+writes ``<dir>/owner.json`` (its pid, command and the database URI). A second process that tries
+to start the same database gets :class:`EmbeddedDbHeld`, which says who holds it and how to join
+the running gateway instead (``MONGO_URI``); tools such as ``printeps export`` join it directly.
 """
 
 from __future__ import annotations
 
+import fcntl
+import json
 import logging
 import os
 import shutil
@@ -38,6 +46,39 @@ class EmbeddedDbError(RuntimeError):
     """The embedded database could not be started (not installed, crashed, never answered)."""
 
 
+class EmbeddedDbHeld(EmbeddedDbError):
+    """Another live process runs the embedded database of this data dir."""
+
+    def __init__(self, data_dir: Path, owner: dict) -> None:
+        self.owner = owner
+        command = " ".join(owner.get("command") or []) or "?"
+        uri = owner.get("uri") or "?"
+        super().__init__(
+            f"the embedded database in {data_dir} is held by process {owner.get('pid', '?')} ({command}), "
+            f"serving at {uri}. To join that running gateway, start this process with "
+            f"MONGO_URI='{uri}' (and its own data dir: PRINTEPS_DATA_DIR), or stop process "
+            f"{owner.get('pid', '?')} first.")
+
+
+def running_owner(data_dir: Path) -> dict | None:
+    """``owner.json`` of the live process running the embedded database in ``data_dir``, else None."""
+    data_dir = Path(data_dir)
+    lock = data_dir / "owner.lock"
+    if not lock.exists():
+        return None
+    fd = os.open(lock, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        try:
+            return json.loads((data_dir / "owner.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return {"pid": "?", "uri": None}
+    finally:
+        os.close(fd)  # closing drops a lock taken here; a held lock stays with its owner
+    return None
+
+
 def free_port() -> int:
     """A free TCP port on 127.0.0.1 (the OS picks it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -67,6 +108,7 @@ class EmbeddedMongo:
         self.port = port or free_port()
         self.cache = cache
         self.proc: subprocess.Popen[bytes] | None = None
+        self._lock_fd: int | None = None
 
     @property
     def uri(self) -> str:
@@ -77,9 +119,10 @@ class EmbeddedMongo:
         if self.proc and self.proc.poll() is None:
             return self.uri
         self.data_dir.mkdir(parents=True, exist_ok=True)
+        self._take_ownership()
         logfile = open(self.data_dir / "secantusd.log", "ab")
         cmd = [_daemon_path(), "--host", "127.0.0.1", "--port", str(self.port), "--storage-path",
-               str(self.data_dir / "data"), "--standalone", "--cache-size", self.cache, "--log-level", "WARNING"]
+               str(self.data_dir / "data"), "--cache-size", self.cache, "--log-level", "WARNING"]
         log.info("starting embedded database: %s", " ".join(cmd))
         self.proc = subprocess.Popen(cmd, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      env=dict(os.environ), start_new_session=True,
@@ -88,6 +131,7 @@ class EmbeddedMongo:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
+                self._release_ownership()
                 raise EmbeddedDbError(
                     f"{DAEMON} exited with code {self.proc.returncode}; see {self.data_dir / 'secantusd.log'}")
             if self._ping():
@@ -95,6 +139,35 @@ class EmbeddedMongo:
             time.sleep(0.1)
         self.stop()
         raise EmbeddedDbError(f"{DAEMON} did not answer on 127.0.0.1:{self.port} within {timeout_s:.0f} s")
+
+    def _take_ownership(self) -> None:
+        """Lock the data dir for this process, or raise EmbeddedDbHeld naming the holder."""
+        if self._lock_fd is not None:
+            return
+        fd = os.open(self.data_dir / "owner.lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            try:
+                owner = json.loads((self.data_dir / "owner.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                owner = {"pid": "?"}
+            raise EmbeddedDbHeld(self.data_dir, owner) from None
+        self._lock_fd = fd
+        owner = {"pid": os.getpid(), "command": [Path(sys.argv[0]).name, *sys.argv[1:]], "uri": self.uri,
+                 "port": self.port, "started_at": time.time()}
+        (self.data_dir / "owner.json").write_text(json.dumps(owner), encoding="utf-8")
+
+    def _release_ownership(self) -> None:
+        if self._lock_fd is None:
+            return
+        try:
+            (self.data_dir / "owner.json").unlink()
+        except FileNotFoundError:
+            pass
+        os.close(self._lock_fd)
+        self._lock_fd = None
 
     def _ping(self) -> bool:
         try:
@@ -107,12 +180,15 @@ class EmbeddedMongo:
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop with SIGINT (a clean WiredTiger close), escalating only if it does not exit."""
         proc, self.proc = self.proc, None
-        if not proc or proc.poll() is not None:
-            return
-        for sig, wait in ((signal.SIGINT, timeout_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
-            try:
-                proc.send_signal(sig)
-                proc.wait(timeout=wait)
+        try:
+            if not proc or proc.poll() is not None:
                 return
-            except subprocess.TimeoutExpired:
-                log.warning("embedded database did not stop on %s", sig.name)
+            for sig, wait in ((signal.SIGINT, timeout_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+                try:
+                    proc.send_signal(sig)
+                    proc.wait(timeout=wait)
+                    return
+                except subprocess.TimeoutExpired:
+                    log.warning("embedded database did not stop on %s", sig.name)
+        finally:
+            self._release_ownership()

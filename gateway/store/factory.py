@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from gateway.store.embedded import EmbeddedMongo
+from gateway.store.embedded import EmbeddedMongo, running_owner
 from gateway.store.store import InformationState
 
 
@@ -27,17 +27,34 @@ class ManagedStore(InformationState):
         return out
 
 
-def open_store(settings: Any, *, spool_name: str = "spool.jsonl") -> ManagedStore:
-    """MONGO_URI (env) > settings.store.mongo_uri > a SecantusDB daemon under <data_dir>/mongo."""
+def store_uri(settings: Any) -> str | None:
+    """The configured MongoDB URI (``MONGO_URI`` wins over ``settings.store.mongo_uri``), if any."""
+    return os.environ.get("MONGO_URI") or settings.store.mongo_uri
+
+
+def embedded_dir(settings: Any) -> Path:
+    return Path(settings.data_dir) / "mongo"
+
+
+def open_store(settings: Any, *, join_running: bool = False) -> ManagedStore:
+    """MONGO_URI (env) > settings.store.mongo_uri > a SecantusDB daemon under <data_dir>/mongo.
+
+    ``join_running``: when another live process already runs the embedded database of this data
+    dir, use it (tools such as ``printeps export``) instead of failing with EmbeddedDbHeld (a
+    second gateway process must be pointed at it explicitly, with MONGO_URI).
+    """
     cfg = settings.store
-    data = Path(settings.data_dir) / "store"
-    uri = os.environ.get("MONGO_URI") or cfg.mongo_uri
+    uri = store_uri(settings)
     embedded = None
+    if not uri and join_running:
+        owner = running_owner(embedded_dir(settings))
+        uri = owner.get("uri") if owner else None
     if not uri:
-        embedded = EmbeddedMongo(Path(settings.data_dir) / "mongo", cfg.embedded_port, cfg.embedded_cache)
+        embedded = EmbeddedMongo(embedded_dir(settings), cfg.embedded_port, cfg.embedded_cache)
         uri = embedded.start()
-    store = ManagedStore(uri, cfg.database, data / spool_name, backend="embedded" if embedded else "external",
-                         timeout_ms=cfg.timeout_ms, spool_max_docs=cfg.spool_max_docs,
-                         retry_interval_s=cfg.retry_interval_s)
+    store = ManagedStore(uri, cfg.database, Path(settings.data_dir) / "store" / "journal",
+                         backend="embedded" if embedded else "external", timeout_ms=cfg.timeout_ms,
+                         spool_max_docs=cfg.spool_max_docs, retry_interval_s=cfg.retry_interval_s,
+                         fsync=cfg.journal_fsync)
     store.embedded = embedded
     return store

@@ -1,9 +1,10 @@
 """The Information State: every sub-system's data kept in MongoDB, the way mongodb_store does it.
 
 Each document carries ``_meta`` = {stored_type, inserted_at, inserted_by} so it can be queried by
-type, time range and fields. Writes never block on a dead database: when MongoDB is unreachable
-they go to a bounded on-disk spool, a background thread reconnects and flushes them in order
-(idempotently: each document gets its ``_id`` before it is spooled), and ``health()`` says degraded.
+type, time range and fields. Writes never block on the database: they are appended to a local
+journal (durable against a killed process) and shipped in order by a background thread,
+idempotently (each document gets its ``_id`` before it is journalled); while MongoDB is
+unreachable they stay in the journal and ``health()`` says degraded.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import re
-import threading
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping
@@ -20,7 +21,7 @@ import pymongo
 from bson import ObjectId
 from pymongo.errors import BulkWriteError, PyMongoError
 
-from gateway.store.spool import Spool, SpoolFull
+from gateway.store.journal import Journal, JournalFull
 
 log = logging.getLogger(__name__)
 
@@ -72,138 +73,64 @@ def _clean(value: Any, where: str) -> Any:
 
 
 class InformationState:
-    """record / query / health over one MongoDB database, with an on-disk spool for outages."""
+    """record / query / health over one MongoDB database; writes go through a local journal.
 
-    def __init__(self, uri: str, database: str, spool_path: Path, *, backend: str = "external",
-                 timeout_ms: int = 1000, spool_max_docs: int = 200_000, retry_interval_s: float = 1.0) -> None:
+    ``record`` returns as soon as the write is in the journal (durable against a killed process,
+    see :mod:`gateway.store.journal`); a background thread ships journalled writes in batches,
+    idempotently, and keeps them while the database is unreachable. ``flush`` waits until they
+    are in. Reads (``query``, ``count``) go to the database and raise StoreUnavailable when it is
+    away. ``db`` is the pymongo database, for the modules that keep their own collections here
+    (the catalog of versions, the decisions).
+    """
+
+    def __init__(self, uri: str, database: str, journal_dir: Path, *, backend: str = "external",
+                 timeout_ms: int = 1000, spool_max_docs: int = 200_000, retry_interval_s: float = 1.0,
+                 fsync: bool = False) -> None:
         self.uri = uri
         self.backend = backend
-        self.retry_interval_s = retry_interval_s
+        self.database = database
         self.client: pymongo.MongoClient = pymongo.MongoClient(
             uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms, socketTimeoutMS=timeout_ms * 5,
             tz_aware=True)
         self.db = self.client[database]
-        self.spool = Spool(spool_path, spool_max_docs)
-        self.dropped = 0
-        self.last_error: str | None = None
-        self._degraded = len(self.spool) > 0  # leftovers from a previous run are flushed first
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._wake = threading.Event()
-        self._indexed: set[str] = set()
-        self._thread = threading.Thread(target=self._flusher, name="store-flusher", daemon=True)
-        self._thread.start()
-        if self._degraded:
-            self._wake.set()
+        self._indexed: set[tuple[str, str]] = set()
+        self.journal = Journal(Path(journal_dir), self._ship, max_docs=spool_max_docs, fsync=fsync,
+                               retry_interval_s=retry_interval_s)
 
     # ---- writes -------------------------------------------------------------------------------
     def record(self, collection: str, doc: Mapping[str, Any], *, stored_type: str,
                inserted_by: str = "gateway") -> str:
-        """Store one document with its ``_meta``; returns its id. Never raises on a DB outage."""
-        check_collection(collection)
-        body = self._body(collection, doc, stored_type, inserted_by)
-        with self._lock:
-            if not self._degraded:
-                try:
-                    self._ensure_indexes(collection)
-                    self.db[collection].insert_one(body)
-                    return str(body["_id"])
-                except PyMongoError as exc:
-                    self._go_degraded(exc)
-            self._spool(collection, body)
-        return str(body["_id"])
+        """Keep one document with its ``_meta``; returns its id. Never raises on a DB outage."""
+        return self.record_many(collection, [doc], stored_type=stored_type, inserted_by=inserted_by)[0]
 
     def record_many(self, collection: str, docs: list[Mapping[str, Any]], *, stored_type: str,
                     inserted_by: str = "gateway") -> list[str]:
-        """Like :meth:`record` for several documents of one kind, in one round trip (in order).
-
-        On an outage all of them go to the spool; any that did reach the database are skipped
-        when the spool is flushed (inserts are idempotent by ``_id``).
-        """
+        """Like :meth:`record` for several documents of one kind (kept in order)."""
         check_collection(collection)
-        bodies = [self._body(collection, doc, stored_type, inserted_by) for doc in docs]
-        with self._lock:
-            if not self._degraded:
-                try:
-                    self._ensure_indexes(collection)
-                    self.db[collection].insert_many(bodies, ordered=True)
-                    return [str(b["_id"]) for b in bodies]
-                except PyMongoError as exc:
-                    self._go_degraded(exc)
-            for body in bodies:
-                self._spool(collection, body)
-        return [str(b["_id"]) for b in bodies]
-
-    @staticmethod
-    def _body(collection: str, doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
-        body = _clean(dict(doc), collection)
-        body.pop("_meta", None)
-        body["_id"] = body.get("_id") or ObjectId()
-        body["_meta"] = {"stored_type": stored_type, "inserted_at": utcnow(), "inserted_by": inserted_by}
-        return body
-
-    def _spool(self, collection: str, body: dict[str, Any]) -> None:
+        bodies = [_body(collection, doc, stored_type, inserted_by) for doc in docs]
         try:
-            self.spool.append(collection, body)
-        except SpoolFull as exc:
-            self.dropped += 1
-            log.error("Information State: %s; dropped a %s document for %s (dropped so far: %d)",
-                      exc, body["_meta"]["stored_type"], collection, self.dropped)
+            self.journal.append(self.database, collection, bodies)
+        except JournalFull as exc:
+            log.error("Information State: %s; refused %d %s document(s) for %s (refused so far: %d)",
+                      exc, len(bodies), stored_type, collection, self.journal.dropped)
+        return [b["_id"] for b in bodies]
 
-    def _go_degraded(self, exc: Exception) -> None:
-        self._degraded = True
-        self.last_error = f"{type(exc).__name__}: {exc}"
-        log.warning("Information State unreachable (%s); buffering writes in %s", self.last_error, self.spool.path)
-        self._wake.set()
+    def flush(self, timeout_s: float = 10.0) -> bool:
+        """Wait until every write made so far is in the database; False if it is not reachable."""
+        return self.journal.flush(timeout_s)
 
-    def _ensure_indexes(self, collection: str) -> None:
-        if collection in self._indexed:
-            return
-        self.db[collection].create_index([("_meta.stored_type", 1), ("_meta.inserted_at", 1)])
-        self._indexed.add(collection)
-
-    # ---- flushing -----------------------------------------------------------------------------
-    def _flusher(self) -> None:
-        while not self._stop.is_set():
-            self._wake.wait(self.retry_interval_s)
-            self._wake.clear()
-            if self._degraded and not self._stop.is_set():
-                self.flush()
-
-    def flush(self) -> bool:
-        """Try to write the spool to the database; True when it is empty and the store is healthy."""
+    def _ship(self, database: str, collection: str, docs: list[dict[str, Any]]) -> None:
+        """Insert journalled documents; ones already there (an earlier, interrupted ship) are skipped."""
+        target = self.client[database][collection]
+        if (database, collection) not in self._indexed:
+            target.create_index([("_meta.stored_type", 1), ("_meta.inserted_at", 1)])
+            self._indexed.add((database, collection))
         try:
-            self.client.admin.command("ping")
-        except PyMongoError as exc:
-            self.last_error = f"{type(exc).__name__}: {exc}"
-            return False
-        while True:
-            pending = self.spool.read()
-            if not pending:
-                break
-            try:
-                for collection, body in pending:
-                    self._insert_idempotent(collection, body)
-            except PyMongoError as exc:
-                self.last_error = f"{type(exc).__name__}: {exc}"
-                return False
-            self.spool.drop_first(len(pending))
-            log.info("Information State: flushed %d buffered writes", len(pending))
-        with self._lock:
-            if len(self.spool) == 0:  # nothing was spooled between the last read and now
-                self._degraded = False
-                self.last_error = None
-                return True
-        return False
-
-    def _insert_idempotent(self, collection: str, body: dict[str, Any]) -> None:
-        self._ensure_indexes(collection)
-        try:
-            self.db[collection].insert_one(body)
-        except pymongo.errors.DuplicateKeyError:
-            pass  # already written before a crash/timeout: flushing twice loses and duplicates nothing
-        except BulkWriteError:  # pragma: no cover - insert_one does not raise it, kept for clarity
-            pass
+            target.insert_many([_to_bson(d) for d in docs], ordered=False)
+        except BulkWriteError as exc:
+            other = [e for e in exc.details.get("writeErrors", []) if e.get("code") != 11000]
+            if other:
+                raise
 
     # ---- reads --------------------------------------------------------------------------------
     def query(self, collection: str, *, type: str | None = None, since: datetime | None = None,
@@ -243,25 +170,53 @@ class InformationState:
         except PyMongoError as exc:
             raise StoreUnavailable(f"Information State unreachable: {exc}") from exc
 
+    def ping(self) -> None:
+        """Raise StoreUnavailable unless the database answers now."""
+        try:
+            self.client.admin.command("ping")
+        except PyMongoError as exc:
+            raise StoreUnavailable(f"Information State unreachable at {_redact(self.uri)}: "
+                                   f"{exc.__class__.__name__}: {exc}") from exc
+
     def health(self) -> dict[str, Any]:
-        """ok / degraded with why, how many writes are buffered and how many were refused."""
+        """ok / degraded with why, how many writes wait in the journal and how many were refused."""
+        journal = self.journal
         return {
-            "status": "degraded" if (self._degraded or self.dropped) else "ok",
+            "status": "degraded" if (journal.degraded or journal.dropped) else "ok",
             "backend": self.backend,
             "uri": _redact(self.uri),
-            "buffered": len(self.spool),
-            "dropped": self.dropped,
-            "last_error": self.last_error,
+            "buffered": journal.backlog,
+            "dropped": journal.dropped,
+            "last_error": journal.last_error,
         }
 
     def close(self, flush_timeout_s: float = 5.0) -> None:
-        """Stop the flusher after one last flush attempt; what remains stays on disk for next start."""
-        self._stop.set()
-        self._wake.set()
-        self._thread.join(timeout=flush_timeout_s)
-        if self._degraded:
-            self.flush()
+        """Ship what can be shipped; what is left stays in the journal for the next start."""
+        self.journal.close(flush_timeout_s)
         self.client.close()
+
+
+def _body(collection: str, doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
+    """The journalled form: plain JSON (``_id`` as hex text, ``inserted_at`` as epoch seconds)."""
+    body = _clean(dict(doc), collection)
+    body.pop("_meta", None)
+    body["_id"] = str(body.get("_id") or ObjectId())
+    body["_meta"] = {"stored_type": stored_type, "inserted_at": time.time(), "inserted_by": inserted_by}
+    return body
+
+
+def _to_bson(body: dict[str, Any]) -> dict[str, Any]:
+    """The stored form of a journalled document: ObjectId ``_id``, a datetime ``inserted_at``."""
+    doc = dict(body)
+    raw_id = doc.get("_id")
+    if isinstance(raw_id, str) and ObjectId.is_valid(raw_id):
+        doc["_id"] = ObjectId(raw_id)
+    meta = dict(doc.get("_meta") or {})
+    at = meta.get("inserted_at")
+    if isinstance(at, (int, float)):
+        meta["inserted_at"] = datetime.fromtimestamp(at, timezone.utc)
+    doc["_meta"] = meta
+    return doc
 
 
 def _redact(uri: str) -> str:

@@ -37,7 +37,7 @@ from gateway.stream.fastpath import Fallback, NotCompilable, Plan, compile_query
 from gateway.stream.lexer import QueryParseError, position
 from gateway.stream.params import OntologySource, ParamError
 from gateway.stream.query import ContinuousQuery, ParamSpec, WindowSpec, parse_query
-from gateway.stream.rules import BindingError, RuleBinding, check_binding, row_to_fact
+from gateway.stream.rules import BindingError, RuleBinding, binding_facts, check_binding
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +125,8 @@ class QueryRuntime:
     plan_text: str | None = None
     not_compilable: str | None = None
     binding: RuleBinding | None = None
-    field_types: dict[str, str] = field(default_factory=dict)
+    field_types: dict[str, dict[str, str]] = field(default_factory=dict)  # fact type -> field -> java type
+    handled: dict[str, int] = field(default_factory=dict)  # suppress_repeats: key -> window end it fired
     session: Any = None
     param_values: dict[str, str] = field(default_factory=dict)
     param_error: str | None = None
@@ -166,9 +167,11 @@ class StreamEngine:
     """Registers queries, takes timestamped triples, evaluates windows and publishes results."""
 
     def __init__(self, settings: StreamSettings | None = None, rules_engine: Any = None,
-                 ontology: OntologySource | None = None) -> None:
+                 ontology: OntologySource | None = None,
+                 providers: dict[str, Callable[[], list[dict[str, Any]]]] | None = None) -> None:
         self.settings = settings or StreamSettings()
         self.rules_engine = rules_engine
+        self.providers = dict(providers or {})  # context facts a binding can ask for (e.g. "robots")
         self.ontology = ontology if ontology is not None else OntologySource(self.settings.ontology_file)
         self._queries: dict[str, QueryRuntime] = {}
         self._static: dict[str, frozenset[Triple]] = {}
@@ -183,6 +186,10 @@ class StreamEngine:
         """Make ``triples`` available as ``FROM <iri>`` / ``FROM NAMED <iri>`` to queries."""
         with self._lock:
             self._static[iri] = frozenset(triples)
+
+    def share_static_graphs(self, other: "StreamEngine") -> None:
+        """Use ``other``'s static graphs (a scratch engine that checks queries for it)."""
+        self._static = other._static
 
     def _graph(self, iri: str) -> frozenset[Triple]:
         if iri == self.settings.ontology_graph:
@@ -242,7 +249,8 @@ class StreamEngine:
         if runtime.query.form != "SELECT":
             raise BindingError("only SELECT queries can feed rules")
         variables = _select_variables(runtime.query)
-        runtime.field_types = check_binding(binding, variables, self.rules_engine)
+        runtime.field_types = check_binding(binding, variables, self.rules_engine, self.providers)
+        runtime.handled = {}
         runtime.binding = binding
 
     def unregister(self, name: str) -> None:
@@ -459,27 +467,35 @@ class StreamEngine:
     def _feed_rules(self, runtime: QueryRuntime, evaluation: Evaluation, data: WindowData) -> None:
         binding = runtime.binding
         assert binding is not None
-        facts = [row_to_fact(row, binding, runtime.field_types) for row in evaluation.rows]
+        name = runtime.query.name
         try:
+            facts = binding_facts(binding, evaluation.rows, runtime.field_types, data, self.providers, runtime.handled)
+            if not facts:
+                return  # every row was a repeat: nothing new to decide
+            window = {"start": data.start_ms, "end": data.end_ms}
+            correlation = f"{name}@{data.end_ms}"
             if binding.mode == "stateful":
                 if runtime.session is None:
                     runtime.session = self.rules_engine.open_session(binding.ruleset)
                 # insert stamped with the window's end (the clock moves there first) and fire: one JVM call
                 result = runtime.session.push(facts, data.end_ms)
+                result.decision_id = self.rules_engine.record_decision(
+                    result, facts, origin="stream", correlation_id=correlation, context={"query": name, "window": window})
             else:
-                result = self.rules_engine.fire(binding.ruleset, facts)
+                result = self.rules_engine.fire(binding.ruleset, facts, origin="stream", correlation_id=correlation,
+                                                context={"query": name, "window": window})
         except Exception as exc:
             runtime.stats["rule_errors"] += 1
             runtime.last_error = f"rules {binding.ruleset!r}: {exc}"
-            log.warning("query %s: firing %s failed: %s", runtime.query.name, binding.ruleset, exc)
-            self._publish({"kind": "error", "query": runtime.query.name, "error": runtime.last_error})
+            log.warning("query %s: firing %s failed: %s", name, binding.ruleset, exc)
+            self._publish({"kind": "error", "query": name, "error": runtime.last_error})
             return
         runtime.stats["rule_fires"] += 1
         payload = result.to_dict() if hasattr(result, "to_dict") else dict(result)
         self._publish({
-            "kind": "actions", "query": runtime.query.name, "ruleset": binding.ruleset,
-            "window": {"start": data.start_ms, "end": data.end_ms}, "facts": facts,
-            "actions": payload.get("actions", []), "fired": payload.get("fired", []),
+            "kind": "actions", "query": name, "ruleset": binding.ruleset, "version": payload.get("version"),
+            "decision_id": payload.get("decision_id"), "window": window, "facts": facts,
+            "actions": payload.get("actions", []), "fired": payload.get("fired", []), "dispatch": binding.dispatch,
         })
 
     def _close_session(self, session: Any) -> None:

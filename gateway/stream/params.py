@@ -13,8 +13,9 @@ import logging
 import os
 import threading
 from pathlib import Path
+from typing import Iterable
 
-from pyoxigraph import Literal, NamedNode, QuerySolutions, RdfFormat, Store
+from pyoxigraph import Literal, NamedNode, Quad, QuerySolutions, RdfFormat, Store
 
 from gateway.rdf.terms import Triple
 from gateway.stream.query import ParamSpec
@@ -84,6 +85,18 @@ class OntologySource:
             self.error = None
             log.info("ontology %s loaded (version %d, %d triples)", self.path, self.version, len(self._triples))
             return True
+
+    def set_graph(self, triples: Iterable[Triple]) -> None:
+        """Serve these triples from now on (the gateway's knowledge base feeds the ontology this
+        way, inferred facts included); the file, if any, is no longer watched."""
+        store = Store()
+        kept = frozenset(triples)
+        store.extend(Quad(s, p, o) for s, p, o in kept)  # type: ignore[arg-type]
+        with self._lock:
+            self.path = None
+            self._store, self._triples = store, kept
+            self.version += 1
+            self.error = None
 
     def _fail(self, message: str) -> None:
         if message != self.error:

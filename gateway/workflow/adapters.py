@@ -89,7 +89,8 @@ class RulesAdapter:
         if not isinstance(facts, list):
             raise ModuleFailed(f"'facts' must be a list of fact objects, got {type(facts).__name__}")
         ruleset = call.params.get("ruleset") or call.module.options["ruleset"]
-        result = self.engine.fire(ruleset, facts)
+        result = self.engine.fire(ruleset, facts, origin="workflow", correlation_id=f"{call.run_id}/{call.step_id}",
+                                  context={"workflow": call.workflow, "run_id": call.run_id, "step": call.step_id})
         return result.to_dict() if hasattr(result, "to_dict") else dict(result)
 
 

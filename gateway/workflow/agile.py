@@ -10,9 +10,8 @@ The tests (``tests/agile``) and the benchmark (``bench/agile_loop.py``) share th
 Scenarios build on each other in Table 2 order (the teahouse evolves: #11 extends the rule set
 that #8 created), so run them in order on one gateway.
 
-Workflows and rule sets are edited through the REST API (PUT). The ontology and SWRL files are
-edited where the running gateway reads them (it re-reads them on change) — through
-``PUT <ontology_endpoint>`` when the gateway offers one, otherwise by writing the file.
+Everything is edited through the REST API (PUT), as the workbench does: workflows, rule sets, the
+ontology and the SWRL rules.
 """
 
 from __future__ import annotations
@@ -29,14 +28,14 @@ import httpx
 Observation = list[str]
 
 
-class ScenarioError(AssertionError):
+class ChangeRequestFailed(AssertionError):
     """A scenario's before/after behaviour was not what the suggestion asks for."""
 
 
 # ---------------------------------------------------------------- talking to the gateway
 
 
-class Gateway:
+class OwnerClient:
     """The running gateway as an owner's tools see it: its REST API (and its knowledge files)."""
 
     def __init__(self, base_url: str, *, token: str | None = None, timeout: float = 30.0) -> None:
@@ -51,14 +50,14 @@ class Gateway:
         response = self.http.request(method, path, **kwargs)
         if response.status_code not in ok:
             self.failed_requests.append(f"{method} {path} -> {response.status_code}: {response.text[:300]}")
-            raise ScenarioError(self.failed_requests[-1])
+            raise ChangeRequestFailed(self.failed_requests[-1])
         return response
 
     # workflows
     def run(self, workflow: str, inputs: dict[str, Any] | None = None) -> dict[str, Any]:
         result = self._call("POST", f"/api/workflows/{workflow}/run", json={"inputs": inputs or {}}).json()
         if result["status"] != "succeeded":
-            raise ScenarioError(f"run of {workflow} failed: {result['error']}")
+            raise ChangeRequestFailed(f"run of {workflow} failed: {result['error']}")
         return result
 
     def workflow_text(self, name: str) -> tuple[str, int]:
@@ -149,7 +148,7 @@ class Scenario:
     category: str
     paper_time: str
     edits: list[Edit]
-    probe: Callable[[Gateway], Observation]
+    probe: Callable[[OwnerClient], Observation]
     expect: Callable[[Observation], bool]
     what: str = ""
 
@@ -180,7 +179,7 @@ def _replace(old: str, new: str, count: int = 1) -> Callable[[str], str]:
     def change(text: str) -> str:
         found = text.count(old)
         if (count and found != count) or found == 0:
-            raise ScenarioError(f"edit anchor {old!r} found {found} times, expected {count or 'some'}")
+            raise ChangeRequestFailed(f"edit anchor {old!r} found {found} times, expected {count or 'some'}")
         return text.replace(old, new)
 
     return change
@@ -196,13 +195,13 @@ def _add_file(name: str, content: str) -> Callable[[dict[str, str]], dict[str, s
 def _append_to_file(name: str, content: str) -> Callable[[dict[str, str]], dict[str, str]]:
     def change(files: dict[str, str]) -> dict[str, str]:
         if name not in files:
-            raise ScenarioError(f"rule set has no file {name!r} (files: {', '.join(files)})")
+            raise ChangeRequestFailed(f"rule set has no file {name!r} (files: {', '.join(files)})")
         return {**files, name: files[name].rstrip("\n") + "\n" + content}
 
     return change
 
 
-def _run(workflow: str, inputs: dict[str, Any] | None = None) -> Callable[[Gateway], Observation]:
+def _run(workflow: str, inputs: dict[str, Any] | None = None) -> Callable[[OwnerClient], Observation]:
     return lambda gw: behaviour(gw.run(workflow, inputs))
 
 
@@ -405,7 +404,7 @@ def _diff_size(old: str, new: str) -> tuple[int, int]:
     return lines, chars
 
 
-def _prepare(gw: Gateway, edit: Edit) -> tuple[Callable[[], None], int, int]:
+def _prepare(gw: OwnerClient, edit: Edit) -> tuple[Callable[[], None], int, int]:
     """Fetch the current content, compute the new one; returns (submit, lines, chars)."""
     comment = f"Table 2: {edit.kind} edit"
     if edit.kind == "workflow":
@@ -425,12 +424,12 @@ def _prepare(gw: Gateway, edit: Edit) -> tuple[Callable[[], None], int, int]:
     return (lambda: gw.put_knowledge(edit.kind, new)), *_diff_size(text, new)
 
 
-def apply(gw: Gateway, scenario: Scenario, *, live_timeout: float = 10.0) -> Measurement:
+def apply(gw: OwnerClient, scenario: Scenario, *, live_timeout: float = 10.0) -> Measurement:
     """Check the old behaviour, submit the edits, wait (bounded) until the new behaviour shows."""
     gw.failed_requests.clear()
     before = scenario.probe(gw)
     if scenario.expect(before):
-        raise ScenarioError(f"#{scenario.id}: the new behaviour is already there before the edit: {before}")
+        raise ChangeRequestFailed(f"#{scenario.id}: the new behaviour is already there before the edit: {before}")
     lines = chars = 0
     submit_s = 0.0
     for edit in scenario.edits:
@@ -445,7 +444,7 @@ def apply(gw: Gateway, scenario: Scenario, *, live_timeout: float = 10.0) -> Mea
     after = scenario.probe(gw)
     while not scenario.expect(after):
         if time.monotonic() > deadline:
-            raise ScenarioError(f"#{scenario.id}: not live within {live_timeout}s; behaviour now: {after}")
+            raise ChangeRequestFailed(f"#{scenario.id}: not live within {live_timeout}s; behaviour now: {after}")
         time.sleep(0.01)
         after = scenario.probe(gw)
     live_s = submit_s + (time.perf_counter() - t_last)
@@ -459,42 +458,30 @@ def apply(gw: Gateway, scenario: Scenario, *, live_timeout: float = 10.0) -> Mea
 
 
 @contextmanager
-def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterator[Gateway]:
-    """A real gateway (REST app + engine with the repository's rule sets + workflows + reasoner)
-    served by uvicorn on 127.0.0.1, with the ontology/SWRL files copied into ``workdir`` (edits
-    never touch the repository). Robots and humans are simulated."""
-    import shutil
-    import socket
-
+def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterator[OwnerClient]:
+    """A real gateway, built as ``printeps serve`` builds it (no ROS: robots and humans are
+    simulated), over its own embedded Information State in ``workdir`` seeded from the
+    repository, served by uvicorn on 127.0.0.1."""
+    from gateway.app import build_gateway
     from gateway.config import PROJECT_ROOT, Settings
-    from gateway.engine import Engine
-    from gateway.server import build_app, serve_in_thread
+    from gateway.serve import free_port, serve_in_thread
 
     workdir = Path(workdir)
-    knowledge = workdir / "ontology"
-    shutil.copytree(PROJECT_ROOT / "ontology", knowledge, dirs_exist_ok=True)
     settings = Settings.model_validate({
         "data_dir": str(workdir / "var"),
         "engine": {"rules_dir": str(PROJECT_ROOT / "rules" / "drl")},
         "workflows": {"simulate_robots": True, "simulate_humans": True},
-        "streams": {"ontology_file": str(knowledge / "teahouse.ttl"), "swrl_file": str(knowledge / "teahouse.swrl"),
-                    "queries_dir": None},
     })
-    engine = Engine(settings)
-    engine.load_rules_dir()
-    app, _ = build_app(settings, engine, None)  # as `printeps serve` wires it (no Information State)
-    engine.warm_up(background=False)  # as a gateway that has been up a while: `serve` warms up at start
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server, thread = serve_in_thread(app, port, name="agile-gateway")
-    gw = Gateway(f"http://127.0.0.1:{port}", token=token)
+    gateway = build_gateway(settings, rest=True, ros=False, warm_up=False)
     try:
-        yield gw
+        gateway.engine.warm_up(background=False)  # as a gateway that has been up a while: `serve` warms up at start
+        server, thread = serve_in_thread(gateway.app, free_port(), name="agile-gateway")
+        gw = OwnerClient(f"http://127.0.0.1:{server.config.port}", token=token)
+        try:
+            yield gw
+        finally:
+            gw.close()
+            server.should_exit = True
+            thread.join(timeout=10)
     finally:
-        gw.close()
-        server.should_exit = True
-        thread.join(timeout=10)
-        workflows = getattr(app.state, "workflows", None)
-        if workflows is not None:
-            workflows.close()
+        gateway.close()

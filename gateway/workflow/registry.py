@@ -2,29 +2,28 @@
 
 Why: domain experts edit a workflow and the next run must use it, without a restart and without
 disturbing a run in progress. ``get`` hands out an immutable snapshot; ``replace`` validates the
-new text completely, then swaps the snapshot under a lock. Versions are kept (in memory and, with
-a data directory, on disk as ``<data>/workflows/<name>/v<N>.yaml`` + ``history.json``) so an edit
-can be rolled back. The ``workflows/`` folder is the starting point: a file whose content changed
-since it was last imported becomes a new version (author "filesystem").
+new text completely, then stores it as a new version in the catalog (:mod:`gateway.versions`),
+which every gateway process follows. Rollback moves the current pointer back, as for rule sets.
+The ``workflows/`` folder is the seed: a workflow the catalog has never had is imported from it
+at start (author "seed"); one the catalog has is never overwritten by files.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import threading
-from dataclasses import asdict, dataclass
-from datetime import datetime, timezone
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 from gateway.workflow.loader import Problem, WorkflowInvalid, parse
 from gateway.workflow.model import Workflow
 
 log = logging.getLogger(__name__)
 
-RESERVED_NAMES = {"runs", "manual", "validate", "schema"}
+KIND = "workflow"
+RESERVED_NAMES = {"runs", "manual", "validate", "schema", "palette"}
 
 
 class WorkflowNotFound(LookupError):
@@ -45,19 +44,6 @@ class WorkflowConflict(RuntimeError):
 
 
 @dataclass(frozen=True)
-class VersionInfo:
-    name: str
-    version: int
-    updated_at: str
-    author: str
-    comment: str
-    hash: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-@dataclass(frozen=True)
 class Entry:
     """One version of a workflow: its model (with ``source`` text) and who made it when."""
 
@@ -66,87 +52,85 @@ class Entry:
 
 
 class WorkflowRegistry:
-    def __init__(self, source_dir: str | Path | None = None, data_dir: str | Path | None = None) -> None:
+    """Workflow versions in a catalog, parsed once per version and kept for runs to use."""
+
+    def __init__(self, catalog: Catalog | None = None, source_dir: str | Path | None = None) -> None:
+        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
         self.source_dir = Path(source_dir) if source_dir else None
-        self.data_dir = Path(data_dir) / "workflows" if data_dir else None
-        self._history: dict[str, list[Entry]] = {}
-        self._imported: dict[str, str] = {}  # name -> hash of the source file last imported
+        self._parsed: dict[tuple[str, int], Entry] = {}
+        self._current: dict[str, tuple[int, int]] = {}  # name -> (version, catalog seq): what this process serves
         self._lock = threading.RLock()
 
-    # ------------------------------------------------------------ loading
+    # ------------------------------------------------------------ the seed folder
 
-    def load(self) -> list[Problem]:
-        """Load kept versions, then import changed files from the source folder; returns file problems.
-
-        An invalid file is reported and skipped: the gateway starts with the others.
-        """
+    def seed(self) -> list[Problem]:
+        """Import the source folder's workflows the catalog has never had; returns file problems.
+        An invalid file is reported and skipped: the gateway starts with the others."""
         problems: list[Problem] = []
-        with self._lock:
-            self._load_kept()
-            if self.source_dir is None or not self.source_dir.is_dir():
-                return problems
-            for path in sorted(self.source_dir.glob("*.yaml")):
-                text = path.read_text(encoding="utf-8")
-                digest = _hash(text)
-                try:
-                    wf = parse(text, file=str(path))
-                except WorkflowInvalid as exc:
-                    problems.extend(exc.problems)
-                    continue
-                if self._imported.get(wf.name) == digest:
-                    continue
-                self._add(wf, author="filesystem", comment=f"imported from {path.name}")
-                self._imported[wf.name] = digest
-                self._save_state(wf.name)
+        if self.source_dir is None or not self.source_dir.is_dir():
+            return problems
+        for path in sorted(self.source_dir.glob("*.yaml")):
+            try:
+                wf = parse(path.read_text(encoding="utf-8"), file=str(path))
+            except WorkflowInvalid as exc:
+                problems.extend(exc.problems)
+                continue
+            if self.catalog.head(KIND, wf.name) is not None:
+                continue
+            try:
+                self.replace(wf.name, wf.source, author="seed", comment=f"seeded from {path.name}", base_version=0)
+            except WorkflowConflict:
+                pass  # another process seeded it at the same moment
         return problems
-
-    def _load_kept(self) -> None:
-        if self.data_dir is None or not self.data_dir.is_dir():
-            return
-        for history_file in sorted(self.data_dir.glob("*/history.json")):
-            state = json.loads(history_file.read_text(encoding="utf-8"))
-            name = history_file.parent.name
-            entries = []
-            for item in state["versions"]:
-                path = history_file.parent / f"v{item['version']}.yaml"
-                try:
-                    entries.append(Entry(parse(path.read_text(encoding="utf-8"), file=str(path)), VersionInfo(**item)))
-                except WorkflowInvalid:  # e.g. written under an older schema: keep the versions that still load
-                    log.error("kept workflow version %s no longer loads; skipped", path)
-            if entries:
-                self._history[name] = entries
-            if state.get("imported_hash"):
-                self._imported[name] = state["imported_hash"]
 
     # ------------------------------------------------------------ reading
 
+    def load(self) -> None:
+        """Take the current version of every workflow from the catalog (at start)."""
+        self.reconcile()
+
     def names(self) -> list[str]:
         with self._lock:
-            return sorted(self._history)
+            return sorted(self._current)
 
     def current(self, name: str) -> Entry:
         with self._lock:
-            entries = self._history.get(name)
-            if not entries:
+            served = self._current.get(name)
+        if served is None:
+            self.sync(name)  # made by another process a moment ago, perhaps
+            with self._lock:
+                served = self._current.get(name)
+            if served is None:
                 raise WorkflowNotFound(name)
-            return entries[-1]
+        return self.version(name, served[0])
 
     def get(self, name: str) -> Workflow:
         """The current workflow (an immutable snapshot a run can keep)."""
         return self.current(name).workflow
 
     def versions(self, name: str) -> list[VersionInfo]:
-        with self._lock:
-            if name not in self._history:
-                raise WorkflowNotFound(name)
-            return [e.info for e in self._history[name]]
+        infos = self.catalog.versions(KIND, name)
+        if not infos:
+            raise WorkflowNotFound(name)
+        return infos
 
     def version(self, name: str, version: int) -> Entry:
+        key = (name, int(version))
         with self._lock:
-            for entry in self._history.get(name, []):
-                if entry.info.version == version:
-                    return entry
-        raise WorkflowNotFound(name, version)
+            entry = self._parsed.get(key)
+        if entry is not None:
+            return entry
+        try:
+            stored = self.catalog.load(KIND, name, int(version))
+        except VersionMissing:
+            raise WorkflowNotFound(name, version) from None
+        entry = Entry(parse(stored.payload["text"], file=f"{name}.yaml"), stored.info)
+        with self._lock:
+            self._parsed[key] = entry
+        return entry
+
+    def history(self, name: str) -> list[dict]:
+        return [c.to_dict() for c in self.catalog.history(KIND, name)]
 
     # ------------------------------------------------------------ changing
 
@@ -154,8 +138,8 @@ class WorkflowRegistry:
                 base_version: int | None = None) -> VersionInfo:
         """Validate ``text`` and make it the current version of ``name`` (created if new).
 
-        Raises :class:`WorkflowInvalid` (nothing changes), :class:`WorkflowConflict` when
-        ``base_version`` is stale, ``ValueError`` when the text names another workflow.
+        Raises :class:`WorkflowInvalid` (nothing changes) or :class:`WorkflowConflict` when
+        ``base_version`` is stale.
         """
         wf = parse(text, file=f"{name}.yaml")
         if wf.name != name:
@@ -164,44 +148,58 @@ class WorkflowRegistry:
         if name in RESERVED_NAMES:
             raise WorkflowInvalid([Problem(f"{name}.yaml", "workflow", *_place_of_name(text),
                                            f"{name!r} is a reserved name")])
+        try:
+            info, seq = self.catalog.save(KIND, name, {"text": wf.source}, author=author, comment=comment,
+                                          hash=_hash(wf.source), base_version=base_version)
+        except CatalogConflict as conflict:
+            raise WorkflowConflict(name, conflict.current) from None
         with self._lock:
-            current = self._history.get(name)
-            if base_version is not None:
-                now = current[-1].info.version if current else 0
-                if base_version != now:
-                    raise WorkflowConflict(name, now)
-            info = self._add(wf, author=author, comment=comment)
-            self._save_state(name)
-            return info
-
-    def rollback(self, name: str, version: int, *, author: str = "anonymous", comment: str = "") -> VersionInfo:
-        """Make an earlier version current again (as a new version, so history only grows)."""
-        old = self.version(name, version)
-        return self.replace(name, old.workflow.source, author=author,
-                            comment=comment or f"rollback to version {version}")
-
-    def _add(self, wf: Workflow, *, author: str, comment: str) -> VersionInfo:
-        entries = self._history.setdefault(wf.name, [])
-        number = entries[-1].info.version + 1 if entries else 1
-        info = VersionInfo(wf.name, number, datetime.now(timezone.utc).isoformat(timespec="milliseconds"),
-                           author, comment, _hash(wf.source))
-        entries.append(Entry(wf, info))
-        if self.data_dir is not None:
-            folder = self.data_dir / wf.name
-            folder.mkdir(parents=True, exist_ok=True)
-            (folder / f"v{number}.yaml").write_text(wf.source, encoding="utf-8")
+            self._parsed[(name, info.version)] = Entry(wf, info)
+        self._serve(name, info.version, seq)
         return info
 
-    def _save_state(self, name: str) -> None:
-        if self.data_dir is None:
+    def rollback(self, name: str, version: int, *, author: str = "anonymous", comment: str = "") -> VersionInfo:
+        """Make an earlier version current again (the pointer moves; history keeps the rollback)."""
+        self.version(name, version)  # WorkflowNotFound when there is no such version
+        info, seq = self.catalog.set_current(KIND, name, int(version), author=author,
+                                             comment=comment or f"rollback to version {version}")
+        self._serve(name, info.version, seq)
+        return info
+
+    def delete(self, name: str, *, author: str = "anonymous") -> None:
+        try:
+            seq = self.catalog.delete(KIND, name, author=author)
+        except VersionMissing:
+            raise WorkflowNotFound(name) from None
+        self._serve(name, None, seq)
+
+    def _serve(self, name: str, version: int | None, seq: int) -> None:
+        """Serve ``version`` (None: stop) unless a newer catalog change is served already."""
+        with self._lock:
+            served = self._current.get(name)
+            if served is not None and served[1] > seq:
+                return
+            if version is None:
+                self._current.pop(name, None)
+            else:
+                self._current[name] = (version, seq)
+
+    # ------------------------------------------------------------ following other processes
+
+    def sync(self, name: str) -> None:
+        """Converge to the catalog's head (parsing the new version now, not on the next run)."""
+        head = self.catalog.head(KIND, name)
+        if head is None or not head.live:
+            self._serve(name, None, head.seq if head else 1 << 62)
             return
-        folder = self.data_dir / name
-        folder.mkdir(parents=True, exist_ok=True)
-        state = {"imported_hash": self._imported.get(name),
-                 "versions": [e.info.to_dict() for e in self._history[name]]}
-        tmp = folder / "history.json.tmp"
-        tmp.write_text(json.dumps(state, indent=1), encoding="utf-8")
-        tmp.replace(folder / "history.json")
+        self.version(name, head.current)  # type: ignore[arg-type]
+        self._serve(name, head.current, head.seq)
+
+    def reconcile(self) -> None:
+        with self._lock:
+            known = set(self._current)
+        for name in sorted(known | {h.name for h in self.catalog.heads(KIND)}):
+            self.sync(name)
 
 
 def _hash(text: str) -> str:

@@ -3,10 +3,10 @@
 Why a separate module: the REST router, the CLI and tests need the same assembled object, and the
 wiring (which adapter for which module kind, which recorder) is decided in one place:
 
-- ``ros_service``/``ros_topic``: rclpy (``gateway.workflow.ros``) when ROS is there and not
-  simulated, else :class:`SimulatedRobots` (records the calls);
-- ``fire_rules``: the gateway's engine; ``ontology_value``: the teahouse ontology file
-  (``settings.streams.ontology_file``, re-read when it changes) unless a reader is injected;
+- ``ros_service``/``ros_topic``: the gateway's ROS node (``gateway.workflow.ros``) when it runs
+  one and robots are not simulated, else :class:`SimulatedRobots` (records the calls);
+- ``fire_rules``: the gateway's engine; ``ontology_value``: the gateway's knowledge base
+  (asserted and SWRL-inferred values, following every edit);
 - ``manual``: a board of human tasks (simulated humans in the demo); ``wait``: sleeping.
 Runs are recorded in the Information State (collection ``workflow_runs``) when a store is given.
 """
@@ -17,7 +17,6 @@ import collections
 import logging
 import threading
 import uuid
-from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from gateway.workflow.adapters import (
@@ -101,49 +100,23 @@ class WorkflowService:
         self.executor.close()
 
 
-def ros_available() -> bool:
-    try:
-        import rclpy  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _ontology_lookup(settings: Any) -> Callable[[str], Any] | None:
-    """Values from the teahouse ontology file the stream/ontology side uses (re-read on change)."""
-    streams = getattr(settings, "streams", None)
-    path = getattr(streams, "ontology_file", None)
-    if not path or not Path(path).is_file():
-        return None
-    from gateway.workflow.knowledge import OntologyValues
-
-    return OntologyValues(path).value
-
-
-def build_service(settings: Any, *, engine: Any = None, store: Any = None,
+def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, store: Any = None,
                   ontology_lookup: Callable[[str], Any] | None = None,
-                  ros_adapter: Adapter | None = None, load: bool = True) -> WorkflowService:
-    """Assemble the service from ``settings.workflows`` and whatever the gateway has running."""
+                  ros_modules: Adapter | None = None, seed: bool = True) -> WorkflowService:
+    """Assemble the service from ``settings.workflows`` and what the gateway runs: its catalog
+    (versions), engine (``fire_rules``), knowledge (``ontology_value``), ROS node (robot modules;
+    simulated robots without one) and Information State (runs recorded)."""
     cfg = settings.workflows
     robots: SimulatedRobots | None = None
     adapters: dict[str, Adapter] = {"wait": WaitAdapter()}
-    if cfg.simulate_robots is None:
-        simulate = ros_adapter is None and not ros_available()
-    else:
-        simulate = cfg.simulate_robots
-    if simulate:
+    simulate = ros_modules is None if cfg.simulate_robots is None else cfg.simulate_robots
+    if simulate or ros_modules is None:
         robots = SimulatedRobots()
         adapters["ros_service"] = adapters["ros_topic"] = robots
     else:
-        if ros_adapter is None:
-            from gateway.workflow.ros import RclpyAdapter
-
-            ros_adapter = RclpyAdapter()
-        adapters["ros_service"] = adapters["ros_topic"] = ros_adapter
+        adapters["ros_service"] = adapters["ros_topic"] = ros_modules
     if engine is not None:
         adapters["fire_rules"] = RulesAdapter(engine)
-    if ontology_lookup is None:
-        ontology_lookup = _ontology_lookup(settings)
     if ontology_lookup is not None:
         adapters["ontology_value"] = OntologyValueAdapter(ontology_lookup)
     manual = ManualBoard(simulate=cfg.simulate_humans)
@@ -156,8 +129,9 @@ def build_service(settings: Any, *, engine: Any = None, store: Any = None,
 
         recorder = FanOutRecorder(memory, CallableRecorder(to_store))
     executor = Executor(adapters, recorder, default_timeout=cfg.default_timeout_s)
-    registry = WorkflowRegistry(cfg.source_dir, settings.data_dir)
-    if load:
-        for problem in registry.load():
+    registry = WorkflowRegistry(catalog, cfg.source_dir)
+    if seed:
+        for problem in registry.seed():
             log.error("workflow not loaded: %s", problem)
+    registry.load()
     return WorkflowService(registry, executor, manual, robots, runs_kept=cfg.runs_kept, recorder=memory)

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from gateway.workflow.agile import TABLES, Gateway, apply, behaviour, running_gateway, scenarios
+from gateway.workflow.agile import TABLES, OwnerClient, apply, behaviour, running_gateway, scenarios
 
 SCENARIOS = scenarios()
 
 
 @pytest.fixture(scope="module")
-def gateway(tmp_path_factory) -> Gateway:
+def gateway(tmp_path_factory) -> OwnerClient:
     with running_gateway(tmp_path_factory.mktemp("agile")) as gw:
         yield gw
 

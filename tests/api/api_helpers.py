@@ -15,7 +15,8 @@ def make_settings(tmp: Path, **api: object) -> Settings:
     rules_dir = tmp / "rules"
     rules_dir.mkdir(parents=True, exist_ok=True)
     return Settings.model_validate(
-        {"data_dir": str(tmp / "var"), "engine": {"rules_dir": str(rules_dir)}, "api": api}
+        {"data_dir": str(tmp / "var"), "engine": {"rules_dir": str(rules_dir)}, "api": api,
+         "streams": {"queries_dir": None}}  # no reception rule set here for the shipped query's binding
     )
 
 

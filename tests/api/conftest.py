@@ -1,4 +1,5 @@
-"""Fixtures of the REST gateway tests: one real engine (JVM + Drools) per test session, apps over it."""
+"""Fixtures of the REST gateway tests: one real gateway (JVM + Drools + Information State), built
+through the one composition root, per test session; apps over it."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from fastapi.testclient import TestClient
 from gateway.config import Settings
 
 from api_helpers import ServerThread, make_settings
+from gw_testing import built_gateway
 
 
 @pytest.fixture(scope="session")
@@ -18,17 +20,19 @@ def api_settings(tmp_path_factory: pytest.TempPathFactory) -> Settings:
 
 
 @pytest.fixture(scope="session")
-def engine(api_settings: Settings):
-    from gateway.engine import Engine
-
-    return Engine(api_settings)
+def api_gateway(api_settings: Settings, mongo, tmp_path_factory: pytest.TempPathFactory):
+    with built_gateway(api_settings, mongo, tmp_path_factory.mktemp("api-store")) as gateway:
+        yield gateway
 
 
 @pytest.fixture(scope="session")
-def client(api_settings: Settings, engine) -> Iterator[TestClient]:
-    from gateway.api.app import create_app
+def engine(api_gateway):
+    return api_gateway.engine
 
-    with TestClient(create_app(api_settings, engine)) as c:
+
+@pytest.fixture(scope="session")
+def client(api_gateway) -> Iterator[TestClient]:
+    with TestClient(api_gateway.app) as c:
         yield c
 
 
@@ -36,21 +40,17 @@ TOKENS = "tok-author:author:alice,tok-caller:caller:bob"
 
 
 @pytest.fixture(scope="session")
-def secured(api_settings: Settings, engine) -> Iterator[TestClient]:
-    """An app with auth on, over the same engine."""
-    from gateway.api.app import create_app
+def secured(api_settings: Settings, api_gateway) -> Iterator[TestClient]:
+    """An app with auth on, over the same gateway."""
+    from gateway.api.main import create_app
 
-    settings = api_settings.model_copy(
-        update={"api": api_settings.api.model_validate({"tokens": TOKENS, "basic_users": "kieserver:kiepw:caller"})}
-    )
-    with TestClient(create_app(settings, engine)) as c:
+    api = api_settings.api.model_validate({"tokens": TOKENS, "basic_users": "kieserver:kiepw:caller"})
+    with TestClient(create_app(api_gateway, api)) as c:
         yield c
 
 
 @pytest.fixture(scope="session")
-def live_server(api_settings: Settings, engine) -> Iterator[ServerThread]:
-    from gateway.api.app import create_app
-
-    server = ServerThread(create_app(api_settings, engine)).start()
+def live_server(api_gateway) -> Iterator[ServerThread]:
+    server = ServerThread(api_gateway.app).start()
     yield server
     server.stop()

@@ -1,7 +1,7 @@
 """Fuzzing every operation of /openapi.json with schemathesis: no answer may be a 5xx.
 
-Runs on its own engine (own version store) so random deletes/deploys cannot touch other tests'
-rule sets; the JVM is the session's one.
+Runs on its own gateway (own database) so random deletes/deploys cannot touch other tests' rule
+sets; the JVM and the database server are the session's.
 """
 
 from __future__ import annotations
@@ -12,21 +12,18 @@ from hypothesis import HealthCheck, given, settings
 from schemathesis.checks import not_a_server_error
 
 from api_helpers import files, make_settings
+from gw_testing import built_gateway
 
 TOKEN = "fuzz-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}  # a valid author token, so requests get past auth
 
 
 @pytest.fixture(scope="module")
-def fuzz_schema(tmp_path_factory):
-    from gateway.api.app import create_app
-    from gateway.engine import Engine
-
+def fuzz_schema(tmp_path_factory, mongo):
     fuzz_settings = make_settings(tmp_path_factory.mktemp("fuzz"), tokens=f"{TOKEN}:author:fuzzer")
-    engine = Engine(fuzz_settings)
-    engine.deploy("fuzz", files("f1"))  # something real to hit besides random names
-    app = create_app(fuzz_settings, engine, include_optional=False)
-    return schemathesis.openapi.from_asgi("/openapi.json", app)
+    with built_gateway(fuzz_settings, mongo, tmp_path_factory.mktemp("fuzz-store")) as gateway:
+        gateway.engine.deploy("fuzz", files("f1"))  # something real to hit besides random names
+        yield schemathesis.openapi.from_asgi("/openapi.json", gateway.app)
 
 
 FUZZ = settings(max_examples=25, deadline=None, derandomize=True, database=None,

@@ -125,19 +125,26 @@ def test_rollback_and_delete(client):
     assert client.delete("/api/rulesets/gone").status_code == 404
 
 
-def test_decisions_record_fires(client, deployed):
-    client.post("/api/rulesets/rest/fire", json={"facts": FACTS})
-    recent = client.get("/api/decisions", params={"limit": 1, "ruleset": "rest", "kind": "fire"}).json()
+def test_decisions_record_fires(client, deployed, api_gateway):
+    fired = client.post("/api/rulesets/rest/fire", json={"facts": FACTS}, headers={"X-Request-ID": "req-42"}).json()
+    assert fired["decision_id"]
+    api_gateway.store.flush()
+    recent = client.get("/api/decisions", params={"limit": 1, "ruleset": "rest", "origin": "rest"}).json()["decisions"]
     assert len(recent) == 1
     d = recent[0]
+    assert d["decision_id"] == fired["decision_id"] and d["correlation_id"] == "req-42"
     assert d["ruleset"] == "rest" and d["version"] == 2 and d["fired"] == ["Adult", "Greet adult"]
-    assert d["actions"][0]["module"] == "say" and d["time"]
+    assert d["actions"][0]["module"] == "say" and d["at"] and d["origin"] == "rest"
+    one = client.get(f"/api/decisions/{fired['decision_id']}").json()
+    assert one["facts"] == FACTS and one["outcomes"] == []
+    assert client.get("/api/decisions/000000000000000000000000").status_code == 404
+    assert client.get("/api/decisions", params={"cursor": "nope"}).status_code == 422
 
 
 def test_health_and_metrics(client, deployed):
     h = client.get("/health").json()
     assert h["status"] == "ok" and h["engine"]["rulesets"]["rest"] == 2
-    assert h["store"]["status"] == "not configured"
+    assert h["store"]["status"] == "ok" and h["sync"]["status"] == "ok"
     client.post("/api/rulesets/rest/fire", json={"facts": FACTS})
     text = client.get("/metrics").text
     assert 'printeps_fires_total{outcome="ok",ruleset="rest"}' in text
@@ -172,13 +179,12 @@ def test_openapi_docs(client):
     assert client.get("/docs").status_code == 200
 
 
-def test_fire_in_a_worker_thread_when_not_inline(api_settings, engine, deployed):
+def test_fire_in_a_worker_thread_when_not_inline(api_settings, api_gateway, deployed):
     from fastapi.testclient import TestClient
 
-    from gateway.api.app import create_app
+    from gateway.api.main import create_app
 
-    settings = api_settings.model_copy(update={"api": api_settings.api.model_copy(update={"inline_fire": False})})
-    with TestClient(create_app(settings, engine, include_optional=False)) as c:
+    with TestClient(create_app(api_gateway, api_settings.api.model_copy(update={"inline_fire": False}))) as c:
         r = c.post("/api/rulesets/rest/fire", json={"facts": FACTS})
         assert r.status_code == 200 and r.json()["version"] == 2
         assert c.post("/api/rulesets/rest/fire", json={"facts": [{"type": "Dragon"}]}).status_code == 422

@@ -1,4 +1,4 @@
-"""Unit tests of the HTTP edge's plain parts: KIE translation, auth, JSON limits, diffs, decisions."""
+"""Unit tests of the HTTP edge's plain parts: KIE translation, auth, JSON limits, diffs, the decision record's document."""
 
 from __future__ import annotations
 
@@ -7,13 +7,12 @@ import asyncio
 import pytest
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBasicCredentials
 
-from gateway.api import kie_server as kie
+from gateway.api.routes import kie_server as kie
 from gateway.api.auth import Authenticator
-from gateway.api.decisions import DecisionLog
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import BadBody, json_depth_ok, parse_json
 from gateway.api.limits import BodyLimit
-from gateway.api.rulesets import facts_from_body, file_diffs
+from gateway.api.routes.rulesets import facts_from_body, file_diffs
 from gateway.config import ApiSettings, load_settings
 
 
@@ -100,17 +99,6 @@ def test_file_diffs_only_changed_files():
     out = file_diffs({"a.drl": "x\ny\n", "b.drl": "same\n"}, {"a.drl": "x\nz\n", "b.drl": "same\n", "c.drl": "new\n"}, 1, 2)
     assert set(out) == {"a.drl", "c.drl"}
     assert "-y" in out["a.drl"] and "+z" in out["a.drl"] and "v1/a.drl" in out["a.drl"]
-
-
-def test_decision_log_is_bounded_and_newest_first():
-    log = DecisionLog(3)
-    for i in range(5):
-        log.on_engine_event("fire", {"ruleset": "r" if i % 2 else "s", "version": i,
-                                     "fired": [{"rule": f"R{i}"}], "actions": []})
-    recent = log.recent(10)
-    assert [d["version"] for d in recent] == [4, 3, 2]
-    assert recent[0]["fired"] == ["R4"]
-    assert [d["version"] for d in log.recent(10, ruleset="r")] == [3]
 
 
 def test_kie_command_parsing():

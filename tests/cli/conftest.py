@@ -12,6 +12,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "api"))
 
 from api_helpers import BROKEN, ServerThread, files, make_settings  # noqa: E402
+from gw_testing import built_gateway  # noqa: E402
 
 TOKENS = "cli-author:author:carol,cli-caller:caller:dave"
 
@@ -35,13 +36,10 @@ def cli_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def server(cli_home: Path) -> Iterator[ServerThread]:
-    """A gateway with auth on (its own version store), serving over real HTTP."""
-    from gateway.api.app import create_app
-    from gateway.engine import Engine
-
+def server(cli_home: Path, mongo) -> Iterator[ServerThread]:
+    """A gateway with auth on (its own database), serving over real HTTP."""
     settings = make_settings(cli_home / "server", tokens=TOKENS)
-    app = create_app(settings, Engine(settings))
-    srv = ServerThread(app).start()
-    yield srv
-    srv.stop()
+    with built_gateway(settings, mongo, cli_home / "server") as gateway:
+        srv = ServerThread(gateway.app).start()
+        yield srv
+        srv.stop()

@@ -202,9 +202,11 @@ def test_failed_deploy_changes_nothing(engine, simple_files):
     assert engine.fire("t", FIVE_FACTS).version == 1
 
 
-def test_versions_rollback_delete_and_persistence(tmp_path, simple_files):
+def test_versions_rollback_delete_and_persistence(tmp_path, simple_files, store):
+    from gateway.store.catalog import MongoCatalog
+
     settings = Settings(data_dir=str(tmp_path / "data"))
-    engine = Engine(settings)
+    engine = Engine(settings, MongoCatalog(store.db, "first-process"))
     v1 = engine.deploy("t", simple_files, author="alice", comment="first")
     changed = {**simple_files, "rules.drl": RULES.replace("Welcome. Two seats?", "Welcome! A table for two?")}
     v2 = engine.deploy("t", changed, author="bob", comment="friendlier", base_version=1)
@@ -216,7 +218,7 @@ def test_versions_rollback_delete_and_persistence(tmp_path, simple_files):
     engine.rollback("t", 1, author="alice")
     assert engine.fire("t", FIVE_FACTS).version == 1
 
-    restarted = Engine(settings)  # a new process would see the same
+    restarted = Engine(settings, MongoCatalog(store.db, "restarted"))  # a new process sees the same
     assert restarted.current("t").info.version == 1
     assert [(v.version, v.author, v.comment) for v in restarted.versions("t")] == [(1, "alice", "first"), (2, "bob", "friendlier")]
     assert restarted.version("t", 2).files == changed
@@ -354,18 +356,21 @@ def test_stateful_session_with_events_and_facts(engine):
         engine.close_session(session.id)
 
 
-def test_load_rules_dir(tmp_path, simple_files):
+def test_rules_dir_only_seeds_what_the_catalog_never_had(tmp_path, simple_files):
     rules = tmp_path / "rules"
     (rules / "good").mkdir(parents=True)
     for name, text in simple_files.items():
         (rules / "good" / name).write_text(text)
+    (rules / "bad").mkdir()
+    (rules / "bad" / "rules.drl").write_text("rule broken when then")
     engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine={"rules_dir": str(rules)}))
-    assert engine.load_rules_dir() == {"good": "deployed v1"}
-    assert engine.load_rules_dir() == {"good": "unchanged v1"}
-    (rules / "good" / "rules.drl").write_text("rule broken when then")
-    report = engine.load_rules_dir()
-    assert report["good"].startswith("failed")
-    assert engine.fire("good", FIVE_FACTS).version == 1  # the stored version keeps serving
+    report = engine.seed_from()
+    assert report["good"] == "seeded v1" and report["bad"].startswith("failed")
+    (rules / "good" / "rules.drl").write_text(RULES.replace("Welcome. Two seats?", "changed on disk"))
+    assert engine.seed_from()["good"] == "kept v1"  # files never overwrite what the store has
+    assert engine.fire("good", FIVE_FACTS).version == 1
+    engine.delete("good")
+    assert engine.seed_from()["good"] == "kept (deleted)"
 
 
 def test_listener_sees_deploys_and_fires(engine, simple_files):

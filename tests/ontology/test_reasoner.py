@@ -7,7 +7,6 @@ from pathlib import Path
 
 import jpype
 import pytest
-from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 from gateway.ontology import Reasoner, ReasonerError
@@ -26,7 +25,7 @@ def files(tmp_path) -> tuple[Path, Path]:
 
 @pytest.fixture()
 def reasoner(files) -> Reasoner:
-    return Reasoner(*files)
+    return Reasoner.from_files(*files)
 
 
 def group_at_entrance(size: int, ages: tuple[int, ...] = ()) -> dict:
@@ -116,28 +115,19 @@ def test_drools_still_fires_next_to_pellet(reasoner, tmp_path):
     assert [a["params"]["text"] for a in result.to_dict()["actions"]] == ["pong"]
 
 
-def test_post_reason_endpoint(files, settings_for_api):
-    from gateway.api import streams
+def test_post_reason_endpoint(files, mongo, tmp_path):
+    from gateway.config import Settings
+    from gw_testing import built_gateway
 
-    svc = streams.build_services(settings_for_api)
-    streams.configure(svc)
-    try:
-        app = FastAPI()
-        app.include_router(streams.router)
-        client = TestClient(app)
+    onto, swrl = files
+    settings = Settings.model_validate({"data_dir": str(tmp_path / "d"), "engine": {"rules_dir": str(tmp_path / "r")},
+                                        "streams": {"ontology_file": str(onto), "swrl_file": str(swrl),
+                                                    "queries_dir": None}})
+    with built_gateway(settings, mongo, tmp_path) as gateway:
+        client = TestClient(gateway.app)
         r = client.post("/api/reason", json=group_at_entrance(2))
         assert r.status_code == 200 and inferred(r.json(), "greeting") == {"pepper1": "Welcome. Two seats?"}
         r = client.post("/api/reason", content="printeps:x a", headers={"content-type": "text/turtle"})
         assert r.status_code == 422 and r.json()["where"] == "body"
         r = client.post("/api/reason", json={"individuals": [{"id": "x", "types": ["Nope"]}]})
         assert r.status_code == 422 and r.json()["where"] == "individuals[0].types[0]"
-    finally:
-        streams.configure(None)
-
-
-@pytest.fixture()
-def settings_for_api(files):
-    from gateway.config import Settings, StreamSettings
-
-    onto, swrl = files
-    return Settings(streams=StreamSettings(ontology_file=str(onto), swrl_file=str(swrl), queries_dir=None))

@@ -1,4 +1,5 @@
-"""Unit tests of the plain-Python core: readings, detector, scenario files, dispatcher policy."""
+"""Unit tests of the plain-Python core: readings, entry detection on the stream engine, scenario
+files, dispatcher policy, robot positions."""
 
 from __future__ import annotations
 
@@ -6,7 +7,6 @@ import math
 
 import pytest
 
-from gateway.ros.detector import EntryDetector
 from gateway.ros.dispatcher import ActionDispatcher
 from gateway.ros.readings import ReadingError, validate_entrance
 from gateway.ros.scenario import ScenarioError, load_scenario
@@ -37,21 +37,40 @@ def test_good_reading_passes() -> None:
     assert validate_entrance(dict(GOOD))["id"] == "e1"
 
 
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+
+
+def _detected(readings: list[dict]) -> list[str]:
+    """The customers the shipped CustomerDetectionQuery detects in these readings, mapped to RDF by
+    the shipped entrance mapping — the path a ROS entrance message takes in the gateway."""
+    import yaml
+
+    from gateway.config import StreamSettings
+    from gateway.rdf.mapping import Mapper, node_map_from_spec
+    from gateway.stream.engine import StreamEngine
+
+    mapper = Mapper({"entrance": node_map_from_spec(yaml.safe_load((ROOT / "ontology" / "mappings" / "entrance.yaml").read_text()))})
+    engine = StreamEngine(StreamSettings(queries_dir=None))
+    engine.register((ROOT / "ontology" / "queries" / "customer_detection.rq").read_text())  # 3.3 m, from the ontology
+    seen: list[str] = []
+    engine.subscribe(lambda e: seen.extend(r["s"].rsplit("/", 1)[-1] for r in e.get("rows", ())
+                                           if e["kind"] == "result"))
+    for r in readings:
+        ts = int(round(r["stamp"] * 1000))
+        engine.push("http://printeps.org/cafe/entrance", ts, mapper.map(r, ts, "entrance"))
+    return seen
+
+
 def _readings(distances, rate=1.0, cid="c1"):
-    return [{"id": f"e{i}", "stamp": i / rate, "customers": [{"id": cid, "distance": d}]}
-            for i, d in enumerate(distances)]
+    return [{"id": f"e{i}", "stamp": 100 + i / rate, "number_of_customers": 1,
+             "customers": [{"id": cid, "distance": d, "age": 30, "gender": "male"}]} for i, d in enumerate(distances)]
 
 
-def test_detector_follows_the_published_query() -> None:
-    det = EntryDetector()
-    events = [e for r in _readings([5.0, 4.0, 3.0, 2.0, 1.8]) for e in det.push(r)]
-    assert events and events[0]["s"] == "c1" and events[0]["distance"] < 3.3 and events[0]["cnt"] > 1
-    passing = EntryDetector()
-    assert not [e for r in _readings([4.5] * 8) for e in passing.push(r)]
-    leaving = EntryDetector()
-    assert not [e for r in _readings([1.0, 2.0, 3.0, 4.0, 5.0]) for e in leaving.push(r)]
-    far = EntryDetector()  # approaching but still beyond ?distance_to_entrance
-    assert not [e for r in _readings([9.0, 8.0, 7.0, 6.0]) for e in far.push(r)]
+def test_entry_detection_follows_the_published_query() -> None:
+    assert "c1" in _detected(_readings([5.0, 4.0, 3.0, 2.0, 1.8, 1.8]))
+    assert not _detected(_readings([4.5] * 8))                     # passing by
+    assert not _detected(_readings([1.0, 2.0, 3.0, 4.0, 5.0]))     # leaving
+    assert not _detected(_readings([9.0, 8.0, 7.0, 6.0, 5.5]))     # approaching, still beyond the entrance
 
 
 def test_scenario_errors_have_file_line_column_and_field(tmp_path) -> None:
@@ -66,17 +85,15 @@ def test_scenario_errors_have_file_line_column_and_field(tmp_path) -> None:
 
 
 def test_the_shipped_scenario_detects_both_groups_only() -> None:
-    from pathlib import Path
-    s = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "teahouse-reception.yaml")
-    det = EntryDetector(distance_to_entrance=s.distance_to_entrance)
-    ids = {e["s"] for r in s.readings() for e in det.push(r)}
-    assert ids == {"g1a", "g1b", "g3a", "g3b", "g3c"}
+    s = load_scenario(ROOT / "scenarios" / "teahouse-reception.yaml")
+    assert s.distance_to_entrance == 3.3  # as in the ontology the query binds it from
+    assert set(_detected(list(s.readings()))) == {"g1a", "g1b", "g3a", "g3b", "g3c"}
 
 
 def test_dispatcher_retries_a_bounded_number_of_times() -> None:
     calls = []
 
-    def caller(service, kind, params, timeout_s):
+    def caller(service, type_name, params, timeout_s):
         calls.append(service)
         return "timeout", "no answer"
 
@@ -86,3 +103,14 @@ def test_dispatcher_retries_a_bounded_number_of_times() -> None:
     assert d.dispatch({"module": "say", "params": {"robot": "nao", "text": "x"}})["status"] == "unsupported"
     assert "notify_staff" in d.dispatch({"module": "notify_staff", "params": {}})["message"]
     assert len(calls) == 3
+
+
+def test_robot_positions_follow_successful_moves() -> None:
+    from gateway.ros.robots import RobotStates
+
+    robots = RobotStates({"pepper": "counter"})
+    assert robots.facts() == [{"type": "Robot", "id": "pepper", "position": "counter"}]
+    robots.on_outcome({"status": "timeout", "action": {"module": "move", "params": {"robot": "pepper", "location": "entrance"}}})
+    assert robots.position("pepper") == "counter"
+    robots.on_outcome({"status": "ok", "action": {"module": "move", "params": {"robot": "pepper", "location": "entrance"}}})
+    assert robots.position("pepper") == "entrance"

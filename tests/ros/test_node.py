@@ -1,4 +1,5 @@
-"""The gateway node with real rclpy nodes over loopback, a real engine and a real store."""
+"""The gateway's ROS node, built by the one composition root, with real rclpy nodes over loopback,
+a real engine and a real Information State: topic → RDF → window → binding → rules → robot."""
 
 from __future__ import annotations
 
@@ -8,58 +9,83 @@ from pathlib import Path
 
 import pytest
 
-from gateway.ros.convert import dict_to_entrance
-from gateway.ros.node import GatewayNode
+from gateway.ros.convert import dict_to_entrance, to_dict
 from gateway.ros.runtime import RosRuntime
 from gateway.ros.scenario import load_scenario
 from gateway.ros.sim_robot import RobotSim
 from gateway.ros.sim_sensor import EntranceSensorSim
-from gateway.ros.stages import pipeline_factory
 
+from gw_testing import built_gateway
 from ros_helpers import wait_for
 
 pytestmark = pytest.mark.ros
 SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "teahouse-reception.yaml"
 
 
-def start_gateway(rt: RosRuntime, settings, store, rules) -> GatewayNode:
-    return rt.make(GatewayNode, settings.ros, pipeline_factory(settings, store, rules), rules=rules, store=store)
+def ros_gateway(settings, mongo, folder, domain_id):
+    settings.ros.domain_id = domain_id
+    return built_gateway(settings, mongo, folder, ros=True)
 
 
-def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_id, settings, store,
-                                                                        engine_rules) -> None:
-    with RosRuntime(domain_id=domain_id) as rt:
+def entrance_message(reading: dict) -> dict:
+    """A scenario reading as the dict the node makes of a real Entrance message."""
+    return to_dict(dict_to_entrance(reading))
+
+
+def handle(gateway, reading: dict) -> None:
+    """Feed one reading through the ingress of the ``entrance`` subscription (as the node does)."""
+    sub = gateway.settings.ros.subscriptions[0]
+    assert sub.topic == "entrance"
+    gateway.ros.ingress.handle(sub, entrance_message(reading))
+
+
+def _one_group(customers=("a", "b")):
+    """Readings that complete a detection of a pair walking up (1 Hz, like the papers)."""
+    return [{"id": f"e{i}", "stamp": 1000.0 + i,
+             "customers": [{"id": c, "distance": d, "age": 30, "gender": "female"} for c in customers]}
+            for i, d in enumerate([5.0, 4.0, 3.0, 2.0, 1.8, 1.8])]
+
+
+def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_id, settings, mongo, tmp_path) -> None:
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway, RosRuntime(domain_id=domain_id) as rt:
         robot = rt.make(RobotSim, "pepper")
-        gw = start_gateway(rt, settings, store, engine_rules)
         sensor = rt.make(EntranceSensorSim, load_scenario(SCENARIO), speed=4.0)
         sensor.start()
         assert sensor.done.wait(30)
-        assert wait_for(lambda: gw.queue.empty() and len(robot.calls) >= 8, 20), robot.calls
+        assert wait_for(lambda: gateway.ros.idle() and len(robot.calls) >= 8, 20), robot.calls
         wait_for(lambda: False, 0.5)
-    said = [c["text"] for c in robot.calls if c["service"] == "speak"]
-    assert said == ["Welcome. Two seats?", "Welcome. Three seats?"]
-    seq = [(c["service"], c.get("location") or c.get("text") or c.get("name")) for c in robot.calls]
-    first = seq[: seq.index(("speak", "Welcome. Three seats?"))]
-    assert first[0] == ("move_to", "entrance") and ("speak", "Welcome. Two seats?") in first
-    assert first.index(("speak", "Welcome. Two seats?")) < first.index(("move_to", "table for two"))
-    rest = seq[len(first) - 1:]
-    assert rest[0] == ("move_to", "entrance") and rest[-1] == ("move_to", "table for four")
-    # the Information State holds every step
-    assert store.count("sensor_messages") == sensor.published
-    assert store.count("rdf_events") == sensor.published
-    assert store.count("query_results") >= 5
-    firings = store.query("rule_firings", newest_first=False)
-    assert len(firings) == 2 and firings[0]["version"] >= 1 and firings[0]["facts"][0]["type"] == "Entrance"
-    assert store.count("actions") == len(robot.calls)
-    assert {d["status"] for d in store.query("actions", limit=100)} == {"ok"}
+        store = gateway.store
+        assert store.flush()
+        said = [c["text"] for c in robot.calls if c["service"] == "speak"]
+        assert said == ["Welcome. Two seats?", "Welcome. Three seats?"]
+        seq = [(c["service"], c.get("location") or c.get("text") or c.get("name")) for c in robot.calls]
+        first = seq[: seq.index(("speak", "Welcome. Three seats?"))]
+        assert first[0] == ("move_to", "entrance") and ("speak", "Welcome. Two seats?") in first
+        assert first.index(("speak", "Welcome. Two seats?")) < first.index(("move_to", "table for two"))
+        rest = seq[len(first) - 1:]
+        assert rest[0] == ("move_to", "entrance") and rest[-1] == ("move_to", "table for four")
+        # the Information State holds every step, and every robot action is linked to its decision
+        assert store.count("sensor_messages") == sensor.published
+        assert store.count("rdf_events") == sensor.published
+        assert store.count("query_results") >= 2
+        decisions, _ = gateway.decisions.find(origin="stream")
+        assert len(decisions) == 2 and all(d["ruleset"] == "reception" for d in decisions)
+        entrance = [f for f in decisions[-1]["facts"] if f["type"] == "Entrance"]
+        assert entrance == [{"type": "Entrance", "id": "entrance", "number_of_customers": 2}]
+        assert store.count("actions") == len(robot.calls)
+        first_decision = gateway.decisions.get(decisions[-1]["decision_id"])
+        assert [o["status"] for o in first_decision["outcomes"]] == ["ok"] * len(first_decision["actions"])
+        # the same windows are the REST API's: the ROS-fed query shows them
+        info = gateway.streams.query_info("CustomerDetectionQuery")
+        assert info["stats"]["windows"] > 0 and info["stats"]["rule_fires"] == 2
 
 
-def test_bad_sensor_values_are_rejected_recorded_and_do_not_stop_the_node(domain_id, settings, store,
-                                                                          engine_rules) -> None:
-    with RosRuntime(domain_id=domain_id) as rt:
-        gw = start_gateway(rt, settings, store, engine_rules)
+def test_bad_sensor_values_are_rejected_recorded_and_do_not_stop_the_node(domain_id, settings, mongo,
+                                                                          tmp_path) -> None:
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway, RosRuntime(domain_id=domain_id) as rt:
         from rclpy.node import Node
         from printeps_interfaces.msg import Entrance
+
         pub_node = rt.make(Node, "bad_sensor")
         pub = pub_node.create_publisher(Entrance, "entrance", 100)
         assert wait_for(lambda: pub.get_subscription_count() > 0, 15)
@@ -72,79 +98,117 @@ def test_bad_sensor_values_are_rejected_recorded_and_do_not_stop_the_node(domain
         ]
         for b in bad:
             pub.publish(dict_to_entrance(b))
-        assert wait_for(lambda: store.count("sensor_messages") == 4, 15)
-        assert gw.pipeline.stats["rejected"] == 3 and gw.pipeline.stats["readings"] == 1
-    rejected = {d["reading"]["id"]: d["error"]["field"]
-                for d in store.query("sensor_messages", type="printeps/RejectedEntrance")}
+        assert wait_for(lambda: gateway.ros.stats["readings"] + gateway.ros.stats["rejected"] == 4, 15)
+        assert gateway.ros.stats["rejected"] == 3 and gateway.ros.stats["readings"] == 1
+        assert gateway.store.flush()
+        rejected = {d["message"]["id"]: d["error"]["field"]
+                    for d in gateway.store.query("sensor_messages", type="printeps/RejectedMessage")}
     assert rejected == {"neg": "customers[0].distance", "nan": "customers[0].distance",
                         "many": "number_of_customers"}
 
 
-def _one_group(customers=("a", "b")):
-    """Readings that complete a detection of a pair walking up (1 Hz, like the papers)."""
-    return [{"id": f"e{i}", "stamp": 1000.0 + i,
-             "customers": [{"id": c, "distance": d, "age": 30, "gender": "female"} for c in customers]}
-            for i, d in enumerate([5.0, 4.0, 3.0, 2.0, 1.8])]
-
-
-def test_missing_robot_service_is_retried_then_recorded(domain_id, settings, store, engine_rules) -> None:
+def test_missing_robot_service_is_retried_then_recorded(domain_id, settings, mongo, tmp_path) -> None:
     settings.ros.robots = {"pepper": "/nobody_here"}
     settings.ros.call_timeout_s = 0.3
-    with RosRuntime(domain_id=domain_id) as rt:
-        gw = start_gateway(rt, settings, store, engine_rules)
-        outcomes = [o for r in _one_group() for o in gw.pipeline.on_reading(r)]
-    assert outcomes and {o["status"] for o in outcomes} == {"no_service"}
-    assert all(o["attempts"] == 2 for o in outcomes)
-    assert store.count("actions", **{"_meta.stored_type": "printeps/Action/no_service"}) == len(outcomes)
+    settings.ros.call_retries = 1
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway:
+        for reading in _one_group():
+            handle(gateway, reading)
+        assert wait_for(gateway.ros.idle, 30)
+        assert gateway.store.flush()
+        outcomes = gateway.store.query("actions")
+        assert outcomes and {o["status"] for o in outcomes} == {"no_service"}
+        assert all(o["attempts"] == 2 and o["decision_id"] for o in outcomes)
 
 
-def test_hanging_robot_times_out_then_recorded(domain_id, settings, store, engine_rules) -> None:
+def test_hanging_robot_times_out_then_recorded(domain_id, settings, mongo, tmp_path) -> None:
     settings.ros.call_timeout_s = 0.4
     settings.ros.call_retries = 1
-    with RosRuntime(domain_id=domain_id) as robot_rt, RosRuntime(domain_id=domain_id) as rt:
+    with RosRuntime(domain_id=domain_id) as robot_rt, ros_gateway(settings, mongo, tmp_path, domain_id) as gateway:
         robot_rt.make(RobotSim, "pepper", hang_s=1.5)
-        gw = start_gateway(rt, settings, store, engine_rules)
-        assert wait_for(lambda: gw.caller.client("/pepper/speak", "Speak").service_is_ready(), 15)
-        reading = _one_group()
-        outcomes = [o for r in reading for o in gw.pipeline.on_reading(r)]
+        client = gateway.ros.caller.client("/pepper/speak", "printeps_interfaces/srv/Speak")
+        assert wait_for(client.service_is_ready, 15)
+        for reading in _one_group():
+            handle(gateway, reading)
+        assert wait_for(gateway.ros.idle, 60)
+        assert gateway.store.flush()
+        outcomes = gateway.store.query("actions", newest_first=False)
     assert outcomes and outcomes[0]["status"] == "timeout" and outcomes[0]["attempts"] == 2
     assert "did not answer within 0.4 s" in outcomes[0]["message"]
-    assert store.count("actions", **{"_meta.stored_type": "printeps/Action/timeout"}) >= 1
 
 
-def test_fire_business_rules_service(domain_id, settings, store, engine_rules) -> None:
+def test_fire_business_rules_service(domain_id, settings, mongo, tmp_path) -> None:
     from rclpy.node import Node
     from printeps_interfaces.srv import FireBusinessRules
 
     facts = [{"type": "Entrance", "id": "entrance", "number_of_customers": 1},
              {"type": "Customer", "id": "a", "entrance": "entrance", "age": 30, "gender": "male", "distance": 2.0},
              {"type": "Robot", "id": "pepper", "position": "entrance"}]
-    with RosRuntime(domain_id=domain_id) as rt:
-        start_gateway(rt, settings, store, engine_rules)
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway, RosRuntime(domain_id=domain_id) as rt:
         client = rt.make(Node, "workflow").create_client(FireBusinessRules, "fire_business_rules")
         assert client.wait_for_service(timeout_sec=15)
-        res = client.call(FireBusinessRules.Request(ruleset="reception", facts_json=json.dumps(facts)), timeout_sec=10)
-        assert res.success and res.version >= 1
+        res = client.call(FireBusinessRules.Request(ruleset="reception", facts_json=json.dumps(facts),
+                                                    request_id="greeting-run-7"), timeout_sec=10)
+        assert res.success and res.version >= 1 and res.decision_id
         assert any(a["params"].get("text", "").startswith("Welcome.") for a in json.loads(res.actions_json))
         bad = client.call(FireBusinessRules.Request(ruleset="reception", facts_json='[{"type": '), timeout_sec=10)
         assert not bad.success and json.loads(bad.error)["column"] > 1
         missing = client.call(FireBusinessRules.Request(ruleset="nope", facts_json="[]"), timeout_sec=10)
         assert not missing.success and "nope" in missing.error
+        assert gateway.store.flush()
+        decision = gateway.decisions.get(res.decision_id)
+        assert decision["origin"] == "ros" and decision["correlation_id"] == "greeting-run-7"
 
 
-def test_gateway_restart_mid_scenario_loses_nothing(domain_id, settings, store, engine_rules) -> None:
+def test_gateway_restart_mid_scenario_loses_nothing(domain_id, settings, mongo, tmp_path) -> None:
+    from gw_testing import open_test_store
+    from gateway.app import build_gateway
+
     scenario = load_scenario(SCENARIO)
     readings = list(scenario.readings(start=5000.0))
     half = len(readings) // 2
     calls = []
-    with RosRuntime(domain_id=domain_id) as robot_rt:
-        robot = robot_rt.make(RobotSim, "pepper", on_call=calls.append)
-        for part in (readings[:half], readings[half:]):  # the gateway is stopped and started in between
-            with RosRuntime(domain_id=domain_id) as rt:
-                gw = start_gateway(rt, settings, store, engine_rules)
-                assert wait_for(lambda: gw.caller.client("/pepper/speak", "Speak").service_is_ready(), 15)
-                for r in part:
-                    gw.pipeline.on_reading(dict(r))
-        assert robot is not None
-    assert store.count("sensor_messages") == len(readings)
-    assert [c["text"] for c in calls if c["service"] == "speak"] == ["Welcome. Two seats?", "Welcome. Three seats?"]
+    settings.ros.domain_id = domain_id
+    store = open_test_store(mongo, tmp_path)
+    try:
+        with RosRuntime(domain_id=domain_id) as robot_rt:
+            robot_rt.make(RobotSim, "pepper", on_call=calls.append)
+            for part in (readings[:half], readings[half:]):  # the gateway is stopped and started in between
+                gateway = build_gateway(settings, store=store, ros=True, warm_up=False)
+                try:
+                    client = gateway.ros.caller.client("/pepper/speak", "printeps_interfaces/srv/Speak")
+                    assert wait_for(client.service_is_ready, 15)
+                    for r in part:
+                        handle(gateway, dict(r))
+                    assert wait_for(gateway.ros.idle, 30)
+                finally:
+                    gateway.close()
+        assert store.flush()
+        assert store.count("sensor_messages") == len(readings)
+        assert [c["text"] for c in calls if c["service"] == "speak"] == ["Welcome. Two seats?", "Welcome. Three seats?"]
+    finally:
+        store.close()
+
+
+def test_a_rest_deploy_changes_what_the_robot_says_next(domain_id, settings, mongo, tmp_path) -> None:
+    """One gateway: a deploy through REST (the workbench's path) changes the text of the next Speak
+    request the simulated robot receives after an entrance message."""
+    from fastapi.testclient import TestClient
+
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway, RosRuntime(domain_id=domain_id) as rt:
+        robot = rt.make(RobotSim, "pepper")
+        client = gateway.ros.caller.client("/pepper/speak", "printeps_interfaces/srv/Speak")
+        assert wait_for(client.service_is_ready, 15)
+        http = TestClient(gateway.app)
+        current = http.get("/api/rulesets/reception").json()
+        files = dict(current["files"])
+        files["reception.dslr"] = files["reception.dslr"].replace("Welcome. Two seats?", "Hello, you two! A table?")
+        assert files != current["files"]
+        deployed = http.put("/api/rulesets/reception", json={"files": files, "comment": "friendlier",
+                                                              "base_version": current["version"]})
+        assert deployed.status_code == 201, deployed.text
+        for reading in _one_group():
+            handle(gateway, reading)
+        assert wait_for(lambda: any(c["service"] == "speak" for c in robot.calls), 30), robot.calls
+        said = [c["text"] for c in robot.calls if c["service"] == "speak"]
+        assert said == ["Hello, you two! A table?"]

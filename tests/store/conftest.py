@@ -22,7 +22,7 @@ def mongo(tmp_path_factory: pytest.TempPathFactory):
 @pytest.fixture
 def store(mongo: EmbeddedMongo, tmp_path: Path, request: pytest.FixtureRequest):
     s = InformationState(mongo.uri, f"t_{request.node.name[:40].replace('[', '_').replace(']', '')}",
-                         tmp_path / "spool.jsonl", backend="embedded", timeout_ms=500, retry_interval_s=0.2)
+                         tmp_path / "journal", backend="embedded", timeout_ms=500, retry_interval_s=0.2)
     yield s
     s.close()
 

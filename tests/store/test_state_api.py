@@ -5,13 +5,18 @@ from __future__ import annotations
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
-from gateway.api.state import router
+from types import SimpleNamespace
+
+from gateway.api.auth import Authenticator
+from gateway.api.routes.state import router
+from gateway.config import ApiSettings
 
 
 def make_client(store) -> TestClient:
     app = FastAPI()
     app.include_router(router)
-    app.state.store = store
+    app.state.gateway = SimpleNamespace(store=store)
+    app.state.auth = Authenticator(ApiSettings())
     return TestClient(app)
 
 
@@ -19,6 +24,7 @@ def test_filters_type_and_fields(store) -> None:
     store.record("actions", {"robot": "pepper", "seats": 2}, stored_type="printeps/Action")
     store.record("actions", {"robot": "hsr", "seats": 3}, stored_type="printeps/Action")
     store.record("actions", {"robot": "pepper"}, stored_type="printeps/Other")
+    assert store.flush()
     client = make_client(store)
     body = client.get("/api/state/actions", params={"type": "printeps/Action", "seats": "2"}).json()
     assert body["count"] == 1 and body["documents"][0]["robot"] == "pepper"

@@ -28,6 +28,7 @@ def test_record_has_meta_and_query_by_type_time_and_fields(store: InformationSta
                  stored_type="printeps/Action", inserted_by="test")
     store.record("actions", {"robot": "hsr", "module": "move"}, stored_type="printeps/Action", inserted_by="test")
     store.record("actions", {"robot": "pepper", "note": "x"}, stored_type="printeps/Other", inserted_by="test")
+    assert store.flush()  # writes are journalled first, then shipped
     docs = store.query("actions", type="printeps/Action")
     assert {d["robot"] for d in docs} == {"pepper", "hsr"}
     meta = docs[0]["_meta"]
@@ -43,6 +44,7 @@ def test_record_has_meta_and_query_by_type_time_and_fields(store: InformationSta
 def test_nested_filters_and_newest_first(store: InformationState) -> None:
     for i in range(3):
         store.record("rule_firings", {"ruleset": "reception", "result": {"count": i}}, stored_type="printeps/Firing")
+    assert store.flush()
     docs = store.query("rule_firings", filters={"result.count": 2})
     assert len(docs) == 1
     assert [d["result"]["count"] for d in store.query("rule_firings")] == [2, 1, 0]
@@ -64,6 +66,7 @@ def test_bad_input_is_a_clear_error(store: InformationState, call, message: str)
 
 def test_nan_is_stored_as_null_not_lost(store: InformationState) -> None:
     store.record("sensor_messages", {"id": "e1", "distance": math.nan}, stored_type="printeps/Entrance")
+    assert store.flush()
     assert store.query("sensor_messages", filters={"id": "e1"})[0]["distance"] is None
 
 
@@ -93,6 +96,7 @@ def _outage_under_load(store: InformationState, mongo, outage_s: float) -> None:
         stop.set()
         th.join(timeout=10)
     assert wait_for(lambda: store.health()["status"] == "ok", 30), store.health()
+    assert store.flush(30), store.health()
     assert store.count("sensor_messages") == len(written)
     assert sorted(d["seq"] for d in store.query("sensor_messages", limit=1000, newest_first=False)
                   )[: min(1000, len(written))] == list(range(min(1000, len(written))))
@@ -107,22 +111,64 @@ def test_db_outage_30s_under_load_loses_nothing(store: InformationState, mongo) 
     _outage_under_load(store, mongo, outage_s=30.0)
 
 
-def test_spool_survives_a_gateway_restart(mongo, tmp_path) -> None:
-    spool = tmp_path / "spool.jsonl"
-    s1 = InformationState(mongo.uri, "t_restart", spool, timeout_ms=300, retry_interval_s=0.2)
+def _journalled(folder) -> int:
+    return sum(len([x for x in p.read_text().splitlines() if x.strip()]) for p in folder.glob("*.jsonl"))
+
+
+def test_journal_survives_a_gateway_restart(mongo, tmp_path) -> None:
+    journal = tmp_path / "journal"
+    s1 = InformationState(mongo.uri, "t_restart", journal, timeout_ms=300, retry_interval_s=0.2)
     s1.record("actions", {"n": 1}, stored_type="printeps/Action")
+    assert s1.flush()
     mongo.stop()
     s1.record("actions", {"n": 2}, stored_type="printeps/Action")
     s1.record("actions", {"n": 3}, stored_type="printeps/Action")
     s1.close(flush_timeout_s=1)
-    assert spool.read_text().count("\n") == 2  # kept on disk, not lost
+    assert _journalled(journal) == 2  # kept on disk, not lost
     mongo.start()
-    s2 = InformationState(mongo.uri, "t_restart", spool, timeout_ms=300, retry_interval_s=0.2)
+    s2 = InformationState(mongo.uri, "t_restart", journal, timeout_ms=300, retry_interval_s=0.2)
     try:
-        assert wait_for(lambda: s2.health()["status"] == "ok", 20)
+        assert wait_for(lambda: s2.health()["status"] == "ok" and s2.health()["buffered"] == 0, 20), s2.health()
         assert sorted(d["n"] for d in s2.query("actions")) == [1, 2, 3]
+        assert _journalled(journal) == 0
     finally:
         s2.close()
+
+
+KILLED_WRITER = """
+import os, sys, time
+from gateway.store.store import InformationState
+s = InformationState("mongodb://127.0.0.1:1/?directConnection=true", "t_killed", sys.argv[1], timeout_ms=200,
+                     retry_interval_s=60)
+ids = [s.record("decisions", {"n": i}, stored_type="printeps/Decision") for i in range(5)]
+print(" ".join(ids), flush=True)
+time.sleep(600)
+"""
+
+
+def test_writes_of_a_killed_process_are_adopted_and_shipped(mongo, tmp_path) -> None:
+    """A write acknowledged by record() survives SIGKILL of its process: another process (here a
+    store over the same data dir) adopts the journal left behind and ships it, exactly once."""
+    import signal
+    import subprocess
+    import sys
+
+    journal = tmp_path / "journal"
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(journal)], stdout=subprocess.PIPE, text=True)
+    try:
+        ids = proc.stdout.readline().split()
+        assert len(ids) == 5
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    assert _journalled(journal) == 5
+    survivor = InformationState(mongo.uri, "t_killed", journal, timeout_ms=500, retry_interval_s=0.2)
+    try:
+        assert wait_for(lambda: survivor.count("decisions") == 5, 20)
+        assert sorted(str(d["_id"]) for d in survivor.query("decisions")) == sorted(ids)
+        assert wait_for(lambda: _journalled(journal) == 0, 10)
+    finally:
+        survivor.close()
 
 
 def test_full_spool_refuses_and_reports(mongo, tmp_path) -> None:
@@ -131,6 +177,7 @@ def test_full_spool_refuses_and_reports(mongo, tmp_path) -> None:
     try:
         for i in range(4):
             s.record("actions", {"n": i}, stored_type="printeps/Action")
+        assert wait_for(lambda: s.health()["last_error"], 10)
         h = s.health()
         assert h["status"] == "degraded" and h["buffered"] == 2 and h["dropped"] == 2
         assert h["last_error"]
@@ -144,6 +191,7 @@ def test_open_store_starts_the_embedded_db_and_stops_it(settings, monkeypatch) -
     try:
         assert store.health()["backend"] == "embedded"
         store.record("actions", {"a": 1}, stored_type="printeps/Action")
+        assert store.flush()
         assert store.count("actions") == 1
         proc = store.embedded.proc
     finally:

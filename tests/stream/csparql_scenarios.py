@@ -41,7 +41,7 @@ def messages(tracks: dict[str, Track], hz: float, seconds: float, t0_ms: int = 0
             d = track(t)
             if d is not None:
                 customers.append({"id": cid, "distance": d})
-        out.append((ts, {"id": "entrance1", "number_of_customers": len(customers), "has_customers": customers}))
+        out.append((ts, {"id": "entrance1", "number_of_customers": len(customers), "customers": customers}))
     return out
 
 

@@ -18,7 +18,7 @@ def n(local: str) -> NamedNode:
 
 
 def test_entrance_message_matches_the_papers_rdf_stream():
-    msg = {"id": "e1", "number_of_customers": 1, "has_customers": [{"id": "c1", "distance": 2.5, "age": 30}]}
+    msg = {"id": "e1", "number_of_customers": 1, "customers": [{"id": "c1", "distance": 2.5, "age": 30}]}
     triples = set(Mapper().map(msg, 1500, "entrance"))
     assert {
         (n("c1"), RDF_TYPE, n("Customer")),
@@ -39,7 +39,7 @@ class FakeRosMessage(SimpleNamespace):
 
 def test_ros_message_objects_are_mapped_like_dicts():
     msg = FakeRosMessage(id="e1", number_of_customers=1,
-                         has_customers=[FakeRosMessage(id="c9", distance=1.25, age=7, gender="female")])
+                         customers=[FakeRosMessage(id="c9", distance=1.25, age=7, gender="female")])
     triples = Mapper().map(msg, 10, "entrance")
     assert (n("c9_t10"), n("distance"), Literal("1.25", datatype=XSD_DECIMAL)) in triples
 
@@ -53,10 +53,10 @@ def test_generic_default_uses_field_names():
 
 
 @pytest.mark.parametrize("msg, mapping, where", [
-    ({"has_customers": [{"id": "c1"}], "number_of_customers": 1}, "entrance", "message.id"),
-    ({"id": "e", "has_customers": [{"id": "c1"}, {"distance": 1.0}]}, "entrance", "message.has_customers[1].id"),
-    ({"id": "e", "has_customers": [{"id": "c1", "distance": {"x": 1}}]}, "entrance", "message.has_customers[0].distance"),
-    ({"id": "e", "has_customers": [{"id": "c1", "distance": float("nan")}]}, "entrance", "message.has_customers[0].distance"),
+    ({"customers": [{"id": "c1"}], "number_of_customers": 1}, "entrance", "message.id"),
+    ({"id": "e", "customers": [{"id": "c1"}, {"distance": 1.0}]}, "entrance", "message.customers[1].id"),
+    ({"id": "e", "customers": [{"id": "c1", "distance": {"x": 1}}]}, "entrance", "message.customers[0].distance"),
+    ({"id": "e", "customers": [{"id": "c1", "distance": float("nan")}]}, "entrance", "message.customers[0].distance"),
     ({"id": "x"}, "nope", "mapping"),
     ({"id": "x", "l": [[1]]}, None, "message.l[0]"),
 ])

@@ -12,8 +12,6 @@ import itertools
 import os
 import shutil
 import socket
-import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,6 +20,7 @@ import pytest
 
 from gateway.config import PROJECT_ROOT, Settings
 
+from gw_testing import built_gateway
 from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, RECEPTION, TOKENS, new_page, reception_files  # noqa: F401
 
 START_TIMEOUT_S = 60
@@ -59,11 +58,9 @@ class Gateway:
 
 
 @pytest.fixture(scope="session")
-def gateway(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Gateway]:
-    import uvicorn
-
-    from gateway.api.app import create_app
-    from gateway.engine import Engine
+def gateway(tmp_path_factory: pytest.TempPathFactory, mongo) -> Iterator[Gateway]:
+    """The gateway as `printeps serve` builds it (no ROS), seeded with a copy of the reception rules."""
+    from gateway.serve import serve_in_thread
 
     root = tmp_path_factory.mktemp("workbench")
     shutil.copytree(RECEPTION, root / "rules" / "reception")
@@ -72,20 +69,11 @@ def gateway(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Gateway]:
         "engine": {"rules_dir": str(root / "rules")},
         "api": {"tokens": TOKENS},
     })
-    engine = Engine(settings)
-    engine.load_rules_dir()
-    port = _free_port()
-    server = uvicorn.Server(uvicorn.Config(create_app(settings, engine), host="127.0.0.1", port=port,
-                                           log_level="warning", lifespan="off"))
-    thread = threading.Thread(target=server.run, name="workbench-gateway", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + START_TIMEOUT_S
-    while not server.started:
-        if time.monotonic() > deadline or not thread.is_alive():
-            raise RuntimeError(f"the gateway did not start on 127.0.0.1:{port} within {START_TIMEOUT_S}s")
-        time.sleep(0.05)
-    yield Gateway(f"http://127.0.0.1:{port}", engine)
-    server.should_exit = True
+    with built_gateway(settings, mongo, root) as gw:
+        server, thread = serve_in_thread(gw.app, _free_port(), name="workbench-gateway", timeout_s=START_TIMEOUT_S)
+        yield Gateway(f"http://127.0.0.1:{server.config.port}", gw.engine)
+        server.should_exit = True
+        thread.join(timeout=10)
     thread.join(timeout=10)
 
 

@@ -2,44 +2,30 @@
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
-
 import pytest
 
 playwright_api = pytest.importorskip("playwright.sync_api")
 
-from gateway.api.app import create_app  # noqa: E402
-from gateway.config import PROJECT_ROOT, Settings  # noqa: E402
-from gateway.engine import Engine  # noqa: E402
+from gateway.config import Settings  # noqa: E402
+from gw_testing import built_gateway  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
 
 @pytest.fixture(scope="module")
-def base_url(tmp_path_factory):
-    import uvicorn
+def base_url(tmp_path_factory, mongo):
+    from gateway.serve import free_port, serve_in_thread
 
     tmp = tmp_path_factory.mktemp("wfweb")
     settings = Settings.model_validate({
         "data_dir": str(tmp / "var"), "engine": {"rules_dir": str(tmp / "rules")},
-        "workflows": {"simulate_robots": True, "simulate_humans": True},
+        "workflows": {"simulate_robots": True, "simulate_humans": True}, "streams": {"queries_dir": None},
     })
-    app = create_app(settings, Engine(settings))
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert server.started
-    yield f"http://127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(timeout=10)
+    with built_gateway(settings, mongo, tmp) as gateway:
+        server, thread = serve_in_thread(gateway.app, free_port())
+        yield f"http://127.0.0.1:{server.config.port}"
+        server.should_exit = True
+        thread.join(timeout=10)
 
 
 @pytest.fixture(scope="module")

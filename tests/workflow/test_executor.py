@@ -115,7 +115,8 @@ class StubEngine:
     def __init__(self) -> None:
         self.fired: list[tuple[str, list]] = []
 
-    def fire(self, ruleset: str, facts: list) -> dict:
+    def fire(self, ruleset: str, facts: list, **decision: object) -> dict:
+        assert decision["origin"] == "workflow" and decision["correlation_id"]  # every fire is a decision
         self.fired.append((ruleset, facts))
         return {"ruleset": ruleset, "version": 1, "fired": [], "facts": facts, "actions": [
             {"module": "say", "params": {"robot": "pepper", "text": "Welcome. ${not a template}"}},

@@ -2,25 +2,8 @@
 
 from __future__ import annotations
 
-import pytest
-
 from gateway.config import Settings
 from gateway.workflow.service import RUNS_COLLECTION, build_service
-
-embedded = pytest.importorskip("gateway.store.embedded")
-
-
-@pytest.fixture(scope="module")
-def store(tmp_path_factory):
-    from gateway.store.store import InformationState
-
-    tmp = tmp_path_factory.mktemp("wf-is")
-    db = embedded.EmbeddedMongo(tmp / "db")
-    db.start()
-    state = InformationState(db.uri, "workflow_test", tmp / "spool.jsonl", timeout_ms=2000, retry_interval_s=0.2)
-    yield state
-    state.close()
-    db.stop()
 
 
 def test_runs_and_steps_are_recorded(store, tmp_path):
@@ -32,6 +15,7 @@ def test_runs_and_steps_are_recorded(store, tmp_path):
     finally:
         service.close()
     assert result.status == "succeeded"
+    assert store.flush()
     finished = store.query(RUNS_COLLECTION, type="printeps/workflow_run_finished", filters={"run_id": result.run_id})
     assert len(finished) == 1 and finished[0]["status"] == "succeeded" and finished[0]["workflow"] == "thanking"
     steps = store.query(RUNS_COLLECTION, type="printeps/workflow_step", filters={"run_id": result.run_id},

@@ -1,4 +1,5 @@
-"""Replacing workflows while running, versions kept on disk, and the workflows/ folder as the start."""
+"""Replacing workflows while running, versions kept in the catalog (the Information State in a
+gateway), and the workflows/ folder as the seed of an empty catalog."""
 
 from __future__ import annotations
 
@@ -29,8 +30,8 @@ route: {services: [s]}
 """
 
 
-def test_replace_while_running_next_run_uses_the_new_version(tmp_path):
-    registry = WorkflowRegistry(None, tmp_path)
+def test_replace_while_running_next_run_uses_the_new_version():
+    registry = WorkflowRegistry()
     registry.replace("serve", HUMAN.replace("TEXT", "old"), author="owner")
     board, robots = ManualBoard(simulate=False), SimulatedRobots()
     ex = Executor({"manual": board, "ros_service": robots})
@@ -52,8 +53,8 @@ def test_replace_while_running_next_run_uses_the_new_version(tmp_path):
     ex.close()
 
 
-def test_invalid_replacement_changes_nothing_and_conflicts_are_detected(tmp_path):
-    registry = WorkflowRegistry(None, tmp_path)
+def test_invalid_replacement_changes_nothing_and_conflicts_are_detected():
+    registry = WorkflowRegistry()
     registry.replace("serve", HUMAN.replace("TEXT", "v1"))
     with pytest.raises(WorkflowInvalid) as info:
         registry.replace("serve", HUMAN.replace("module: say", "module: shout"))
@@ -69,33 +70,35 @@ def test_invalid_replacement_changes_nothing_and_conflicts_are_detected(tmp_path
         registry.get("nope")
 
 
-def test_versions_survive_a_restart_and_rollback(tmp_path):
-    registry = WorkflowRegistry(None, tmp_path)
+def test_versions_survive_a_restart_and_rollback(store):
+    from gateway.store.catalog import MongoCatalog
+
+    registry = WorkflowRegistry(MongoCatalog(store.db, "first"))
     registry.replace("serve", HUMAN.replace("TEXT", "v1"), author="a")
     registry.replace("serve", HUMAN.replace("TEXT", "v2"), author="b", comment="louder")
-    again = WorkflowRegistry(None, tmp_path)
+    again = WorkflowRegistry(MongoCatalog(store.db, "restarted"))
     again.load()
     assert [(v.version, v.author) for v in again.versions("serve")] == [(1, "a"), (2, "b")]
     assert "v2" in again.get("serve").source
-    assert again.rollback("serve", 1).version == 3
+    assert again.rollback("serve", 1).version == 1  # the pointer moves back, as for rule sets
     assert "v1" in again.get("serve").source
+    registry.sync("serve")  # what the change follower does in the other process
+    assert "v1" in registry.get("serve").source
+    assert [h["event"] for h in again.history("serve")] == ["deploy", "deploy", "rollback"]
 
 
-def test_source_folder_is_imported_once_and_again_when_a_file_changes(tmp_path, teahouse_dir):
+def test_source_folder_only_seeds_what_the_catalog_never_had(tmp_path, teahouse_dir):
     source = tmp_path / "workflows"
     shutil.copytree(teahouse_dir, source)
-    registry = WorkflowRegistry(source, tmp_path / "data")
-    assert registry.load() == []
+    registry = WorkflowRegistry(source_dir=source)
+    assert registry.seed() == []
     assert len(registry.names()) == 7
     registry.replace("thanking", registry.get("thanking").source.replace("Please come again.", "See you!"))
-    restarted = WorkflowRegistry(source, tmp_path / "data")
-    restarted.load()
-    assert "See you!" in restarted.get("thanking").source  # the live edit is kept over the unchanged file
     path = source / "7_thanking.yaml"
     path.write_text(path.read_text().replace("Thank you very much.", "Thank you!"))
     (source / "broken.yaml").write_text("workflow: broken\nmodules: {}\n")
-    restarted = WorkflowRegistry(source, tmp_path / "data")
-    problems = restarted.load()
+    problems = registry.seed()
     assert problems and all(p.file.endswith("broken.yaml") for p in problems)
-    assert "Thank you!" in restarted.get("thanking").source
-    assert restarted.current("thanking").info.author == "filesystem"
+    assert "See you!" in registry.get("thanking").source  # the live edit is kept over the changed file
+    assert "Thank you!" not in registry.get("thanking").source
+    assert registry.current("thanking").info.author == "anonymous"

@@ -127,22 +127,17 @@ def test_generated_greeting_fires_rules_in_the_gateway_node(pepper, ros_env, tmp
     assert dispatched and all(s["status"] == "ok" for s in dispatched)
 
 
-def test_executor_calls_robots_over_rclpy(pepper, ros_env, tmp_path, monkeypatch):
-    from gateway.workflow.adapters import OntologyValueAdapter
-    from gateway.workflow.executor import Executor
-    from gateway.workflow.ros import RclpyAdapter
+def test_workflows_call_robots_through_the_gateway_node(pepper, ros_env, tmp_path, mongo):
+    """A gateway built with its ROS node runs workflows against real robot services through that
+    node (one ROS context per gateway), with ontology values from its knowledge base."""
+    from gateway.config import Settings
+    from gw_testing import built_gateway
 
-    monkeypatch.setenv("ROS_DOMAIN_ID", ros_env["ROS_DOMAIN_ID"])
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    adapter = RclpyAdapter("workflow_test")
-    ex = Executor({"ros_service": adapter, "ros_topic": adapter,
-                   "ontology_value": OntologyValueAdapter({"pepper1.robotToTableDistance": 0.7}.get)}, default_timeout=20)
-    try:
-        result = ex.run(load(PROJECT_ROOT / "workflows" / "3_take_order.yaml"))
+    settings = Settings.model_validate({"data_dir": str(tmp_path / "var"), "workflows": {"simulate_robots": False},
+                                        "ros": {"domain_id": int(ros_env["ROS_DOMAIN_ID"])}})
+    with built_gateway(settings, mongo, tmp_path, ros=True) as gateway:
+        result = gateway.workflows.run("take_order")
         assert result.status == "succeeded", result.error
-        assert robot_calls(pepper) == [("move_to", (3.3, 2.0)), ("speak", "What would you like to drink?"),
-                                       ("speak", "2 green tea, certainly.")]
+        assert robot_calls(pepper) == [("move_to", (3.5, 2.0)), ("speak", "What would you like to drink?"),
+                                       ("speak", "2 green tea, certainly.")]  # 4.0 - pepper1.robotToTableDistance 0.5
         assert result.steps[-1].output == {"published": "/teahouse/orders"}
-    finally:
-        ex.close()
-        adapter.close()

@@ -8,25 +8,22 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
-from gateway.api.app import create_app
 from gateway.config import PROJECT_ROOT, Settings
-from gateway.engine import Engine
+
+from gw_testing import built_gateway
 
 
 @pytest.fixture(scope="module")
-def client(tmp_path_factory):
+def client(tmp_path_factory, mongo):
     tmp = tmp_path_factory.mktemp("wfapi")
     settings = Settings.model_validate({
         "data_dir": str(tmp / "var"),
         "engine": {"rules_dir": str(PROJECT_ROOT / "rules" / "drl")},
         "workflows": {"simulate_robots": True, "simulate_humans": True},
     })
-    engine = Engine(settings)
-    engine.load_rules_dir()
-    app = create_app(settings, engine)
-    with TestClient(app) as test_client:
-        yield test_client
-    app.state.workflows.close()
+    with built_gateway(settings, mongo, tmp) as gateway:
+        with TestClient(gateway.app) as test_client:
+            yield test_client
 
 
 def test_list_and_read(client):
@@ -87,7 +84,7 @@ def test_replace_is_live_for_the_next_run_and_bad_edits_change_nothing(client):
 
 
 def test_background_run_and_manual_tasks(client):
-    client.app.state.workflows.manual.simulate = False
+    client.app.state.gateway.workflows.manual.simulate = False
     try:
         started = client.post("/api/workflows/serving/run", json={"wait": False})
         assert started.status_code == 202
@@ -110,7 +107,7 @@ def test_background_run_and_manual_tasks(client):
             time.sleep(0.02)
         assert result and result["status"] == "succeeded" and result["steps"][0]["output"]["by"] == "Ken"
     finally:
-        client.app.state.workflows.manual.simulate = True
+        client.app.state.gateway.workflows.manual.simulate = True
 
 
 def test_generated_code_endpoint(client):

@@ -1,5 +1,6 @@
-// Recent decisions: the last N fire requests and events, with the rules that fired and what the
-// robot was told to do. Refreshes itself while shown.
+// Recent decisions: the last N firings of the rules from every origin (REST and KIE clients, the
+// stream detectors, ROS, workflows), from the Information State, with the rules that fired and
+// what the robot was told to do. Refreshes itself while shown.
 
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
@@ -7,7 +8,10 @@ import { actionList, firedList } from "./actions.js";
 
 const REFRESH_MS = 10_000;
 
-const KIND_WORDS = { fire: "rules fired", deploy: "deployed", rollback: "rolled back", delete: "deleted" };
+const ORIGIN_WORDS = {
+  rest: "asked over REST", kie: "asked by a KIE client", stream: "detected in the sensor stream",
+  ros: "asked by a ROS workflow", workflow: "a workflow step", cli: "the command line",
+};
 
 export async function showDecisions(main, ctx) {
   const limitEl = h("select", { "aria-label": "How many" }, [20, 50, 200].map((n) => h("option", { value: n, selected: n === 50 }, `last ${n}`)));
@@ -24,7 +28,7 @@ export async function showDecisions(main, ctx) {
   fill(main, h("section", { class: "decisions" },
     h("div", { class: "title-row" }, h("h1", {}, "Recent decisions"), limitEl,
       h("button", { class: "secondary", onclick: load }, "Refresh")),
-    h("p", { class: "hint" }, "Each time the rules were asked (a fire request or an event): which rules fired and what the robot was told to do. Newest first."),
+    h("p", { class: "hint" }, "Each time the rules decided something (a request, a sensor event, a workflow step), on any gateway process: which rules fired and what the robot was told to do. Newest first."),
     bodyEl));
   await load();
   const timer = setInterval(load, REFRESH_MS);
@@ -42,7 +46,8 @@ function render(bodyEl, decisions) {
     h("tbody", {}, sorted.map((d) => h("tr", {},
       h("td", {}, when(timeOf(d))),
       h("td", {}, `${d.ruleset || "—"}${d.version !== undefined ? ` v${d.version}` : ""}`),
-      h("td", {}, KIND_WORDS[d.kind] || d.kind || "—", d.author ? ` by ${d.author}` : ""),
+      h("td", { title: d.decision_id || "" }, ORIGIN_WORDS[d.origin] || d.origin || "—",
+        d.correlation_id ? ` (${d.correlation_id})` : ""),
       h("td", {}, firedList(d.fired)),
       h("td", {}, actionList(d.actions, "Nothing.")))))));
 }

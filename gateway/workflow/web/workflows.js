@@ -152,7 +152,7 @@ async function select(name) {
   current = data;
   document.querySelectorAll("#list button").forEach((b) => b.classList.toggle("current", b.dataset.name === name));
   $("#title").textContent = data.title || data.name;
-  $("#meta").textContent = `${data.name} · version ${data.version} · ${data.updated_at} by ${data.author}` +
+  $("#meta").textContent = `${data.name} · version ${data.version} · ${data.deployed_at} by ${data.author}` +
     (data.comment ? ` · ${data.comment}` : "");
   drawWorkflow($("#workflow-view"), data.workflow_view);
   drawScenario($("#scenario-view"), data.scenario_view);

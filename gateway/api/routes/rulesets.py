@@ -15,13 +15,12 @@ import time
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path as PathParam, Query, Request
+from fastapi import APIRouter, Path as PathParam, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
-from gateway.api.jsonio import run_blocking
 
-from gateway.api.auth import Principal, author, caller
+from gateway.api.deps import Author, Caller, EngineDep, SettingsDep, correlation_id
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, read_json
+from gateway.api.jsonio import JSON, read_json, run_blocking
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"  # as gateway.engine.ruleset.check_name
 
@@ -82,86 +81,92 @@ FIRE_SCHEMA: dict[str, Any] = {
 }
 
 
-def _engine(request: Request) -> Any:
-    return request.app.state.engine
-
-
 @router.get("/api/rulesets")
-def list_rulesets(request: Request, _: Principal = Depends(caller)) -> JSON:
+def list_rulesets(engine: EngineDep, _: Caller) -> JSON:
     """The current version of each rule set: name, version, deployed_at, author, comment."""
-    return JSON([info.to_dict() for info in _engine(request).list_rulesets()])
+    return JSON([info.to_dict() for info in engine.list_rulesets()])
 
 
 @router.get("/api/rulesets/{name}")
-def get_ruleset(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+def get_ruleset(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
     """The current version with its files."""
-    return JSON(_version_dict(_engine(request).current(name)))
+    return JSON(_version_dict(engine.current(name)))
 
 
 @router.get("/api/rulesets/{name}/versions")
-def list_versions(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+def list_versions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
     """Every kept version of the rule set, oldest first."""
-    return JSON([info.to_dict() for info in _engine(request).versions(name)])
+    return JSON([info.to_dict() for info in engine.versions(name)])
 
 
 @router.get("/api/rulesets/{name}/versions/{version}")
-def get_version(
-    name: RuleSetName, version: Annotated[int, PathParam(ge=1)], request: Request, _: Principal = Depends(caller)
-) -> JSON:
+def get_version(name: RuleSetName, version: Annotated[int, PathParam(ge=1)], engine: EngineDep, _: Caller) -> JSON:
     """One version with its files."""
-    return JSON(_version_dict(_engine(request).version(name, version)))
+    return JSON(_version_dict(engine.version(name, version)))
+
+
+@router.get("/api/rulesets/{name}/history")
+def history(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
+    """Every deploy, rollback and delete of the rule set, oldest first (from any gateway process)."""
+    events = engine.history(name)
+    if not events:
+        engine.versions(name)  # 404 for a rule set that never existed
+    return JSON(events)
 
 
 @router.put("/api/rulesets/{name}", status_code=201)
-def deploy(name: RuleSetName, body: DeployBody, request: Request, who: Principal = Depends(author)) -> JSON:
-    """Compile and make live; 422 with ``errors`` (file, line, column, message) if it does not compile,
-    409 ``{"error": "base version changed", "current": n}`` if ``base_version`` is stale."""
-    info = _engine(request).deploy(
-        name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version
-    )
+def deploy(name: RuleSetName, body: DeployBody, engine: EngineDep, who: Author) -> JSON:
+    """Compile and make live on every gateway process; 422 with ``errors`` (file, line, column,
+    message) if it does not compile, 409 ``{"error": "base version changed", "current": n}`` if
+    ``base_version`` is stale."""
+    info = engine.deploy(name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version)
     return JSON({"name": info.name, "version": info.version}, status_code=201)
 
 
 @router.post("/api/rulesets/{name}/validate")
-def validate(name: RuleSetName, body: FilesBody, request: Request, _: Principal = Depends(caller)) -> JSON:
-    """Compile only: ``{"ok": bool, "errors": [...]}``; deploys nothing."""
-    errors = _engine(request).validate(name, dict(body.files))
+def validate(name: RuleSetName, body: DeployBody, engine: EngineDep, _: Caller) -> JSON:
+    """Compile only (the body a deploy takes is accepted as is): ``{"ok": bool, "errors": [...]}``."""
+    errors = engine.validate(name, dict(body.files))
     return JSON({"ok": not errors, "errors": [e.to_dict() for e in errors]})
 
 
 @router.post("/api/rulesets/{name}/expand")
-def expand(name: RuleSetName, body: FilesBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+def expand(name: RuleSetName, body: FilesBody, engine: EngineDep, _: Caller) -> JSON:
     """The DRL each ``.dslr`` file expands to: ``{"expanded": {"x.dslr": "<drl>"}}``."""
-    return JSON({"expanded": _engine(request).expand(name, dict(body.files))})
+    return JSON({"expanded": engine.expand(name, dict(body.files))})
 
 
 @router.post("/api/rulesets/{name}/rollback")
-def rollback(name: RuleSetName, body: RollbackBody, request: Request, who: Principal = Depends(author)) -> JSON:
-    """Make an earlier version current again."""
-    info = _engine(request).rollback(name, body.version, author=who.name, comment=body.comment)
+def rollback(name: RuleSetName, body: RollbackBody, engine: EngineDep, who: Author) -> JSON:
+    """Make an earlier version current again (on every gateway process)."""
+    info = engine.rollback(name, body.version, author=who.name, comment=body.comment)
     return JSON({"name": info.name, "version": info.version})
 
 
 @router.delete("/api/rulesets/{name}")
-def delete(name: RuleSetName, request: Request, _: Principal = Depends(author)) -> JSON:
-    """Undeploy the rule set (its fire endpoint answers 404 afterwards)."""
-    _engine(request).delete(name)
+def delete(name: RuleSetName, engine: EngineDep, who: Author) -> JSON:
+    """Undeploy the rule set (its fire endpoint answers 404 afterwards); its history stays."""
+    engine.delete(name, author=who.name)
     return JSON({"name": name, "deleted": True})
 
 
 @router.post("/api/rulesets/{name}/fire", openapi_extra=FIRE_SCHEMA)
-async def fire(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
-    """Fire the current version on ``facts``: ``{"version", "actions", "fired", "facts", ...}``;
-    422 naming the bad fact/field."""
+async def fire(name: RuleSetName, request: Request, _: Caller) -> JSON:
+    """Fire the current version on ``facts``: ``{"decision_id", "version", "actions", "fired", "facts",
+    ...}``; 422 naming the bad fact/field. The decision is recorded with the ``X-Request-ID`` (or
+    ``traceparent``) header as its correlation id."""
+    state = request.app.state
     body = await read_json(request)
-    facts = facts_from_body(body, request.app.state.settings.engine.max_facts)
-    metrics = request.app.state.metrics
+    facts = facts_from_body(body, state.settings.engine.max_facts)
+    metrics = state.metrics
+    engine = state.engine
+    correlation = correlation_id(request)
     start = time.perf_counter()
     try:
-        if request.app.state.settings.api.inline_fire:  # see ApiSettings.inline_fire
-            result = _engine(request).fire(name, facts)
+        if state.settings.api.inline_fire:  # see ApiSettings.inline_fire
+            result = engine.fire(name, facts, origin="rest", correlation_id=correlation)
         else:
-            result = await run_blocking(_engine(request).fire, name, facts)
+            result = await run_blocking(lambda: engine.fire(name, facts, origin="rest", correlation_id=correlation))
     except Exception:
         metrics.fire_failed(name)
         raise
@@ -196,20 +201,19 @@ def facts_from_body(body: Any, max_facts: int) -> list[dict[str, Any]]:
 
 
 @router.get("/api/rulesets/{name}/types")
-def declared_types(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+def declared_types(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
     """The fact types the rule set declares: ``{"Customer": {"id": "String", "age": "int"}}``."""
-    return JSON(_engine(request).declared_types(name))
+    return JSON(engine.declared_types(name))
 
 
 @router.get("/api/rulesets/{name}/examples")
-def examples(name: RuleSetName, request: Request, _: Principal = Depends(caller)) -> JSON:
+def examples(name: RuleSetName, engine: EngineDep, settings: SettingsDep, _: Caller) -> JSON:
     """The rule set's ``examples.json`` (``[{"name", "facts"}]``) or ``[]`` when it has none."""
-    engine = _engine(request)
     current = engine.current(name)  # 404 for unknown rule sets
     text = current.files.get("examples.json")
     source = "examples.json"
     if text is None:
-        path = Path(request.app.state.settings.engine.rules_dir) / name / "examples.json"
+        path = Path(settings.engine.rules_dir) / name / "examples.json"
         if not path.is_file():
             return JSON([])
         text, source = path.read_text(encoding="utf-8"), str(path)
@@ -223,24 +227,22 @@ def examples(name: RuleSetName, request: Request, _: Principal = Depends(caller)
 
 
 @router.post("/api/rulesets/{name}/try")
-def try_files(
-    name: RuleSetName, body: TryBody, request: Request, _: Principal = Depends(caller)
-) -> JSON:
-    """Fire undeployed text (the workbench's "try it"); 422 ``{"errors": [...]}`` if it does not compile."""
-    facts = facts_from_body({"facts": body.facts}, request.app.state.settings.engine.max_facts)
-    return JSON(_engine(request).fire_files(dict(body.files), facts).to_dict())
+def try_files(name: RuleSetName, body: TryBody, engine: EngineDep, settings: SettingsDep, _: Caller) -> JSON:
+    """Fire undeployed text (the workbench's "try it", not a decision); 422 ``{"errors": [...]}`` if
+    it does not compile."""
+    facts = facts_from_body({"facts": body.facts}, settings.engine.max_facts)
+    return JSON(engine.fire_files(dict(body.files), facts).to_dict())
 
 
 @router.get("/api/rulesets/{name}/diff")
 def diff(
     name: RuleSetName,
-    request: Request,
+    engine: EngineDep,
+    _: Caller,
     from_: Annotated[int | None, Query(alias="from", ge=1)] = None,
     to: Annotated[int | None, Query(ge=1)] = None,
-    _: Principal = Depends(caller),
 ) -> JSON:
     """Unified diff per changed file between two versions (default: previous -> current)."""
-    engine = _engine(request)
     if to is None:
         to = engine.current(name).info.version
     if from_ is None:
@@ -269,6 +271,6 @@ def _version_dict(rv: Any) -> dict[str, Any]:
 
 
 @router.get("/api/whoami")
-async def whoami(who: Principal = Depends(caller)) -> JSON:
+async def whoami(who: Caller) -> JSON:
     """The identity and role of the presented token (``anonymous``/``author`` in open mode)."""
     return JSON(who.to_dict())

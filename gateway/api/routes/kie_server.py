@@ -24,8 +24,9 @@ from typing import Any
 from fastapi import APIRouter, Depends, Request
 
 from gateway.api.auth import Principal, kie_caller
+from gateway.api.deps import correlation_id
 from gateway.api.jsonio import JSON, read_json, run_blocking
-from gateway.engine import EngineError, RuleSetNotFound
+from gateway.engine import EngineError, FireResult, RuleSetNotFound
 
 PREFIX = "/kie-server/services/rest/server"
 KIE_VERSION = "7.74.1.Final"  # the KIE Server API level these answers follow
@@ -376,10 +377,11 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
     """Run a command batch (insert, insert-elements, fire-all-rules, get-objects, dispose)."""
     body = await read_json(request)
     metrics = request.app.state.metrics
+    engine = request.app.state.engine
     try:
         commands = parse_commands(body)
         start = time.perf_counter()
-        run = await run_blocking(run_batch, request.app.state.engine, container_id, commands)
+        run = await run_blocking(run_batch, engine, container_id, commands)
     except RuleSetNotFound:
         return JSON(service_response(False, f"Container {container_id} is not instantiated."))
     except (BatchError, EngineError) as exc:
@@ -387,13 +389,16 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         metrics.errors.labels("kie_failure").inc()
         return JSON(service_response(False, f"Error calling container {container_id}: {exc}"))
     metrics.observe_fire(container_id, time.perf_counter() - start, len(run.fired))
-    if run.fired_any:
-        request.app.state.decisions.on_engine_event("fire", {
-            "ruleset": container_id, "version": run.version, "actions": run.actions, "fired": run.fired,
-            "facts": [f for f, _, _ in run.inserted], "via": "kie-server"})
     results = list(run.results)
+    headers = {"X-Ruleset-Version": str(run.version)} if run.version is not None else {}
     if run.fired_any:
+        decision = FireResult(container_id, run.version or 0, run.actions, [{"rule": r} for r in run.fired],
+                              fire_count=len(run.fired))
+        decision_id = engine.record_decision(decision, [f for f, _, _ in run.inserted], origin="kie",
+                                             correlation_id=correlation_id(request),
+                                             context={"lookup": body.get("lookup") if isinstance(body, dict) else None})
         results.append({"key": "actions", "value": run.actions})
-    headers = {"X-Ruleset-Version": str(run.version)} if run.version is not None else None
+        results.append({"key": "decision-id", "value": decision_id})
+        headers["X-Decision-Id"] = decision_id
     payload = {"execution-results": {"results": results, "facts": run.facts_out}}
     return JSON(service_response(True, f"Container {container_id} successfully called.", payload), headers=headers)

@@ -2,15 +2,16 @@
 and the workbench page ``/workbench/workflows`` (workflow view, scenario view, editor).
 
 Why thin: everything is in ``gateway.workflow``; this maps HTTP to the :class:`WorkflowService`
-kept in ``app.state.workflows``. When the app has none, one is built on first use from
-``app.state.settings``/``engine``/``store`` so the router works in any app.
+kept in the gateway (versions in the Information State, followed by every gateway process).
 
     GET  /api/workflows                        [{name, title, version, ...}]
     GET  /api/workflows/{name}                 {name, version, text, workflow_view, scenario_view}
     GET  /api/workflows/{name}/versions        [{version, updated_at, author, comment, hash}]
     POST /api/workflows/validate               {"text": yaml} -> {"valid", "problems", views}
     PUT  /api/workflows/{name}                 {"text", "comment", "base_version"} -> 201 {name, version}
-    POST /api/workflows/{name}/rollback        {"version"} -> 201 {name, version}
+    POST /api/workflows/{name}/rollback        {"version"} -> 201 {name, version} (the pointer moves back)
+    DELETE /api/workflows/{name}               stop offering it (versions and history stay)
+    GET  /api/workflows/{name}/history         deploys, rollbacks, deletes
     POST /api/workflows/{name}/run             {"inputs": {...}, "wait": true} -> the run (or 202 {run_id})
     GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id}
     GET  /api/workflows/manual, POST /api/workflows/manual/{task_id}/done {"result": {...}}
@@ -19,7 +20,6 @@ kept in ``app.state.workflows``. When the app has none, one is built on first us
 
 from __future__ import annotations
 
-import threading
 from importlib import resources
 from typing import Annotated, Any
 
@@ -28,19 +28,19 @@ from fastapi.responses import HTMLResponse, PlainTextResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.auth import Principal, author, caller
+from gateway.api.deps import gateway_of
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON
 from gateway.workflow.codegen import generate
 from gateway.workflow.diagram import scenario_view, workflow_view
 from gateway.workflow.loader import WorkflowInvalid, schema
 from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
-from gateway.workflow.service import WorkflowService, build_service
+from gateway.workflow.service import WorkflowService
 
 router = APIRouter(tags=["workflows"])
 
 WorkflowName = Annotated[str, PathParam(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=100)]
 MAX_TEXT = 1_000_000
-_build_lock = threading.Lock()
 _ASSETS = {"workflows.js": "text/javascript", "workflows.css": "text/css"}
 
 
@@ -73,16 +73,8 @@ class DoneBody(BaseModel):
 
 
 def service(request: Request) -> WorkflowService:
-    """The app's workflow service, built on first use when the app was not given one."""
-    state = request.app.state
-    existing = getattr(state, "workflows", None)
-    if existing is not None:
-        return existing
-    with _build_lock:
-        if getattr(state, "workflows", None) is None:
-            state.workflows = build_service(state.settings, engine=getattr(state, "engine", None),
-                                            store=getattr(state, "store", None))
-    return state.workflows
+    """The gateway's workflow service."""
+    return gateway_of(request).workflows
 
 
 def _entry(svc: WorkflowService, name: str) -> Any:
@@ -197,6 +189,23 @@ def rollback(name: WorkflowName, body: RollbackBody, request: Request, who: Prin
     except WorkflowNotFound as exc:
         raise ApiError(404, str(exc), name=name) from None
     return JSON({"name": info.name, "version": info.version}, status_code=201)
+
+
+@router.delete("/api/workflows/{name}")
+def delete(name: WorkflowName, request: Request, who: Principal = Depends(author)) -> JSON:
+    try:
+        service(request).registry.delete(name, author=who.name)
+    except WorkflowNotFound as exc:
+        raise ApiError(404, str(exc), name=name) from None
+    return JSON({"name": name, "deleted": True})
+
+
+@router.get("/api/workflows/{name}/history")
+def history(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -> JSON:
+    events = service(request).registry.history(name)
+    if not events:
+        raise ApiError(404, f"workflow {name!r} not found", name=name)
+    return JSON(events)
 
 
 @router.post("/api/workflows/{name}/run")

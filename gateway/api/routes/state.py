@@ -1,7 +1,7 @@
 """GET /api/state/{collection}: read the Information State over REST, with filters.
 
 Why a thin router: all querying lives in gateway.store; this only turns query parameters into a
-store query. The store comes from ``app.state.store`` (set by whoever creates the app).
+store query.
 
     GET /api/state/actions?type=printeps/Action&since=2026-11-22T00:00:00Z&limit=20&robot=pepper
 Reserved parameters: type, since, until (ISO-8601), limit (1..1000), order (newest|oldest).
@@ -17,6 +17,7 @@ from typing import Any
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.encoders import jsonable_encoder
 
+from gateway.api.deps import Caller, StoreDep
 from gateway.store.store import MAX_LIMIT, StoreError, StoreUnavailable
 
 router = APIRouter(prefix="/api/state", tags=["information-state"])
@@ -46,13 +47,10 @@ def _filter_value(raw: str) -> Any:
 
 
 @router.get("/{collection}")
-def read_state(request: Request, collection: str, type: str | None = None, since: str | None = None,
-               until: str | None = None, limit: int = Query(100, ge=1, le=MAX_LIMIT),
+def read_state(request: Request, collection: str, store: StoreDep, _: Caller, type: str | None = None,
+               since: str | None = None, until: str | None = None, limit: int = Query(100, ge=1, le=MAX_LIMIT),
                order: str = Query("newest", pattern="^(newest|oldest)$")) -> dict[str, Any]:
     """Documents of one collection, newest first by default, with ``_meta`` and ``_id`` as a string."""
-    store = getattr(request.app.state, "store", None)
-    if store is None:
-        raise HTTPException(503, "the Information State is not configured on this gateway")
     filters = {k: _filter_value(v) for k, v in request.query_params.items() if k not in RESERVED}
     try:
         docs = store.query(collection, type=type, since=_time("since", since), until=_time("until", until),

@@ -1,0 +1,67 @@
+"""``create_app(gateway)``: the REST application of one built gateway.
+
+Why it builds nothing: the services (engine, knowledge, streams, workflows, the Information State)
+come from :func:`gateway.app.build_gateway`; this only puts the explicit list of routers, the
+error handlers, the body limit and the metrics around them. Routes get what they need through
+:mod:`gateway.api.deps`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.responses import RedirectResponse
+
+from gateway.api.auth import Authenticator
+from gateway.api.errors import install_error_handlers
+from gateway.api.limits import BodyLimit
+from gateway.api.metrics import Metrics
+from gateway.config import ApiSettings
+from gateway.api.routes import (
+    decisions, health, kie_server, knowledge, mappings, metrics, rulesets, state, streams, workflows,
+)
+from gateway.workbench import router as workbench
+
+log = logging.getLogger(__name__)
+
+ROUTERS = (
+    rulesets.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge.router,
+    workflows.router, state.router, health.router, metrics.router, workbench.router,
+)
+
+DESCRIPTION = """Manage and fire PRINTEPS business rule sets (Drools), continuous queries, workflows and
+the teahouse knowledge over HTTP.
+
+Auth: `Authorization: Bearer <token>` (roles `author`, `caller`); KIE Server endpoints also accept
+HTTP basic auth. With no tokens configured the API runs open (dev mode). Errors are JSON:
+`{"error": "...", ...}`."""
+
+
+def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
+    """The app over ``gateway`` (a :class:`gateway.app.Gateway`); ``api`` overrides the gateway's
+    API settings (auth, limits) for this app only."""
+    settings = gateway.settings if api is None else gateway.settings.model_copy(update={"api": api})
+    app = FastAPI(title="PRINTEPS gateway", version="0.1.0", description=DESCRIPTION)
+    app.state.gateway = gateway
+    app.state.settings = settings
+    app.state.engine = gateway.engine  # the fire route reads it directly: no dependency on the hot path
+    app.state.auth = Authenticator(settings.api)
+    app.state.metrics = Metrics()
+    app.state.stream_posts = threading.BoundedSemaphore(settings.streams.max_pending_posts)
+    app.state.rejected_stream_posts = 0
+    gateway.engine.add_listener(app.state.metrics.on_engine_event)
+    install_error_handlers(app)
+    for router in ROUTERS:
+        app.include_router(router)
+
+    @app.get("/", include_in_schema=False)
+    def root() -> RedirectResponse:
+        return RedirectResponse("/workbench", status_code=307)
+
+    app.add_middleware(BodyLimit, max_bytes=settings.api.max_body_bytes)
+    if settings.api.is_open:
+        log.warning("REST API is open (no tokens configured): every caller acts as author 'anonymous'")
+    return app

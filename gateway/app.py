@@ -1,0 +1,274 @@
+"""The composition root: the one place a gateway is built, run and shut down.
+
+Every entry point — ``printeps serve`` (and each of its ``--workers``), ``printeps demo``, the ROS
+launcher ``printeps ros`` / ``python -m gateway.ros.run``, the agile-loop harness and the tests —
+calls :func:`build_gateway` with its settings; there is no second wiring. One gateway process is:
+
+- the Information State (MongoDB: ``MONGO_URI`` or the embedded SecantusDB), with the catalog of
+  everything an author changes (rule sets, workflows, knowledge, queries, mappings) and the one
+  decision record;
+- one rules engine, one knowledge base (ontology + SWRL, Pellet), one stream engine with its
+  queries, bindings and mappings, one workflow service;
+- optionally one ROS node (topics in, robot services out) and the REST app (API + workbench);
+- a change follower that keeps all of them on the catalog's current versions, so a change made
+  through any process is live in every process.
+
+Imports go downward only: cli/demo → app → api/ros → stream/engine/ontology/store → config/jvm.
+Data flows one way: sensor → RDF → window → binding → rules → action → Information State.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from gateway import jvm
+from gateway.config import Settings
+from gateway.engine import Engine
+from gateway.follower import ChangeFollower
+from gateway.ontology.knowledge import KnowledgeBase
+from gateway.rdf.mapping import Mapper
+from gateway.ros.robots import RobotStates
+from gateway.store.store import QUERY_RESULTS
+from gateway.stream.engine import StreamEngine
+from gateway.stream.services import MappingService, QueryService
+from gateway.versions import Catalog, MemoryCatalog
+from gateway.workflow.service import WorkflowService, build_service
+
+log = logging.getLogger(__name__)
+
+
+def process_name() -> str:
+    """host:pid — how this process signs catalog changes and decisions."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+@dataclass
+class Gateway:
+    """A built gateway: every service of this process. ``close()`` stops them in reverse order."""
+
+    settings: Settings
+    catalog: Catalog
+    engine: Engine
+    knowledge: KnowledgeBase
+    mapper: Mapper
+    mappings: MappingService
+    streams: StreamEngine
+    queries: QueryService
+    robots: RobotStates
+    workflows: WorkflowService
+    store: Any = None
+    decisions: Any = None
+    ros: Any = None
+    follower: ChangeFollower | None = None
+    app: Any = None
+    name: str = field(default_factory=process_name)
+    _closers: list[tuple[str, Callable[[], None]]] = field(default_factory=list, repr=False)
+
+    def health(self) -> dict[str, dict[str, Any]]:
+        """Per part: ``{"status": "ok" | "degraded" | "down" | "not configured", ...}``."""
+        report: dict[str, dict[str, Any]] = {
+            "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()}},
+            "store": self.store.health() if self.store is not None else {"status": "not configured"},
+            "ros": self.ros.health() if self.ros is not None else {"status": "not configured"},
+            "sync": self.follower.health() if self.follower is not None else {"status": "not configured"},
+            "knowledge": {"status": "ok" if not self.knowledge.error else "degraded", "error": self.knowledge.error},
+        }
+        return report
+
+    def close(self) -> None:
+        """Stop everything this gateway started, last started first; each step is best effort."""
+        while self._closers:
+            what, closer = self._closers.pop()
+            try:
+                closer()
+            except Exception:  # shutting down must go on: later parts (the store) must still close
+                log.exception("closing %s failed", what)
+
+
+def build_gateway(
+    settings: Settings,
+    *,
+    rest: bool = True,
+    ros: bool | None = None,
+    store: Any = None,
+    use_store: bool = True,
+    seed: bool = True,
+    warm_up: bool = True,
+    follow: bool = True,
+    domain_id: int | None = None,
+    on_ros_event: Callable[[str, dict[str, Any]], None] | None = None,
+) -> Gateway:
+    """Build one gateway process from ``settings`` (see the module docstring).
+
+    ``ros``: run the ROS node (None: ``settings.ros.enabled``, else when rclpy is importable).
+    ``store``: an open Information State to use (None: open the configured one); ``use_store``
+    False runs on a catalog in memory with no decision record (local CLI tools only).
+    ``seed``: import ``rules/drl``, ``workflows``, ``ontology`` into a store that lacks them.
+    """
+    closers: list[tuple[str, Callable[[], None]]] = []
+    try:
+        return _build(settings, closers, rest=rest, ros=ros, store=store, use_store=use_store, seed=seed,
+                      warm_up=warm_up, follow=follow, domain_id=domain_id, on_ros_event=on_ros_event)
+    except BaseException:
+        while closers:
+            what, closer = closers.pop()
+            try:
+                closer()
+            except Exception:
+                log.exception("closing %s after a failed start failed", what)
+        raise
+
+
+def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *, rest: bool, ros: bool | None,
+           store: Any, use_store: bool, seed: bool, warm_up: bool, follow: bool, domain_id: int | None,
+           on_ros_event: Callable[[str, dict[str, Any]], None] | None) -> Gateway:
+    name = process_name()
+    # The JVM starts in this (normally the main) thread: a JVM first started from a worker thread
+    # makes the interpreter hang at exit (JPype).
+    jvm.start(settings.jvm)
+
+    catalog: Catalog
+    decisions = None
+    if use_store:
+        from gateway.store import open_store
+        from gateway.store.catalog import MongoCatalog
+        from gateway.store.decisions import DecisionRecord
+
+        if store is None:
+            store = open_store(settings)
+            closers.append(("the Information State", store.close))
+        store.ping()
+        catalog = MongoCatalog(store.db, name, change_streams=settings.sync.change_streams,
+                               poll_interval_s=settings.sync.poll_interval_s)
+        closers.append(("the catalog", catalog.close))
+        decisions = DecisionRecord(store, enabled=settings.store.record_fires, max_facts=settings.store.decision_facts_max)
+    else:
+        catalog = MemoryCatalog(name)
+    start_seq = catalog.last_seq()  # follow from here: nothing changed after loading is missed
+
+    engine = Engine(settings, catalog)
+    if decisions is not None:
+        engine.add_listener(decisions.on_engine_event)
+    closers.append(("the rules engine's sessions", lambda: [engine.close_session(s.id) for s in engine.sessions()]))
+
+    cfg = settings.streams
+    knowledge = KnowledgeBase(catalog)
+    if seed:
+        knowledge.seed(cfg.ontology_file, cfg.swrl_file)
+        for ruleset, status in engine.seed_from(settings.engine.rules_dir).items():
+            (log.error if status.startswith("failed") else log.info)("rule set %s: %s", ruleset, status)
+    knowledge.load()
+    for ruleset, status in engine.load_all().items():
+        (log.error if status.startswith("failed") else log.info)("rule set %s: %s", ruleset, status)
+
+    robots = RobotStates(settings.ros.robot_start)
+    mapper = Mapper()
+    mappings = MappingService(mapper, catalog, describe=_describe_if_available())
+    streams = StreamEngine(cfg, rules_engine=engine, ontology=knowledge.ontology, providers={"robots": robots.facts})
+    closers.append(("the stream engine", streams.close))
+    queries = QueryService(streams, catalog)
+    if seed:
+        mappings.seed(cfg.mappings_dir)
+        queries.seed(cfg.queries_dir)
+    mappings.load()
+    queries.load()
+    if store is not None:
+        streams.subscribe(_result_recorder(store))
+
+    run_ros = _want_ros(settings, ros)
+    ros_gateway = None
+    ros_modules = None
+    if run_ros:
+        from gateway.ros.bridge import RosGateway
+        from gateway.workflow.ros import RosModules
+
+        ros_gateway = RosGateway(settings, engine=engine, streams=streams, mappings=mappings, store=store,
+                                 robots=robots, domain_id=domain_id, on_event=on_ros_event)
+        closers.append(("the ROS node", ros_gateway.close))
+        ros_modules = RosModules(ros_gateway.node, ros_gateway.caller)
+
+    workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
+                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed)
+    closers.append(("the workflow executor", workflows.close))
+
+    follower = None
+    if follow and use_store:
+        follower = ChangeFollower(catalog, {"ruleset": engine, "workflow": workflows.registry, "knowledge": knowledge,
+                                            "mapping": mappings, "query": queries},
+                                  start_seq=start_seq, reconcile_interval_s=settings.sync.reconcile_interval_s).start()
+        closers.append(("the change follower", follower.stop))
+
+    gateway = Gateway(settings=settings, catalog=catalog, engine=engine, knowledge=knowledge, mapper=mapper,
+                      mappings=mappings, streams=streams, queries=queries, robots=robots, workflows=workflows,
+                      store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
+                      _closers=closers)
+    if rest:
+        from gateway.api.main import create_app
+
+        gateway.app = create_app(gateway)
+    if warm_up:
+        engine.warm_up()
+    return gateway
+
+
+def _want_ros(settings: Settings, ros: bool | None) -> bool:
+    if ros is not None:
+        return ros
+    if settings.ros.enabled is not None:
+        return settings.ros.enabled
+    from gateway.ros.bridge import ros_available
+
+    return ros_available()
+
+
+def _describe_if_available() -> Callable[[str], dict[str, str]] | None:
+    """Message types' fields from rosidl when the ROS packages are installed (mapping checks)."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return None
+    from gateway.ros.convert import describe
+
+    return describe
+
+
+def _result_recorder(store: Any) -> Callable[[dict[str, Any]], None]:
+    """Keep every non-empty query result in the Information State (what was detected, when)."""
+
+    def record(event: dict[str, Any]) -> None:
+        if event.get("kind") == "result" and event.get("rows"):
+            store.record(QUERY_RESULTS, {k: v for k, v in event.items() if k != "kind"},
+                         stored_type=f"printeps/QueryResult/{event.get('query', 'query')}", inserted_by="stream_engine")
+
+    return record
+
+
+def run(settings: Settings, *, rest: bool = True, ros: bool | None = None, host: str | None = None,
+        port: int | None = None) -> None:
+    """Build a gateway, run it until SIGINT/SIGTERM, shut it down (``printeps serve`` / ``printeps ros``).
+
+    With ``rest`` uvicorn serves the app (and handles the signals); without, the process waits on
+    the signals itself (the ROS launcher).
+    """
+    import signal
+    import threading
+
+    from gateway.serve import serve
+
+    gateway = build_gateway(settings, rest=rest, ros=ros)
+    try:
+        if rest:
+            serve(gateway, host or settings.api.host, port or settings.api.port)
+            return
+        stop = threading.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        print("gateway node ready" if gateway.ros is not None else "gateway ready (no ROS node)", flush=True)
+        stop.wait()
+        print("gateway node stopping", flush=True)
+    finally:
+        gateway.close()

@@ -1,0 +1,208 @@
+"""Serving a gateway over HTTP: one process, a background thread (demo, tests), or N workers on one port.
+
+``printeps serve --workers N`` runs N worker processes that share one listening socket (opened
+here, passed down as a file descriptor, as uvicorn's own multi-process mode does). Each worker is a
+full member of the gateway: it builds its own gateway through the one composition root
+(:func:`gateway.app.build_gateway`), over the same Information State, so deploys and decisions are
+shared and a change made through any worker is live in all of them. The parent only supervises:
+it starts the embedded database once (when no ``MONGO_URI`` is set) so the workers can share it,
+restarts a worker that dies, and stops everything on SIGINT/SIGTERM. The ROS node runs in worker 0
+only (one node per gateway: a topic read by N workers would greet every party N times).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+RESTART_BACKOFF_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | None = None) -> None:
+    """Serve ``gateway.app`` with uvicorn until SIGINT/SIGTERM (the caller closes the gateway)."""
+    import gc
+
+    import uvicorn
+
+    gc.collect()
+    gc.freeze()  # start-up objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
+    config = uvicorn.Config(gateway.app, host=host, port=port, loop="auto", http="auto", log_level="info",
+                            access_log=False)
+    uvicorn.Server(config).run(sockets=sockets)
+
+
+def serve_in_thread(app: Any, port: int, name: str = "uvicorn", timeout_s: float = 30.0,
+                    host: str = "127.0.0.1") -> tuple[Any, threading.Thread]:
+    """Serve ``app`` on ``host:port`` in a daemon thread; returns once it accepts requests as
+    ``(server, thread)`` (stop with ``server.should_exit = True``, then join)."""
+    import uvicorn
+
+    server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off"))
+    thread = threading.Thread(target=server.run, name=name, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + timeout_s
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            server.should_exit = True
+            raise RuntimeError(f"the gateway did not start on {host}:{port} within {timeout_s:.0f} s")
+        time.sleep(0.05)
+    return server, thread
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+# --------------------------------------------------------------------------- workers
+
+
+def listening_socket(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host, port))
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock
+
+
+class Supervisor:
+    """Starts, watches and restarts N worker processes over one socket (see the module docstring)."""
+
+    def __init__(self, workers: int, host: str, port: int, *, config: str | None = None, ros: bool | None = None,
+                 env: dict[str, str] | None = None) -> None:
+        self.workers = workers
+        self.host, self.port = host, port
+        self.config = config
+        self.ros = ros
+        self.env = dict(os.environ if env is None else env)
+        self.procs: list[subprocess.Popen[bytes] | None] = [None] * workers
+        self.restarts = [0] * workers
+        self._stop = threading.Event()
+        self.sock: socket.socket | None = None
+        self.embedded: Any = None
+
+    def start_database(self, settings: Any) -> None:
+        """The embedded database, once for all workers, unless a MongoDB URI is configured."""
+        from gateway.store.factory import embedded_dir, store_uri
+
+        if store_uri(settings):
+            return
+        from gateway.store.embedded import EmbeddedMongo
+
+        self.embedded = EmbeddedMongo(embedded_dir(settings), settings.store.embedded_port, settings.store.embedded_cache)
+        self.env["MONGO_URI"] = self.embedded.start()
+        print(f"embedded database at {self.env['MONGO_URI']} (shared by {self.workers} workers)", flush=True)
+
+    def spawn(self, index: int) -> None:
+        assert self.sock is not None
+        cmd = [sys.executable, "-m", "gateway.worker", "--fd", str(self.sock.fileno()), "--index", str(index),
+               "--host", self.host, "--port", str(self.port)]
+        if self.config:
+            cmd += ["--config", self.config]
+        if self.ros is not None:
+            cmd += ["--ros" if (self.ros and index == 0) else "--no-ros"]
+        elif index != 0:
+            cmd += ["--no-ros"]
+        env = {**self.env, "PRINTEPS_WORKER_INDEX": str(index)}
+        self.procs[index] = subprocess.Popen(cmd, env=env, pass_fds=(self.sock.fileno(),),
+                                             preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+
+    def run(self, settings: Any) -> int:
+        """Serve until SIGINT/SIGTERM; returns the exit code."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: self._stop.set())
+        self.sock = listening_socket(self.host, self.port)
+        try:
+            self.start_database(settings)
+            for index in range(self.workers):
+                self.spawn(index)
+            print(f"serving on http://{self.host}:{self.port} with {self.workers} workers", flush=True)
+            while not self._stop.wait(0.5):
+                self._watch()
+        finally:
+            self.shutdown()
+        return 0
+
+    def _watch(self) -> None:
+        for index, proc in enumerate(self.procs):
+            if proc is None or proc.poll() is None:
+                continue
+            pause = RESTART_BACKOFF_S[min(self.restarts[index], len(RESTART_BACKOFF_S) - 1)]
+            log.error("worker %d (pid %d) exited with %s; restarting it in %.1f s", index, proc.pid, proc.returncode, pause)
+            print(f"worker {index} (pid {proc.pid}) exited with {proc.returncode}; restarting", flush=True)
+            self.restarts[index] += 1
+            if self._stop.wait(pause):
+                return
+            self.spawn(index)
+
+    def shutdown(self, timeout_s: float = 30.0) -> None:
+        for proc in self.procs:
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + timeout_s
+        for proc in self.procs:
+            if proc is None:
+                continue
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        if self.sock is not None:
+            self.sock.close()
+        if self.embedded is not None:
+            self.embedded.stop()
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: a worker gets SIGTERM when the supervisor dies (no orphaned workers)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+def worker_main(argv: list[str] | None = None) -> int:
+    """One worker of ``printeps serve --workers N`` (``python -m gateway.worker``)."""
+    import argparse
+
+    from gateway.app import build_gateway
+    from gateway.config import load_settings
+
+    ap = argparse.ArgumentParser(description="a PRINTEPS gateway worker (started by `printeps serve --workers`)")
+    ap.add_argument("--fd", type=int, required=True)
+    ap.add_argument("--index", type=int, default=0)
+    ap.add_argument("--host", default="127.0.0.1")
+    ap.add_argument("--port", type=int, default=8080)
+    ap.add_argument("--config", default=None)
+    ap.add_argument("--ros", dest="ros", action="store_true", default=None)
+    ap.add_argument("--no-ros", dest="ros", action="store_false")
+    args = ap.parse_args(argv)
+    sys.setswitchinterval(0.001)
+    logging.basicConfig(level=logging.INFO, format=f"%(asctime)s worker{args.index} %(levelname)s %(name)s: %(message)s")
+    settings = load_settings(args.config)
+    sock = socket.socket(fileno=args.fd)
+    gateway = build_gateway(settings, ros=args.ros)
+    try:
+        serve(gateway, args.host, args.port, sockets=[sock])
+    finally:
+        gateway.close()
+    return 0
+
+
+def config_path(config: Path | None) -> str | None:
+    return str(config) if config else os.environ.get("PRINTEPS_CONFIG")

@@ -1,0 +1,162 @@
+"""One decision record: every fire from every origin, kept in the Information State.
+
+A decision is one firing of a rule set on facts, whatever asked for it: a REST or KIE client, a
+stream binding, the ROS ``fire_business_rules`` service, a workflow step (the workbench's "try it"
+is no decision). Each is written to ``decisions`` with its ``decision_id`` (an ObjectId's text,
+also the document ``_id``: time-ordered, so newest-first paging is an index walk), its origin, the
+caller's correlation id (``X-Request-ID`` / ``traceparent`` / the ROS request), the rule set and
+version, the facts in, the rules fired and the actions. Robot action outcomes are written to
+``actions`` with the ``decision_id`` they carry out, so ``get`` returns a decision with them.
+
+Writes go through the store's journal (durable before the fire is answered, shipped in batches);
+reads go to the database, from any process and after restarts. The last decisions of this
+process are also kept in memory for a moment, so one that is not shipped yet is found anyway.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import threading
+from collections import OrderedDict
+from datetime import datetime, timezone
+from typing import Any
+
+import pymongo
+from bson import ObjectId
+from bson.errors import InvalidId
+from pymongo.errors import PyMongoError
+
+from gateway.store.store import ACTIONS, StoreError, StoreUnavailable
+
+log = logging.getLogger(__name__)
+
+DECISIONS = "decisions"
+RECENT_KEPT = 2000
+MAX_PAGE = 1000
+
+
+def process_name() -> str:
+    """host:pid — which gateway process made a decision."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+class DecisionRecord:
+    """Writes decisions (an engine listener) and reads them back with filters and a cursor."""
+
+    def __init__(self, store: Any, *, enabled: bool = True, max_facts: int = 1000) -> None:
+        self.store = store
+        self.enabled = enabled
+        self.max_facts = max_facts
+        self.process = process_name()
+        self._recent: OrderedDict[str, dict[str, Any]] = OrderedDict()
+        self._lock = threading.Lock()
+        self._indexes()
+
+    def _indexes(self) -> None:
+        try:
+            coll = self.store.db[DECISIONS]
+            for keys in (["ruleset", "_id"], ["origin", "_id"], ["fired", "_id"], ["correlation_id"]):
+                coll.create_index([(k, pymongo.DESCENDING if k == "_id" else pymongo.ASCENDING) for k in keys])
+            self.store.db[ACTIONS].create_index([("decision_id", pymongo.ASCENDING)])
+        except PyMongoError as exc:  # not fatal: indexes are created again at the next start
+            log.warning("decisions: could not create indexes now: %s", exc)
+
+    # ---- writing -------------------------------------------------------------------------------
+    def on_engine_event(self, kind: str, payload: dict[str, Any]) -> None:
+        """Engine listener: each "fire" event is a decision to record."""
+        if kind != "fire" or not self.enabled:
+            return
+        doc = self.document(payload)
+        with self._lock:
+            self._recent[doc["_id"]] = doc
+            while len(self._recent) > RECENT_KEPT:
+                self._recent.popitem(last=False)
+        self.store.record(DECISIONS, doc, stored_type="printeps/Decision", inserted_by=self.process)
+
+    def document(self, payload: dict[str, Any]) -> dict[str, Any]:
+        facts = payload.get("facts") or []
+        kept = facts if len(facts) <= self.max_facts else facts[: self.max_facts]
+        return {
+            "_id": payload["decision_id"],
+            "decision_id": payload["decision_id"],
+            "origin": payload.get("origin") or "api",
+            "correlation_id": payload.get("correlation_id"),
+            "ruleset": payload.get("ruleset"),
+            "version": payload.get("version"),
+            "facts": kept,
+            "facts_count": len(facts),
+            "fired": list(payload.get("fired") or []),
+            "actions": list(payload.get("actions") or []),
+            "fire_count": payload.get("fire_count"),
+            "duration_ms": payload.get("duration_ms"),
+            "context": payload.get("context") or {},
+            "at": datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z"),
+            "process": self.process,
+        }
+
+    def record_outcome(self, outcome: dict[str, Any], stored_type: str, inserted_by: str) -> None:
+        """A robot action's outcome (it carries the ``decision_id`` it belongs to, if any)."""
+        self.store.record(ACTIONS, outcome, stored_type=stored_type, inserted_by=inserted_by)
+
+    # ---- reading -------------------------------------------------------------------------------
+    def find(self, *, ruleset: str | None = None, version: int | None = None, origin: str | None = None,
+             rule: str | None = None, since: datetime | None = None, until: datetime | None = None,
+             limit: int = 50, cursor: str | None = None) -> tuple[list[dict[str, Any]], str | None]:
+        """Decisions newest first with filters; returns (page, cursor of the next page or None)."""
+        if not 1 <= limit <= MAX_PAGE:
+            raise StoreError(f"limit {limit}: must be between 1 and {MAX_PAGE}")
+        spec: dict[str, Any] = {}
+        for field, value in (("ruleset", ruleset), ("version", version), ("origin", origin), ("fired", rule)):
+            if value is not None:
+                spec[field] = value
+        id_range: dict[str, Any] = {}
+        if since is not None:
+            id_range["$gte"] = ObjectId.from_datetime(since)
+        if until is not None:
+            id_range["$lt"] = ObjectId.from_datetime(until)
+        if cursor is not None:
+            try:
+                after = ObjectId(cursor)
+            except (InvalidId, TypeError):
+                raise StoreError(f"cursor {cursor!r}: not a cursor this API gave out") from None
+            id_range["$lt"] = min(after, id_range["$lt"]) if "$lt" in id_range else after
+        if id_range:
+            spec["_id"] = id_range
+        try:
+            docs = list(self.store.db[DECISIONS].find(spec, {"_meta": 0}).sort("_id", pymongo.DESCENDING)
+                        .limit(limit + 1))
+        except PyMongoError as exc:
+            raise StoreUnavailable(f"Information State unreachable: {type(exc).__name__}: {exc}") from exc
+        more = len(docs) > limit
+        page = [_plain(d) for d in docs[:limit]]
+        return page, (page[-1]["decision_id"] if more and page else None)
+
+    def get(self, decision_id: str) -> dict[str, Any] | None:
+        """One decision with the outcomes of its robot actions; None when unknown."""
+        try:
+            oid = ObjectId(decision_id)
+        except (InvalidId, TypeError):
+            return None
+        try:
+            doc = self.store.db[DECISIONS].find_one({"_id": oid}, {"_meta": 0})
+            outcomes = list(self.store.db[ACTIONS].find({"decision_id": decision_id}, {"_meta": 0})
+                            .sort("_id", pymongo.ASCENDING).limit(MAX_PAGE))
+        except PyMongoError as exc:
+            raise StoreUnavailable(f"Information State unreachable: {type(exc).__name__}: {exc}") from exc
+        if doc is None:
+            with self._lock:
+                recent = self._recent.get(decision_id)
+            if recent is None:
+                return None
+            doc = {k: v for k, v in recent.items() if k != "_meta"}
+        out = _plain(doc)
+        out["outcomes"] = [_plain(o) for o in outcomes]
+        return out
+
+
+def _plain(doc: dict[str, Any]) -> dict[str, Any]:
+    out = dict(doc)
+    out["_id"] = str(out.get("_id"))
+    return out

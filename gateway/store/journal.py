@@ -1,0 +1,339 @@
+"""The local journal: every Information State write lands here first, then goes to MongoDB.
+
+Why a journal in front of the database:
+- A write must be cheap on the hot path (a fire answered over REST must not wait for a database
+  round trip) and must not be lost once it was acknowledged, even when the process is killed
+  with SIGKILL a moment later. An append with ``write()`` reaches the kernel's page cache, which
+  outlives the process; only a machine crash can lose it (``fsync=True`` closes that gap too, at
+  the price of a disk flush per write).
+- When the database is away, writes simply stay in the journal until it is back: the same path
+  serves normal operation and outages (bounded by ``max_docs``; beyond that writes are refused
+  and counted, never silently lost).
+
+Layout: ``<dir>/<pid>-<start>-<n>.jsonl`` segments, one JSON document per line
+(``{"db", "c", "d"}``: database, collection, document). Each process holds an exclusive
+``flock`` on the segments it writes; a segment whose lock can be taken belongs to a process that
+is gone (crashed, killed, restarted) and is adopted: shipped and deleted by whichever process
+finds it first. Shipping is idempotent (every document carries its ``_id`` before it is
+journalled), so a segment shipped twice duplicates nothing.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import itertools
+import logging
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import orjson
+
+log = logging.getLogger(__name__)
+
+SEGMENT_BYTES = 4 * 1024 * 1024
+_segment_ids = itertools.count(1)
+
+
+class JournalFull(RuntimeError):
+    """The journal reached its bound (``max_docs`` not yet in the database); the write was refused."""
+
+
+@dataclass
+class Entry:
+    """One journalled write: where it goes and the document (plain JSON, see InformationState)."""
+
+    database: str
+    collection: str
+    doc: dict[str, Any]
+    segment: "Segment"
+
+
+class Segment:
+    """One journal file, locked by its writer for as long as it lives."""
+
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path = path
+        self.fd = fd
+        self.size = 0
+        self.written = 0   # entries appended
+        self.shipped = 0   # entries known to be in the database
+        self.closed = False
+
+    @classmethod
+    def create(cls, folder: Path) -> "Segment":
+        path = folder / f"{os.getpid()}-{int(time.time() * 1000)}-{next(_segment_ids)}.jsonl"
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        return cls(path, fd)
+
+    def append(self, line: bytes, fsync: bool) -> None:
+        os.write(self.fd, line)
+        if fsync:
+            os.fsync(self.fd)
+        self.size += len(line)
+        self.written += 1
+
+    def release(self) -> None:
+        """Leave the unshipped entries for the next process: drop the shipped ones (they are a
+        prefix: entries ship in the order they were written), then let go of the lock."""
+        if self.closed:
+            return
+        self.closed = True
+        if self.shipped:
+            with open(self.path, "rb") as fh:
+                rest = [line for line in fh if line.strip()][self.shipped:]
+            tmp = self.path.with_suffix(".compact")
+            tmp.write_bytes(b"".join(rest))
+            os.replace(tmp, self.path)
+        os.close(self.fd)
+
+    def remove(self) -> None:
+        """Delete the file (everything in it is in the database), then let go of the lock."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            os.unlink(self.path)
+        except FileNotFoundError:
+            pass
+        os.close(self.fd)
+
+
+def encode(database: str, collection: str, doc: dict[str, Any]) -> bytes:
+    """One journal line (orjson; values orjson cannot write become text, as JSON would need)."""
+    return orjson.dumps({"db": database, "c": collection, "d": doc}, default=str,
+                        option=orjson.OPT_NON_STR_KEYS) + b"\n"
+
+
+def read_lines(path: Path) -> Iterator[tuple[str, str, dict[str, Any]]]:
+    """The entries of a segment file; a torn last line (a crash mid-write) is skipped."""
+    with open(path, "rb") as fh:
+        for raw in fh:
+            if not raw.strip():
+                continue
+            try:
+                entry = orjson.loads(raw)
+                yield entry["db"], entry["c"], entry["d"]
+            except (orjson.JSONDecodeError, KeyError, TypeError):
+                log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
+
+
+Ship = Callable[[str, str, list[dict[str, Any]]], None]
+
+
+class Journal:
+    """Appends writes durably and hands them, in order and in batches, to ``ship``.
+
+    ``ship(database, collection, docs)`` must be idempotent and raise on failure (the batch is
+    then retried after ``retry_interval_s``; meanwhile ``degraded`` is true). One daemon thread
+    ships; :meth:`flush` waits until everything appended so far is shipped.
+    """
+
+    def __init__(self, folder: Path, ship: Ship, *, max_docs: int = 200_000, fsync: bool = False,
+                 retry_interval_s: float = 1.0, batch: int = 500, adopt_interval_s: float = 10.0) -> None:
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.ship = ship
+        self.max_docs = max_docs
+        self.fsync = fsync
+        self.retry_interval_s = retry_interval_s
+        self.batch = batch
+        self.adopt_interval_s = adopt_interval_s
+        self.dropped = 0
+        self.last_error: str | None = None
+        self.degraded = False
+        self._pending: deque[Entry] = deque()
+        self._segment: Segment | None = None
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._idle = threading.Condition(self._lock)
+        self._inflight = 0
+        self._stop = False
+        self._adopted: deque[tuple[str, str, dict[str, Any]]] = deque()
+        self._adopt_pending = 0
+        self._adopted_files: list[tuple[Path, int]] = []
+        self._adopt_orphans()  # now, so that backlog and flush() count what a dead process left
+        self._thread = threading.Thread(target=self._run, name="information-state-journal", daemon=True)
+        self._thread.start()
+
+    # ---- writing -------------------------------------------------------------------------------
+    def append(self, database: str, collection: str, docs: list[dict[str, Any]]) -> None:
+        """Journal ``docs`` (in order); raises JournalFull when the bound is reached."""
+        lines = [encode(database, collection, d) for d in docs]
+        with self._lock:
+            if self._stop:
+                raise RuntimeError("the Information State journal is closed")
+            if len(self._pending) + self._inflight + len(docs) > self.max_docs:
+                self.dropped += len(docs)
+                raise JournalFull(f"the journal in {self.folder} holds {self.max_docs} writes not yet in the database")
+            segment = self._writable_segment()
+            for line, doc in zip(lines, docs):
+                segment.append(line, self.fsync)
+                self._pending.append(Entry(database, collection, doc, segment))
+            self._wake.notify()
+
+    def _writable_segment(self) -> Segment:
+        if self._segment is None or self._segment.size >= SEGMENT_BYTES:
+            self._segment = Segment.create(self.folder)
+        return self._segment
+
+    @property
+    def backlog(self) -> int:
+        """Writes not yet confirmed by the database (this process's and adopted ones)."""
+        return len(self._pending) + self._inflight + self._adopt_pending
+
+    # ---- shipping ------------------------------------------------------------------------------
+    def _run(self) -> None:
+        next_adopt = time.monotonic() + self.adopt_interval_s
+        while True:
+            if time.monotonic() >= next_adopt:
+                self._adopt_orphans()
+                next_adopt = time.monotonic() + self.adopt_interval_s
+            with self._lock:
+                while not self._pending and not self._stop and not self._adopted:
+                    self._idle.notify_all()
+                    self._wake.wait(timeout=max(0.05, next_adopt - time.monotonic()))
+                    if time.monotonic() >= next_adopt:
+                        break
+                if self._stop and not self._pending and not self._adopted:
+                    self._idle.notify_all()
+                    return
+                batch = [self._pending.popleft() for _ in range(min(self.batch, len(self._pending)))]
+                self._inflight = len(batch)
+            if batch and not self._ship_batch(batch):
+                with self._lock:
+                    self._pending.extendleft(reversed(batch))
+                    self._inflight = 0
+                    stopping = self._stop
+                if stopping:
+                    return
+                time.sleep(self.retry_interval_s)
+                continue
+            with self._lock:
+                self._inflight = 0
+                for entry in batch:
+                    entry.segment.shipped += 1
+                self._release_segments(batch)
+            self._ship_adopted()
+
+    def _ship_batch(self, batch: list[Entry]) -> bool:
+        """Ship consecutive entries of one (database, collection) together; False on failure."""
+        start = 0
+        while start < len(batch):
+            end = start
+            key = (batch[start].database, batch[start].collection)
+            while end < len(batch) and (batch[end].database, batch[end].collection) == key:
+                end += 1
+            if not self._try_ship(key[0], key[1], [e.doc for e in batch[start:end]]):
+                # what was shipped before the failure is re-shipped later: harmless (idempotent)
+                return False
+            start = end
+        return True
+
+    def _try_ship(self, database: str, collection: str, docs: list[dict[str, Any]]) -> bool:
+        try:
+            self.ship(database, collection, docs)
+        except Exception as exc:  # the database is away (or refuses): keep the writes, retry
+            if not self.degraded:
+                log.warning("Information State unreachable (%s: %s); keeping writes in %s",
+                            type(exc).__name__, exc, self.folder)
+            self.degraded = True
+            self.last_error = f"{type(exc).__name__}: {exc}"
+            return False
+        if self.degraded:
+            log.info("Information State reachable again; shipping the journal")
+        self.degraded = False
+        self.last_error = None
+        return True
+
+    def _release_segments(self, batch: list[Entry]) -> None:
+        """Delete segments whose every entry is shipped and that take no more writes."""
+        for segment in {id(e.segment): e.segment for e in batch}.values():
+            if segment.shipped >= segment.written and segment is not self._segment:
+                segment.remove()
+        current = self._segment
+        if current is not None and current.shipped >= current.written and current.size >= SEGMENT_BYTES // 4:
+            current.remove()  # everything in it is shipped: start afresh instead of growing
+            self._segment = None
+
+    # ---- segments left by processes that are gone ---------------------------------------------
+    def _adopt_orphans(self) -> None:
+        """Take over unlocked segments (their writer died) and queue their entries for shipping."""
+        if self._adopted:
+            return
+        for path in sorted(self.folder.glob("*.jsonl")):
+            if self._segment is not None and path == self._segment.path:
+                continue
+            try:
+                fd = os.open(path, os.O_RDONLY)
+            except FileNotFoundError:
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                continue  # a live writer holds it
+            entries = list(read_lines(path))
+            log.info("Information State: adopting %d journalled writes from %s", len(entries), path.name)
+            with self._lock:
+                self._adopted.extend(entries)
+                self._adopt_pending += len(entries)
+                self._adopted_files.append((path, fd))
+            return  # one file at a time keeps memory bounded
+
+    def _ship_adopted(self) -> None:
+        while self._adopted:
+            chunk = [self._adopted.popleft() for _ in range(min(self.batch, len(self._adopted)))]
+            groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+            for database, collection, doc in chunk:
+                groups.setdefault((database, collection), []).append(doc)
+            for (database, collection), docs in groups.items():
+                if not self._try_ship(database, collection, docs):
+                    self._adopted.extendleft(reversed(chunk))
+                    return
+            with self._lock:
+                self._adopt_pending -= len(chunk)
+        for path, fd in self._adopted_files:
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+            os.close(fd)
+        self._adopted_files = []
+
+    # ---- waiting and closing ---------------------------------------------------------------------
+    def flush(self, timeout_s: float = 10.0) -> bool:
+        """Wait until everything appended so far is in the database; False on timeout/outage."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            self._wake.notify()
+            while self._pending or self._inflight or self._adopted:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._idle.wait(timeout=min(remaining, 0.05))
+        return True
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Ship what can be shipped within ``timeout_s``; what is left stays on disk for next time."""
+        with self._lock:
+            self._stop = True
+            self._wake.notify_all()
+        self._thread.join(timeout=timeout_s)
+        with self._lock:
+            segments = {id(e.segment): e.segment for e in self._pending}
+            if self._segment is not None:
+                segments[id(self._segment)] = self._segment
+            for segment in segments.values():
+                if segment.shipped >= segment.written:
+                    segment.remove()
+                else:
+                    segment.release()  # unlocked: the next process adopts what is left
+            for _path, fd in self._adopted_files:
+                os.close(fd)
+            self._adopted_files = []

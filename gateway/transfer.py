@@ -1,0 +1,175 @@
+"""``printeps export DIR`` / ``printeps import DIR``: the Information State ↔ a folder, for git.
+
+The Information State is the source of truth for everything an author changes; these two keep a
+git-based workflow possible. The folder has the repository's seed layout, so an exported folder
+can be committed, reviewed, edited and imported again (or used as the seed of a new gateway):
+
+    rules/drl/<rule set>/<files>         workflows/<name>.yaml
+    ontology/teahouse.ttl, .swrl         ontology/queries/<query>.rq + <query>.binding.yaml
+    ontology/mappings/<name>.yaml
+
+Export writes the current version of each item. Import makes every item whose content differs
+from the current version a new version (author and comment given), through the same services —
+and so the same checks — as a deploy over REST: a rule set that does not compile, a workflow that
+does not validate, knowledge Pellet refuses, a query that does not parse are reported with file
+and position and change nothing, while the other items are imported.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from gateway.versions import Catalog
+
+RULES = Path("rules") / "drl"
+WORKFLOWS = Path("workflows")
+ONTOLOGY = Path("ontology")
+QUERIES = ONTOLOGY / "queries"
+MAPPINGS = ONTOLOGY / "mappings"
+
+
+def _current(catalog: Catalog, kind: str) -> list[tuple[str, Any]]:
+    out = []
+    for head in catalog.heads(kind):
+        if head.live:
+            out.append((head.name, catalog.load(kind, head.name, head.current).payload))  # type: ignore[arg-type]
+    return out
+
+
+def export_to(catalog: Catalog, folder: Path) -> list[str]:
+    """Write the current version of everything into ``folder``; returns the files written."""
+    written: list[str] = []
+
+    def write(rel: Path, text: str) -> None:
+        path = folder / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+        written.append(str(rel))
+
+    for name, files in _current(catalog, "ruleset"):
+        for fname, text in sorted(files.items()):
+            write(RULES / name / fname, text)
+    for name, payload in _current(catalog, "workflow"):
+        write(WORKFLOWS / f"{name}.yaml", payload["text"])
+    for name, payload in _current(catalog, "knowledge"):
+        write(ONTOLOGY / payload.get("file", f"teahouse.{'ttl' if name == 'ontology' else 'swrl'}"), payload["text"])
+    for name, payload in _current(catalog, "query"):
+        write(QUERIES / f"{name}.rq", payload["text"])
+        if payload.get("binding"):
+            write(QUERIES / f"{name}.binding.yaml", yaml.safe_dump(_plain_binding(payload["binding"]), sort_keys=False,
+                                                                  allow_unicode=True))
+        if payload.get("params"):
+            write(QUERIES / f"{name}.params.json", json.dumps(payload["params"], indent=1))
+    for name, spec in _current(catalog, "mapping"):
+        write(MAPPINGS / f"{name}.yaml", yaml.safe_dump(spec, sort_keys=False, allow_unicode=True))
+    return written
+
+
+def _plain_binding(binding: dict[str, Any]) -> dict[str, Any]:
+    """A binding without its defaults (what an author would write)."""
+    defaults = {"mode": "stateless", "local_names": True, "constants": {}, "attributes": {}, "subject": None,
+                "window_facts": [], "context": [], "suppress_repeats": None, "dispatch": True, "fields": None}
+    return {k: v for k, v in binding.items() if k not in defaults or defaults[k] != v}
+
+
+def import_from(gateway: Any, folder: Path, *, author: str, comment: str) -> list[tuple[str, str]]:
+    """Import ``folder`` into the gateway's catalog; returns ``(item, outcome)`` lines, outcome
+    "unchanged vN", "deployed vN" or "failed: <what and where>"."""
+    report: list[tuple[str, str]] = []
+
+    def attempt(item: str, action: Any) -> None:
+        try:
+            report.append((item, action()))
+        except Exception as exc:  # every failure is reported with its item; the others go on
+            report.append((item, f"failed: {_describe(exc)}"))
+
+    rules = folder / RULES
+    if rules.is_dir():
+        for sub in sorted(p for p in rules.iterdir() if p.is_dir()):
+            attempt(f"rule set {sub.name}", lambda sub=sub: gateway.engine.import_folder(sub, author, comment))
+    knowledge = gateway.knowledge
+    for kind, suffixes in (("ontology", (".ttl", ".owl", ".rdf")), ("swrl", (".swrl",))):
+        files = sorted(p for p in (folder / ONTOLOGY).glob("*") if p.suffix in suffixes) if (folder / ONTOLOGY).is_dir() else []
+        for path in files[:1]:
+            attempt(f"{kind} {path.name}", lambda kind=kind, path=path: _import_knowledge(knowledge, kind, path, author, comment))
+    workflows = folder / WORKFLOWS
+    if workflows.is_dir():
+        for path in sorted(workflows.glob("*.yaml")):
+            attempt(f"workflow {path.name}", lambda path=path: _import_workflow(gateway.workflows.registry, path, author, comment))
+    mappings = folder / MAPPINGS
+    if mappings.is_dir():
+        for path in sorted(mappings.glob("*.yaml")):
+            attempt(f"mapping {path.stem}", lambda path=path: _import_mapping(gateway.mappings, path, author, comment))
+    queries = folder / QUERIES
+    if queries.is_dir():
+        for path in sorted(queries.glob("*.rq")):
+            attempt(f"query {path.name}", lambda path=path: _import_query(gateway, path, author, comment))
+    return report
+
+
+def _import_knowledge(knowledge: Any, kind: str, path: Path, author: str, comment: str) -> str:
+    text = path.read_text(encoding="utf-8")
+    info = knowledge.info(kind)
+    if info is not None and knowledge.text(kind) == text:
+        return f"unchanged v{info.version}"
+    return f"deployed v{knowledge.replace(kind, text, author=author, comment=comment).version}"
+
+
+def _import_workflow(registry: Any, path: Path, author: str, comment: str) -> str:
+    from gateway.workflow.loader import parse
+
+    text = path.read_text(encoding="utf-8")
+    name = parse(text, file=str(path)).name
+    if name in registry.names():
+        entry = registry.current(name)
+        if entry.workflow.source == text:
+            return f"unchanged v{entry.info.version}"
+    return f"deployed v{registry.replace(name, text, author=author, comment=comment).version}"
+
+
+def _import_mapping(mappings: Any, path: Path, author: str, comment: str) -> str:
+    spec = yaml.safe_load(path.read_text(encoding="utf-8"))
+    current = mappings.get(path.stem) if path.stem in mappings.names() else None
+    if current is not None and current["version"] is not None and current["spec"] == spec:
+        return f"unchanged v{current['version']}"
+    return f"deployed v{mappings.replace(path.stem, spec, author=author, comment=comment).version}"
+
+
+def _import_query(gateway: Any, path: Path, author: str, comment: str) -> str:
+    from gateway.stream.query import ParamSpec, parse_query
+    from gateway.stream.rules import RuleBinding
+
+    text = path.read_text(encoding="utf-8")
+    sidecar = path.with_name(path.stem + ".binding.yaml")
+    binding = RuleBinding.from_dict(yaml.safe_load(sidecar.read_text(encoding="utf-8")), sidecar.name) \
+        if sidecar.exists() else None
+    params_file = path.with_name(path.stem + ".params.json")
+    params = [ParamSpec(**p) for p in json.loads(params_file.read_text(encoding="utf-8"))] if params_file.exists() else None
+    name = parse_query(text, params).name
+    head = gateway.catalog.head("query", name)
+    if head is not None and head.live:
+        payload = gateway.catalog.load("query", name, head.current).payload
+        if payload["text"] == text and payload.get("binding") == (binding.to_dict() if binding else None):
+            return f"unchanged v{head.current}"
+    info = gateway.queries.register(text, params, replace=True, binding=binding, author=author, comment=comment)
+    return f"deployed v{info['version']}"
+
+
+def _describe(exc: Exception) -> str:
+    errors = getattr(exc, "errors", None)
+    if isinstance(errors, list) and errors:
+        first = errors[0]
+        if hasattr(first, "to_dict"):
+            first = first.to_dict()
+        if isinstance(first, dict):
+            where = ":".join(str(first.get(k)) for k in ("file", "line", "column") if first.get(k) not in (None, ""))
+            return f"{where}: {first.get('message', exc)}" if where else str(first.get("message", exc))
+    problems = getattr(exc, "problems", None)
+    if isinstance(problems, list) and problems:
+        return str(problems[0])
+    return str(exc)
+

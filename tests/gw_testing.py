@@ -1,0 +1,37 @@
+"""Helpers for tests that need a gateway: stores on the shared test server, gateways built through
+the one composition root (:func:`gateway.app.build_gateway`)."""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+from pathlib import Path
+
+_databases = itertools.count(1)
+
+
+def open_test_store(mongo, folder: Path, name: str | None = None):
+    """An InformationState on its own database of the shared server, journalling under ``folder``."""
+    from gateway.store.store import InformationState
+
+    database = name or f"t{os.getpid()}_{next(_databases)}"
+    return InformationState(mongo.uri, database, Path(folder) / "journal", backend="embedded", timeout_ms=1000,
+                            retry_interval_s=0.2)
+
+
+@contextlib.contextmanager
+def built_gateway(settings, mongo, folder: Path, **options):
+    """``build_gateway`` (the one composition root) over a fresh database of the shared server;
+    closes the gateway and its store afterwards."""
+    from gateway.app import build_gateway
+
+    store = open_test_store(mongo, folder)
+    try:
+        gateway = build_gateway(settings, store=store, **{"ros": False, "warm_up": False, **options})
+        try:
+            yield gateway
+        finally:
+            gateway.close()
+    finally:
+        store.close()
