@@ -19,6 +19,8 @@ import typer
 app = typer.Typer(help="PRINTEPS gateway: a Drools-backed rules server for service robots.", no_args_is_help=True)
 rules_app = typer.Typer(help="Check and deploy rule sets (folders of .drl/.dsl/.dslr files).", no_args_is_help=True)
 app.add_typer(rules_app, name="rules")
+workflow_app = typer.Typer(help="Check workflow files and generate their standalone ROS nodes.", no_args_is_help=True)
+app.add_typer(workflow_app, name="workflow")
 
 DEFAULT_SERVER = "http://127.0.0.1:8080"
 ConfigOption = typer.Option(None, "--config", "-c", help="Settings YAML (default: $PRINTEPS_CONFIG).")
@@ -313,6 +315,48 @@ def fire(
         _print_json(exc.to_dict())
         raise typer.Exit(1)
     _print_json(result.to_dict())
+
+
+@workflow_app.command("validate")
+def workflow_validate(files: list[Path] = typer.Argument(..., help="Workflow YAML files.")) -> None:
+    """Check workflow files against the schema and their references: ``file:line:column: path:
+    message`` per problem, exit 1 on any."""
+    from gateway.workflow.loader import WorkflowInvalid, load
+
+    failed = False
+    for path in files:
+        try:
+            wf = load(path)
+        except WorkflowInvalid as exc:
+            failed = True
+            for problem in exc.problems:
+                typer.echo(str(problem), err=True)
+        except OSError as exc:
+            failed = True
+            typer.echo(f"{path}: {exc.strerror}", err=True)
+        else:
+            typer.echo(f"{path}: ok ({wf.name})")
+    if failed:
+        raise typer.Exit(1)
+
+
+@workflow_app.command("generate")
+def workflow_generate(
+    file: Path = typer.Argument(..., help="A workflow YAML file."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Default: standard output."),
+) -> None:
+    """Write the workflow as a standalone rclpy node (what the papers' editor generated)."""
+    from gateway.workflow.codegen import generate
+    from gateway.workflow.loader import WorkflowInvalid, load
+
+    try:
+        source = generate(load(file))
+    except WorkflowInvalid as exc:
+        _fail(str(exc))
+    if output:
+        output.write_text(source, encoding="utf-8")
+    else:
+        typer.echo(source, nl=False)
 
 
 @app.command("build-java")

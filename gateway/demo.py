@@ -193,27 +193,3 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         out(f"  pepper {c['service']:<8} {what}")
     out(f"  Information State: {store_health.get('status')} ({store_health.get('buffered')} buffered); logs in {work}")
     return summary
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m gateway.demo [--headless] [--speed N] [--scenario FILE]`` (the CLI wraps this)."""
-    import argparse
-
-    ap = argparse.ArgumentParser(description="PRINTEPS teahouse reception demo")
-    ap.add_argument("--headless", action="store_true")
-    ap.add_argument("--speed", type=float, default=1.0)
-    ap.add_argument("--scenario", default=None)
-    ap.add_argument("--config", default=None)
-    args = ap.parse_args(argv)
-    sys.setswitchinterval(0.001)  # GIL hand-offs between executor/worker threads: see docs/ros.md
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    summary = run_demo(load_settings(args.config), headless=args.headless, scenario=args.scenario,
-                       speed=args.speed, stop_event=stop)
-    return 0 if summary["greetings"] else 1
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

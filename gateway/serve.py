@@ -1,7 +1,9 @@
 """Serving a gateway over HTTP: one process, a background thread (demo, tests), or N workers on one port.
 
-``printeps serve --workers N`` runs N worker processes that share one listening socket (opened
-here, passed down as a file descriptor, as uvicorn's own multi-process mode does). Each worker is a
+``printeps serve --workers N`` runs N worker processes listening on one port: each binds its own
+socket with ``SO_REUSEPORT``, so the kernel spreads new connections evenly over the workers (one
+shared socket, as in uvicorn's own multi-process mode, lets one busy process take most of them).
+Each worker is a
 full member of the gateway: it builds its own gateway through the one composition root
 (:func:`gateway.app.build_gateway`), over the same Information State, so deploys and decisions are
 shared and a change made through any worker is live in all of them. The parent only supervises:
@@ -36,9 +38,17 @@ def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | 
 
     gc.collect()
     gc.freeze()  # start-up objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
+    # uvicorn shuts down gracefully on SIGTERM, then raises the signal again for the handler it
+    # found: make that an orderly exit, so the caller's ``gateway.close()`` runs (journal shipped,
+    # ROS node destroyed, embedded database stopped) instead of the process dying on the spot.
+    signal.signal(signal.SIGTERM, _exit_quietly)
     config = uvicorn.Config(gateway.app, host=host, port=port, loop="auto", http="auto", log_level="info",
                             access_log=False)
     uvicorn.Server(config).run(sockets=sockets)
+
+
+def _exit_quietly(signum: int, frame: Any) -> None:
+    raise SystemExit(0)
 
 
 def serve_in_thread(app: Any, port: int, name: str = "uvicorn", timeout_s: float = 30.0,
@@ -68,13 +78,15 @@ def free_port(host: str = "127.0.0.1") -> int:
 # --------------------------------------------------------------------------- workers
 
 
-def listening_socket(host: str, port: int) -> socket.socket:
+def listening_socket(host: str, port: int, *, listen: bool = True) -> socket.socket:
+    """A socket on ``host:port`` that other processes may bind too (``SO_REUSEPORT``)."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
     sock.bind((host, port))
-    sock.listen(2048)
-    sock.set_inheritable(True)
+    if listen:
+        sock.listen(2048)
     return sock
 
 
@@ -91,7 +103,6 @@ class Supervisor:
         self.procs: list[subprocess.Popen[bytes] | None] = [None] * workers
         self.restarts = [0] * workers
         self._stop = threading.Event()
-        self.sock: socket.socket | None = None
         self.embedded: Any = None
 
     def start_database(self, settings: Any) -> None:
@@ -107,9 +118,8 @@ class Supervisor:
         print(f"embedded database at {self.env['MONGO_URI']} (shared by {self.workers} workers)", flush=True)
 
     def spawn(self, index: int) -> None:
-        assert self.sock is not None
-        cmd = [sys.executable, "-m", "gateway.worker", "--fd", str(self.sock.fileno()), "--index", str(index),
-               "--host", self.host, "--port", str(self.port)]
+        cmd = [sys.executable, "-m", "gateway.worker", "--index", str(index), "--host", self.host,
+               "--port", str(self.port)]
         if self.config:
             cmd += ["--config", self.config]
         if self.ros is not None:
@@ -117,14 +127,14 @@ class Supervisor:
         elif index != 0:
             cmd += ["--no-ros"]
         env = {**self.env, "PRINTEPS_WORKER_INDEX": str(index)}
-        self.procs[index] = subprocess.Popen(cmd, env=env, pass_fds=(self.sock.fileno(),),
+        self.procs[index] = subprocess.Popen(cmd, env=env,
                                              preexec_fn=_die_with_parent if sys.platform == "linux" else None)
 
     def run(self, settings: Any) -> int:
         """Serve until SIGINT/SIGTERM; returns the exit code."""
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: self._stop.set())
-        self.sock = listening_socket(self.host, self.port)
+        listening_socket(self.host, self.port, listen=False).close()  # the port is free: fail now, not in N workers
         try:
             self.start_database(settings)
             for index in range(self.workers):
@@ -160,8 +170,6 @@ class Supervisor:
                 proc.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 proc.kill()
-        if self.sock is not None:
-            self.sock.close()
         if self.embedded is not None:
             self.embedded.stop()
 
@@ -184,7 +192,6 @@ def worker_main(argv: list[str] | None = None) -> int:
     from gateway.config import load_settings
 
     ap = argparse.ArgumentParser(description="a PRINTEPS gateway worker (started by `printeps serve --workers`)")
-    ap.add_argument("--fd", type=int, required=True)
     ap.add_argument("--index", type=int, default=0)
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=8080)
@@ -195,8 +202,8 @@ def worker_main(argv: list[str] | None = None) -> int:
     sys.setswitchinterval(0.001)
     logging.basicConfig(level=logging.INFO, format=f"%(asctime)s worker{args.index} %(levelname)s %(name)s: %(message)s")
     settings = load_settings(args.config)
-    sock = socket.socket(fileno=args.fd)
     gateway = build_gateway(settings, ros=args.ros)
+    sock = listening_socket(args.host, args.port)  # after the build: a worker takes connections once it serves
     try:
         serve(gateway, args.host, args.port, sockets=[sock])
     finally:

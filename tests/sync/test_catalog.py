@@ -1,0 +1,148 @@
+"""The catalog of versions in a real MongoDB-protocol server and the change follower: two
+"processes" (two catalogs over one database) see each other's changes; a bad log entry or a gap
+never stops a follower."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import pytest
+
+from gateway.follower import ChangeFollower
+from gateway.store.catalog import CHANGES, MongoCatalog
+from gateway.versions import CatalogConflict, MemoryCatalog, VersionMissing
+
+
+class Recorder:
+    """A followed service that only notes what it was asked to converge."""
+
+    def __init__(self) -> None:
+        self.synced: list[str] = []
+        self.reconciled = 0
+
+    def sync(self, name: str) -> None:
+        if name == "explodes":
+            raise RuntimeError("cannot apply")
+        self.synced.append(name)
+
+    def reconcile(self) -> None:
+        self.reconciled += 1
+
+
+def wait_for(cond, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return bool(cond())
+
+
+@pytest.fixture(params=["mongo", "memory"])
+def catalogs(request, store):
+    """Two catalogs over the same source of truth (two processes), on MongoDB or in memory."""
+    if request.param == "memory":
+        shared = MemoryCatalog("p1")
+        return shared, shared
+    return MongoCatalog(store.db, "p1"), MongoCatalog(store.db, "p2")
+
+
+def test_versions_heads_conflicts_rollback_delete_history(catalogs):
+    one, two = catalogs
+    info, seq1 = one.save("ruleset", "r", {"files": {"a.drl": "x"}}, author="alice", comment="first", hash="h1",
+                          base_version=0)
+    assert info.version == 1 and two.head("ruleset", "r").current == 1
+    with pytest.raises(CatalogConflict) as stale:
+        two.save("ruleset", "r", {"files": {}}, author="bob", comment="", hash="h", base_version=0)
+    assert stale.value.current == 1
+    info2, seq2 = two.save("ruleset", "r", {"files": {"a.drl": "y"}}, author="bob", comment="second", hash="h2",
+                           base_version=1)
+    assert info2.version == 2 and seq2 > seq1
+    assert one.load("ruleset", "r", 1).payload == {"files": {"a.drl": "x"}}
+    back, _ = one.set_current("ruleset", "r", 1, author="alice", comment="undo")
+    assert back.version == 1 and two.head("ruleset", "r").current == 1
+    two.delete("ruleset", "r", author="bob")
+    head = one.head("ruleset", "r")
+    assert head.deleted and not head.live and head.last == 2
+    with pytest.raises(VersionMissing):
+        one.delete("ruleset", "r", author="alice")
+    info3, _ = one.save("ruleset", "r", {"files": {}}, author="alice", comment="again", hash="h3")
+    assert info3.version == 3  # numbering continues after a delete
+    assert [c.event for c in two.history("ruleset", "r")] == ["deploy", "deploy", "rollback", "delete", "deploy"]
+    assert [v.version for v in two.versions("ruleset", "r")] == [1, 2, 3]
+    assert one.changes_since(0)[-1].seq == two.last_seq()
+
+
+def test_concurrent_saves_never_share_a_version(store):
+    import threading
+
+    catalogs = [MongoCatalog(store.db, f"p{i}") for i in range(4)]
+    got: list[int] = []
+
+    def deploy(catalog: MongoCatalog) -> None:
+        for _ in range(5):
+            got.append(catalog.save("workflow", "w", {"text": "x"}, author="a", comment="", hash="h")[0].version)
+
+    threads = [threading.Thread(target=deploy, args=(c,)) for c in catalogs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(got) == list(range(1, 21))
+    assert catalogs[0].head("workflow", "w").last == 20
+
+
+def test_follower_applies_every_change_of_another_process(store):
+    writer, reader = MongoCatalog(store.db, "writer"), MongoCatalog(store.db, "reader")
+    seen = Recorder()
+    follower = ChangeFollower(reader, {"ruleset": seen}, start_seq=reader.last_seq()).start()
+    try:
+        writer.save("ruleset", "a", {}, author="x", comment="", hash="1")
+        writer.save("ruleset", "b", {}, author="x", comment="", hash="2")
+        writer.delete("ruleset", "a", author="x")
+        assert wait_for(lambda: seen.synced == ["a", "b", "a"]), seen.synced
+    finally:
+        follower.stop()
+
+
+def test_a_malformed_change_entry_is_skipped_with_a_reason_and_following_goes_on(store, caplog):
+    writer, reader = MongoCatalog(store.db, "writer"), MongoCatalog(store.db, "reader")
+    seen = Recorder()
+    follower = ChangeFollower(reader, {"ruleset": seen}, start_seq=reader.last_seq()).start()
+    try:
+        caplog.set_level(logging.ERROR)
+        bad_seq = writer._next_seq()
+        store.db[CHANGES].insert_one({"_id": bad_seq, "seq": bad_seq, "kind": "ruleset"})  # no name, no event
+        unknown = writer._next_seq()
+        store.db[CHANGES].insert_one({"_id": unknown, "seq": unknown, "kind": "spaceship", "name": "x",
+                                      "event": "deploy"})
+        writer.save("ruleset", "explodes", {}, author="x", comment="", hash="1")  # its service fails to apply it
+        writer.save("ruleset", "after", {}, author="x", comment="", hash="2")
+        assert wait_for(lambda: "after" in seen.synced), seen.synced
+        assert follower.errors >= 1 and follower.skipped >= 1 and follower.health()["status"] == "ok"
+        assert f"skipped malformed change-log entry {bad_seq}" in caplog.text
+        assert "unknown kind 'spaceship'" in caplog.text
+    finally:
+        follower.stop()
+
+
+def test_a_gap_in_the_log_is_waited_for_then_passed_over(store):
+    writer, reader = MongoCatalog(store.db, "writer"), MongoCatalog(store.db, "reader")
+    seen = Recorder()
+    follower = ChangeFollower(reader, {"ruleset": seen}, start_seq=reader.last_seq(), gap_wait_s=0.5)
+    lost = writer._next_seq()  # a writer that died between claiming a number and logging it
+    writer.save("ruleset", "later", {}, author="x", comment="", hash="1")
+    follower.poll()
+    assert seen.synced == ["later"]  # entries past the gap are applied at once
+    assert follower.low_water == lost - 1
+    time.sleep(0.6)
+    follower.poll()
+    assert follower.low_water > lost  # the gap is passed over
+
+
+def test_reconcile_asks_every_service(store):
+    seen = Recorder()
+    follower = ChangeFollower(MongoCatalog(store.db, "r"), {"ruleset": seen, "workflow": seen}, start_seq=0)
+    follower.reconcile()
+    assert seen.reconciled == 2
