@@ -73,7 +73,8 @@ class DecisionRecord:
             self._recent[doc["_id"]] = doc
             while len(self._recent) > RECENT_KEPT:
                 self._recent.popitem(last=False)
-        self.store.record(DECISIONS, doc, stored_type="printeps/Decision", inserted_by=self.process)
+        # check_keys=False: built here from checked parts (facts the engine accepted), on the fire path
+        self.store.record(DECISIONS, doc, stored_type="printeps/Decision", inserted_by=self.process, check_keys=False)
 
     def document(self, payload: dict[str, Any]) -> dict[str, Any]:
         facts = payload.get("facts") or []

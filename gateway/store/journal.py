@@ -45,12 +45,17 @@ class JournalFull(RuntimeError):
 
 @dataclass
 class Entry:
-    """One journalled write: where it goes and the document (plain JSON, see InformationState)."""
+    """One journalled write: where it goes and its journal line (the document is decoded from it
+    when shipped, so what reaches the database is exactly what was journalled)."""
 
     database: str
     collection: str
-    doc: dict[str, Any]
+    line: bytes
     segment: "Segment"
+
+    @property
+    def doc(self) -> dict[str, Any]:
+        return orjson.loads(self.line)["d"]
 
 
 class Segment:
@@ -105,7 +110,8 @@ class Segment:
 
 
 def encode(database: str, collection: str, doc: dict[str, Any]) -> bytes:
-    """One journal line (orjson; values orjson cannot write become text, as JSON would need)."""
+    """One journal line (orjson: NaN and infinity become null, non-text keys text, and values it
+    cannot write become their text, as JSON needs)."""
     return orjson.dumps({"db": database, "c": collection, "d": doc}, default=str,
                         option=orjson.OPT_NON_STR_KEYS) + b"\n"
 
@@ -145,6 +151,7 @@ class Journal:
         self.batch = batch
         self.adopt_interval_s = adopt_interval_s
         self.dropped = 0
+        self.set_aside_count = 0
         self.last_error: str | None = None
         self.degraded = False
         self._pending: deque[Entry] = deque()
@@ -162,19 +169,18 @@ class Journal:
         self._thread.start()
 
     # ---- writing -------------------------------------------------------------------------------
-    def append(self, database: str, collection: str, docs: list[dict[str, Any]]) -> None:
-        """Journal ``docs`` (in order); raises JournalFull when the bound is reached."""
-        lines = [encode(database, collection, d) for d in docs]
+    def append(self, database: str, collection: str, lines: list[bytes]) -> None:
+        """Journal the encoded documents (:func:`encode`, in order); raises JournalFull at the bound."""
         with self._lock:
             if self._stop:
                 raise RuntimeError("the Information State journal is closed")
-            if len(self._pending) + self._inflight + len(docs) > self.max_docs:
-                self.dropped += len(docs)
+            if len(self._pending) + self._inflight + len(lines) > self.max_docs:
+                self.dropped += len(lines)
                 raise JournalFull(f"the journal in {self.folder} holds {self.max_docs} writes not yet in the database")
             segment = self._writable_segment()
-            for line, doc in zip(lines, docs):
+            for line in lines:
                 segment.append(line, self.fsync)
-                self._pending.append(Entry(database, collection, doc, segment))
+                self._pending.append(Entry(database, collection, line, segment))
             self._wake.notify()
 
     def _writable_segment(self) -> Segment:
@@ -260,6 +266,17 @@ class Journal:
         if current is not None and current.shipped >= current.written and current.size >= SEGMENT_BYTES // 4:
             current.remove()  # everything in it is shipped: start afresh instead of growing
             self._segment = None
+
+    def set_aside(self, database: str, collection: str, doc: dict[str, Any], error: str) -> None:
+        """A document the database refuses (not for being away): keep it in ``refused.jsonl``
+        beside the journal with the reason, so it is not lost and holds up nothing."""
+        self.set_aside_count += 1
+        log.error("Information State refused a %s document (%s); kept in %s", collection, error,
+                  self.folder / "refused.jsonl")
+        line = orjson.dumps({"db": database, "c": collection, "d": doc, "error": error}, default=str,
+                            option=orjson.OPT_NON_STR_KEYS) + b"\n"
+        with open(self.folder / "refused.jsonl", "ab") as fh:
+            fh.write(line)
 
     # ---- segments left by processes that are gone ---------------------------------------------
     def _adopt_orphans(self) -> None:

@@ -19,9 +19,10 @@ from typing import Any, Mapping
 
 import pymongo
 from bson import ObjectId
-from pymongo.errors import BulkWriteError, PyMongoError
+from bson.errors import InvalidDocument
+from pymongo.errors import BulkWriteError, DuplicateKeyError, OperationFailure, PyMongoError
 
-from gateway.store.journal import Journal, JournalFull
+from gateway.store.journal import Journal, JournalFull, encode
 
 log = logging.getLogger(__name__)
 
@@ -55,20 +56,31 @@ def check_collection(name: str) -> str:
     return name
 
 
+_SCALARS = (str, int, bool, type(None))
+
+
 def _clean(value: Any, where: str) -> Any:
-    """Make a value storable: no NaN/inf (JSON can't carry them), no '$' or '.' in keys."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Mapping):
+    """Make a value storable: no NaN/inf (JSON can't carry them), no '$' or '.' in keys.
+
+    Runs on every recorded decision (the fire path), so the common types are tested by exact
+    type first and the place of a bad key is only spelled out when there is one."""
+    kind = type(value)
+    if kind in _SCALARS:
+        return value
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is dict or isinstance(value, Mapping):
         out = {}
         for k, v in value.items():
-            key = str(k)
-            if key.startswith("$") or "." in key:
+            key = k if type(k) is str else str(k)
+            if key[:1] == "$" or "." in key:
                 raise StoreError(f"{where}: field name {key!r} may not start with '$' or contain '.'")
-            out[key] = _clean(v, f"{where}.{key}")
+            out[key] = _clean(v, f"{where}.{key}") if type(v) not in _SCALARS else v
         return out
-    if isinstance(value, (list, tuple)):
-        return [_clean(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if kind is list or kind is tuple:
+        return [v if type(v) in _SCALARS else _clean(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
     return value
 
 
@@ -99,21 +111,33 @@ class InformationState:
 
     # ---- writes -------------------------------------------------------------------------------
     def record(self, collection: str, doc: Mapping[str, Any], *, stored_type: str,
-               inserted_by: str = "gateway") -> str:
+               inserted_by: str = "gateway", check_keys: bool = True) -> str:
         """Keep one document with its ``_meta``; returns its id. Never raises on a DB outage."""
-        return self.record_many(collection, [doc], stored_type=stored_type, inserted_by=inserted_by)[0]
+        return self.record_many(collection, [doc], stored_type=stored_type, inserted_by=inserted_by,
+                                check_keys=check_keys)[0]
 
     def record_many(self, collection: str, docs: list[Mapping[str, Any]], *, stored_type: str,
-                    inserted_by: str = "gateway") -> list[str]:
-        """Like :meth:`record` for several documents of one kind (kept in order)."""
+                    inserted_by: str = "gateway", check_keys: bool = True) -> list[str]:
+        """Like :meth:`record` for several documents of one kind (kept in order).
+
+        ``check_keys`` False skips the search for ``$``/``.`` field names, for documents the
+        gateway builds itself from checked parts (decisions, on the fire path); a document the
+        database refuses anyway is set aside by the shipper, never blocking the others."""
         check_collection(collection)
-        bodies = [_body(collection, doc, stored_type, inserted_by) for doc in docs]
+        ids, lines = [], []
+        for doc in docs:
+            body = _body(doc, stored_type, inserted_by)
+            line = encode(self.database, collection, body)
+            if check_keys and _BAD_KEY.search(line):
+                _clean(dict(doc), collection)  # raises StoreError naming the field and where it is
+            ids.append(body["_id"])
+            lines.append(line)
         try:
-            self.journal.append(self.database, collection, bodies)
+            self.journal.append(self.database, collection, lines)
         except JournalFull as exc:
             log.error("Information State: %s; refused %d %s document(s) for %s (refused so far: %d)",
-                      exc, len(bodies), stored_type, collection, self.journal.dropped)
-        return [b["_id"] for b in bodies]
+                      exc, len(lines), stored_type, collection, self.journal.dropped)
+        return ids
 
     def flush(self, timeout_s: float = 10.0) -> bool:
         """Wait until every write made so far is in the database; False if it is not reachable."""
@@ -128,9 +152,17 @@ class InformationState:
         try:
             target.insert_many([_to_bson(d) for d in docs], ordered=False)
         except BulkWriteError as exc:
-            other = [e for e in exc.details.get("writeErrors", []) if e.get("code") != 11000]
-            if other:
-                raise
+            refused = {e["index"]: e for e in exc.details.get("writeErrors", []) if e.get("code") != 11000}
+            for index, error in refused.items():  # the others are in: only these are set aside
+                self.journal.set_aside(database, collection, docs[index], error.get("errmsg", str(error)))
+        except (InvalidDocument, OperationFailure):
+            for doc in docs:  # one refused document must not hold up the others: one by one
+                try:
+                    target.insert_one(_to_bson(doc))
+                except DuplicateKeyError:
+                    pass
+                except (InvalidDocument, OperationFailure) as single:
+                    self.journal.set_aside(database, collection, doc, f"{type(single).__name__}: {single}")
 
     # ---- reads --------------------------------------------------------------------------------
     def query(self, collection: str, *, type: str | None = None, since: datetime | None = None,
@@ -187,6 +219,7 @@ class InformationState:
             "uri": _redact(self.uri),
             "buffered": journal.backlog,
             "dropped": journal.dropped,
+            "set_aside": journal.set_aside_count,
             "last_error": journal.last_error,
         }
 
@@ -196,9 +229,16 @@ class InformationState:
         self.client.close()
 
 
-def _body(collection: str, doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
-    """The journalled form: plain JSON (``_id`` as hex text, ``inserted_at`` as epoch seconds)."""
-    body = _clean(dict(doc), collection)
+# A key (a JSON string followed by a colon) that starts with "$" or holds a ".": MongoDB would
+# take it for an operator or a path. Searched for in the encoded line, so a clean document — all of
+# them on the fire path — is never walked in Python.
+_BAD_KEY = re.compile(rb'"(?:\$(?:[^"\\]|\\.)*|(?:[^"\\]|\\.)*\.(?:[^"\\]|\\.)*)":')
+
+
+def _body(doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
+    """The journalled form: plain JSON (``_id`` as hex text, ``inserted_at`` as epoch seconds);
+    NaN and infinity become null when it is encoded."""
+    body = dict(doc)
     body.pop("_meta", None)
     body["_id"] = str(body.get("_id") or ObjectId())
     body["_meta"] = {"stored_type": stored_type, "inserted_at": time.time(), "inserted_by": inserted_by}

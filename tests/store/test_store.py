@@ -207,3 +207,15 @@ def test_mongo_uri_selects_an_external_db(settings, mongo, monkeypatch) -> None:
         assert store.health()["status"] == "ok"
     finally:
         store.close()
+
+
+def test_a_document_the_database_refuses_is_set_aside_and_holds_up_nothing(store: InformationState) -> None:
+    huge = {"blob": "x" * (17 * 1024 * 1024)}  # over MongoDB's 16 MB document limit
+    store.record("actions", {"n": 1}, stored_type="printeps/Action")
+    store.record("actions", huge, stored_type="printeps/Action")
+    store.record("actions", {"n": 2}, stored_type="printeps/Action")
+    assert store.flush(30)
+    assert sorted(d["n"] for d in store.query("actions")) == [1, 2]
+    assert store.health()["set_aside"] == 1
+    refused = (store.journal.folder / "refused.jsonl").read_text()
+    assert "DocumentTooLarge" in refused or "too large" in refused.lower()
