@@ -30,6 +30,7 @@ OPTIONAL_ROUTERS = (
     ("gateway.api.state", "router"),
     ("gateway.api.workflows", "router"),
     ("gateway.workbench.router", "router"),
+    ("gateway.api.authoring", "router"),  # issue 16: rule test scenarios, decision-table grids
 )
 
 DESCRIPTION = """Manage and fire PRINTEPS business rule sets (Drools) over HTTP.

@@ -32,8 +32,9 @@ router = APIRouter(tags=["rule sets"])
 
 
 class FilesBody(BaseModel):
-    """Rule files of a rule set: file name -> text (``.drl``, ``.dsl``, ``.dslr``, ``examples.json``);
-    the engine checks names, sizes and content and answers 422 naming the file."""
+    """Rule files of a rule set: file name -> text (``.drl``, ``.dsl``, ``.dslr``, decision tables
+    ``.csv`` and ``.xlsx`` — the latter as a ``data:`` URL —, ``examples.json`` and test scenarios
+    ``tests/<name>.yaml``); the engine checks names, sizes and content and answers 422 naming the file."""
 
     model_config = ConfigDict(extra="forbid")
     files: dict[str, str] = Field(min_length=1, max_length=MAX_FILES)
@@ -44,6 +45,7 @@ class DeployBody(FilesBody):
     base_version: int | None = Field(
         default=None, ge=0, description="The version this edit started from; 409 if it is no longer current."
     )
+    force: bool = Field(default=False, description="Deploy even if test scenarios (tests/*.yaml) are red.")
 
 
 class RollbackBody(BaseModel):
@@ -115,7 +117,14 @@ def get_version(
 @router.put("/api/rulesets/{name}", status_code=201)
 def deploy(name: RuleSetName, body: DeployBody, request: Request, who: Principal = Depends(author)) -> JSON:
     """Compile and make live; 422 with ``errors`` (file, line, column, message) if it does not compile,
+    422 ``{"kind": "scenarios", ...}`` if a test scenario is red (unless ``force``),
     409 ``{"error": "base version changed", "current": n}`` if ``base_version`` is stale."""
+    # --- issue 16: the deploy gate (test scenarios must be green unless forced) ---
+    if not body.force:
+        from gateway.api.authoring import require_green
+
+        require_green(_engine(request), name, dict(body.files))
+    # --- end issue 16 ---
     info = _engine(request).deploy(
         name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version
     )

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.engine.errors import VersionNotFound
+from gateway.engine.ruleset import read_file, write_file
 
 
 @dataclass(frozen=True)
@@ -111,8 +112,8 @@ class VersionStore:
             vdir.mkdir(parents=True, exist_ok=True)
             tmp = vdir / f".{version}.tmp{os.getpid()}"
             (tmp / "files").mkdir(parents=True, exist_ok=True)
-            for fname, text in files.items():
-                (tmp / "files" / fname).write_text(text, encoding="utf-8")
+            for fname, text in files.items():  # tests/<name>.yaml in a subfolder; a workbook as itself
+                write_file(tmp / "files" / fname, text)
             (tmp / "meta.json").write_text(
                 json.dumps({**info.to_dict(), "files": sorted(files)}, indent=1, ensure_ascii=False), encoding="utf-8"
             )
@@ -129,7 +130,7 @@ class VersionStore:
     def load(self, name: str, version: int) -> RuleSetVersion:
         info = self.info(name, version)
         fdir = self._dir(name) / "versions" / str(version) / "files"
-        files = {p.name: p.read_text(encoding="utf-8") for p in sorted(fdir.iterdir()) if p.is_file()}
+        files = {p.relative_to(fdir).as_posix(): read_file(p) for p in sorted(fdir.rglob("*")) if p.is_file()}
         return RuleSetVersion(info, files)
 
     def list_versions(self, name: str) -> list[VersionInfo]:
