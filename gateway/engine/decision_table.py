@@ -507,9 +507,9 @@ class _SheetCompiler:
             if row != last_row:
                 self.flush()
                 last_row = row
-            if not text.strip():
-                continue
             problem = self.sheet.problems.get((row, col))
+            if not text.strip() and not problem:
+                continue
             try:
                 if problem:
                     raise TableError(self.cell(row, col), problem)

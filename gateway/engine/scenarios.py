@@ -589,7 +589,7 @@ def compare(scenario: Scenario, fired: list[str], actions: list[dict[str, Any]],
             continue
         closest = _closest_action(wanted, [a for k, a in enumerate(actions) if k not in used])
         message = f"expected action {describe_action(wanted.to_dict())} was not requested"
-        if expect.ordered and any(_action_matches(wanted, a) for a in actions):
+        if expect.ordered and any(_action_matches(wanted, a) for k, a in enumerate(actions) if k not in used):
             message = f"expected action {describe_action(wanted.to_dict())} came out of order"
         elif closest is not None:
             message += f"; closest: {describe_action(closest)}"
