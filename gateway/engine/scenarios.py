@@ -608,8 +608,8 @@ def compare(scenario: Scenario, fired: list[str], actions: list[dict[str, Any]],
     for wanted, line in expect.facts:
         index = next((k for k, fact in enumerate(facts) if k not in taken and _subset(wanted, fact)), None)
         if index is None:
-            same_type = [f for f in facts if f.get("type") == wanted.get("type")]
-            seen = "; ".join(_brief(f) for f in same_type[:3]) or f"no {wanted.get('type')} fact at all"
+            same_type = sorted(_brief(f) for f in facts if f.get("type") == wanted.get("type"))
+            seen = "; ".join(same_type[:3]) + (" …" if len(same_type) > 3 else "") or f"no {wanted.get('type')} fact at all"
             failures.append(Failure(f"no fact matches {_brief(wanted)} ({wanted.get('type')} facts: {seen})", line))
         else:
             taken.add(index)

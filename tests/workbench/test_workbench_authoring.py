@@ -66,6 +66,7 @@ def test_completion_offers_sentences_with_tab_stops_and_hover_shows_drl(author_p
     hover = page.get_by_test_id("dsl-hover")
     expect(hover).to_contain_text("age >= 13, age <= 19")
     expect(hover).to_contain_text("Adds to the fact on the line above")
+    expect(hover).to_contain_text("$c: Customer(category == null, age >= 13, age <= 19)")
     page.screenshot(path=str(screenshots / "workbench-hover.png"))
 
 

@@ -41,14 +41,40 @@ export function explainLine(lines, number, entries) {
   const scopes = scopesFor(section);
   if (!scopes || !trimmed || trimmed === "when" || trimmed === "then" || /^(\/\/|#)/.test(trimmed)) return null;
   if (trimmed.startsWith(">")) return { kind: "raw", drl: trimmed.slice(1).trim() };
+  const found = expandLine(trimmed, entries, scopes);
+  if (!found) return { kind: "unknown" };
+  if (!trimmed.startsWith("-")) return { kind: "sentence", ...found };
+  // A "- …" line adds constraints to the pattern of the sentence above it: show both together.
+  let n = number - 1;
+  while (n >= 1 && (lines[n - 1] || "").trim().startsWith("-")) n--;
+  const above = n >= 1 ? (lines[n - 1] || "").trim() : "";
+  const pattern = above && sectionAt(lines, n) === section ? expandLine(above, entries, scopes) : null;
+  const together = pattern && /\)\s*$/.test(pattern.drl)
+    ? addConstraints(pattern.drl, lines, number, entries, scopes, section) : null;
+  return { kind: "constraint", ...found, together };
+}
+
+function expandLine(text, entries, scopes) {
   for (const entry of entries) {
     if (!scopes.has(entry.scope)) continue;
-    const drl = expandWith(entry, trimmed);
-    if (drl !== null) {
-      return { kind: trimmed.startsWith("-") ? "constraint" : "sentence", drl, entry };
-    }
+    const drl = expandWith(entry, text);
+    if (drl !== null) return { drl, entry };
   }
-  return { kind: "unknown" };
+  return null;
+}
+
+/** The pattern above with the constraints of every "- …" line down to line `number` added. */
+function addConstraints(pattern, lines, number, entries, scopes, section) {
+  let start = number;
+  while (start > 1 && (lines[start - 2] || "").trim().startsWith("-")) start--;
+  const constraints = [];
+  for (let n = start; n <= number; n++) {
+    const found = expandLine((lines[n - 1] || "").trim(), entries, scopes);
+    if (found && sectionAt(lines, n) === section) constraints.push(found.drl);
+  }
+  const close = pattern.lastIndexOf(")");
+  const inner = pattern.slice(pattern.indexOf("(") + 1, close).trim();
+  return pattern.slice(0, close) + (inner ? ", " : "") + constraints.join(", ") + pattern.slice(close);
 }
 
 /** The type name of the innermost `Type(` still open at the end of `text` (or ""). */

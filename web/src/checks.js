@@ -229,7 +229,10 @@ export function nearestSentences(text, entries, scopes, limit = 3) {
     }
   }
   scored.sort((a, b) => a.d - b.d || a.label.localeCompare(b.label));
-  return scored.slice(0, limit).map(({ label, template, entry }) => ({ label, template, entry }));
+  // Only those about as near as the nearest: a clear typo gets one fix, not three guesses.
+  const best = scored.length ? scored[0].d : 0;
+  return scored.filter((s) => s.d <= best + Math.max(3, best / 2)).slice(0, limit)
+    .map(({ label, template, entry }) => ({ label, template, entry }));
 }
 
 /** Which part of a rule line `number` (1-based) of a .dslr text is in: "when", "then" or null. */

@@ -68,6 +68,14 @@ export function sentenceHover(source) {
         const code = document.createElement("pre");
         code.textContent = found.drl;
         dom.append(title, code);
+        if (found.together) {
+          const with_ = document.createElement("div");
+          with_.className = "cm-dsl-hover-title";
+          with_.textContent = "Together with it:";
+          const whole = document.createElement("pre");
+          whole.textContent = found.together;
+          dom.append(with_, whole);
+        }
         if (found.entry) {
           const from = document.createElement("div");
           from.className = "cm-dsl-hover-from";

@@ -193,6 +193,7 @@ class RulesView {
         this.tableTexts[fileName] = content;
         this.changed();
       },
+      onSelect: (row) => this.followTableRow(fileName, row),
     }).then((editor) => {
       this.tables[fileName] = editor;
       editor.showProblems(this.allProblems().filter((p) => p.file === fileName));
@@ -392,7 +393,21 @@ class RulesView {
       text = (this.expanded && this.expanded[this.active]) || "";
     }
     if (this.previewView.state.doc.toString() !== text) setText(this.previewView, text);
-    if (isDslr) this.followCursor(this.active, this.cursorLine || 1);
+    if (isTable(this.active)) this.followTableRow(this.active, this.tableRow || 1);
+    else if (isDslr) this.followCursor(this.active, this.cursorLine || 1);
+  }
+
+  /** Keep the rule a table's selected row becomes in view ("// RuleTable … , row N" heads it). */
+  followTableRow(fileName, row) {
+    this.tableRow = row;
+    if (!this.previewOn || fileName !== this.active) return;
+    const doc = this.previewView.state.doc;
+    for (let n = 1; n <= doc.lines; n++) {
+      if (doc.line(n).text.endsWith(`, row ${row}`)) {
+        scrollToLine(this.previewView, n, "start");
+        return;
+      }
+    }
   }
 
   /** Keep the generated DRL of the rule being edited in view. Expansion does not keep line

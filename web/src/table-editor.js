@@ -38,11 +38,13 @@ export function ruleTables(rows) {
 
 /**
  * Mount the grid for `fileName` in `host`. options: content (the file's text as in `files`),
- * readOnly, onChange(content) after every edit has been written into the file.
+ * readOnly, onChange(content) after every edit has been written into the file, onSelect(row) when
+ * a row is selected (1-based, as the spreadsheet numbers it).
  */
-export async function mountTableEditor(host, { fileName, content, readOnly = false, onChange = () => {} }) {
+export async function mountTableEditor(host, { fileName, content, readOnly = false, onChange = () => {}, onSelect = () => {} }) {
   const grid = await api("POST", "/api/decision-tables/read", { file: fileName, content });
   const editor = new TableEditor(host, fileName, content, grid, readOnly, onChange);
+  editor.onSelect = onSelect;
   return editor;
 }
 
@@ -123,7 +125,11 @@ class TableEditor {
             title: labels[c] && !role ? labels[c] : null,
             disabled: this.readOnly || anchor,
             placeholder: anchor ? "⟵ merged" : null,
-            onfocus: () => { this.selected = { row: r, col: c }; this.markSelected(); },
+            onfocus: () => {
+              this.selected = { row: r, col: c };
+              this.markSelected();
+              this.onSelect?.(r);
+            },
             oninput: (e) => this.edit(r, c, e.target.value),
             onkeydown: (e) => this.key(e, r, c),
           });

@@ -38,6 +38,7 @@ test("hovering a line explains its DRL, with the line's values", () => {
   const lines = RULE.split("\n");
   assert.deepEqual(explainLine(lines, 4, entries).drl, "age >= 4, age <= 12");
   assert.equal(explainLine(lines, 4, entries).kind, "constraint");
+  assert.equal(explainLine(lines, 4, entries).together, "$c: Customer(category == null, age >= 4, age <= 12)");
   assert.equal(explainLine(lines, 6, entries).drl, 'actions.say("pepper", "Hello");');
   assert.equal(explainLine(lines, 2, entries), null);
 });
@@ -50,6 +51,10 @@ test("a misspelt sentence gets the nearest sentences as fixes, keeping its value
   assert.equal(problems.length, 1);
   assert.equal(problems[0].fixes[0].label, "- aged between 4 and 12");
   assert.match(problems[0].message, /Did you mean “- aged between 4 and 12”/);
+});
+
+test("a clear typo gets one fix, not several guesses", () => {
+  assert.deepEqual(nearestSentences('Pepper sayz "Hi"', entries, CONSEQUENCE_SCOPES).map((f) => f.label), ['Pepper says "Hi"']);
 });
 
 test("nothing is offered for a line far from every sentence", () => {
