@@ -180,3 +180,9 @@ def test_the_grid_edits_a_decision_table_and_the_change_fires(author_page, gatew
     assert said(gateway.fire(name, pair)) == ["Welcome! A cosy table for two?"]
     regulars = [{"type": "Group", "entrance": "entrance", "kind": "regulars", "size": 4}]
     assert said(gateway.fire(name, regulars)) == ["Welcome back, friends!"]
+
+    # The history compares the table's cells, not the workbook's bytes.
+    page.get_by_role("link", name="History").click()
+    diff = page.get_by_test_id("diff")
+    expect(diff).to_contain_text("greetings.xlsx")
+    expect(diff).to_contain_text("13 |  | Greet a pair | pair |  |  | Welcome! A cosy table for two?")
