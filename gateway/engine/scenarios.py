@@ -18,7 +18,7 @@ file format an owner can read). Scenarios are kept and versioned with the rule s
         facts:                    # facts after firing; each matches one fact (fields: a subset)
           - {type: Customer, id: c1, category: child}
 
-Plain Python: a malformed file gets :class:`CompileError`\\ s naming the file, line and column
+Plain Python: a malformed file gets :class:`CompileError` objects naming the file, line and column
 (:func:`format_errors`, which the compiler also reports, so nothing with a broken scenario file
 deploys); :func:`run_scenarios` fires each scenario through the engine on the compiled rule set
 (one build for all of them) and compares; the :class:`TestReport` gives the expected and actual of

@@ -3,7 +3,7 @@
 Why separate from the converter: reading a workbook (openpyxl, merged ranges, formulas, number
 formats as Drools' ExcelParser formats them) and writing edited cells back into it (keeping styles,
 formulas and other sheets) are file-format concerns; :mod:`gateway.engine.decision_table` only sees
-:class:`Sheet`\ s of cell texts. A CSV file is one sheet named after the file and read line by line
+:class:`Sheet` objects (cell texts). A CSV file is one sheet named after the file and read line by line
 as Drools' CsvParser does (a quoted cell cannot span lines; a merged cell ends with ``...``).
 """
 

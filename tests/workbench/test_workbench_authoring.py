@@ -69,6 +69,19 @@ def test_completion_offers_sentences_with_tab_stops_and_hover_shows_drl(author_p
     expect(hover).to_contain_text("$c: Customer(category == null, age >= 13, age <= 19)")
     page.screenshot(path=str(screenshots / "workbench-hover.png"))
 
+    # DRL: fact types and, inside a pattern, their fields complete from the declared types.
+    choose_tab(page, "types.drl")
+    page.locator(EDITOR).click()
+    page.keyboard.press("Control+End")
+    page.keyboard.type('\nrule "Typed"\nwhen\n    $c: Cust')
+    expect(completions).to_contain_text("Customer")
+    completions.locator("li", has_text="Customer").first.click()
+    page.keyboard.type("(ag")
+    expect(completions.locator("li").first).to_contain_text("age")
+    expect(completions).to_contain_text("int")
+    completions.locator("li", has_text="age").first.click()
+    expect(page.locator(f"{EDITOR} .cm-activeLine")).to_contain_text("$c: Customer(age")
+
 
 def test_quick_fix_corrects_a_misspelt_sentence(author_page, ruleset, screenshots):
     page = author_page
