@@ -96,14 +96,14 @@ def main() -> None:
                 ready(url, proc)
             urls = [u for _, u in procs]
             client = httpx.Client(timeout=30)
-            files = client.get(f"{urls[0]}/api/rulesets/reception").json()["files"]
-            original = files["reception.dslr"]
+            original = client.get(f"{urls[0]}/api/rulesets/reception").json()["files"]
             anchor = greeting(client, urls[0])  # the sentence to change, as written in the .dslr
-            assert anchor in original, anchor
+            assert anchor in original["reception.dslr"], anchor
             deploy_s, propagation_s = [], []
             for k in range(args.rounds + 2):
                 new = f"Round {k} greeting."
-                files["reception.dslr"] = original.replace(anchor, new)
+                # the rules and their test scenarios (a red scenario would refuse the deploy)
+                files = {name: text.replace(anchor, new) for name, text in original.items()}
                 origin = urls[k % 3]
                 followers = [u for u in urls if u != origin]
                 seen: dict[str, float] = {}

@@ -68,8 +68,8 @@ def main() -> int:
 
     http = TestClient(gateway.app)
     current = http.get("/api/rulesets/reception").json()
-    files = dict(current["files"])
-    files["reception.dslr"] = files["reception.dslr"].replace("Welcome. Two seats?", "Welcome, both of you!")
+    files = {name: text.replace("Welcome. Two seats?", "Welcome, both of you!")  # rules and their scenarios
+             for name, text in current["files"].items()}
     deployed = http.put("/api/rulesets/reception", json={"files": files, "comment": "bench: deployed over REST"})
     assert deployed.status_code == 201, deployed.text
     expected_text = "Welcome, both of you!"

@@ -51,14 +51,14 @@ def _headers(token: Optional[str]) -> dict[str, str]:
 
 def read_ruleset(path: Path) -> tuple[str, dict[str, str]]:
     """(name, files) of a rule set folder, or of a single rule file (name = its stem)."""
-    from gateway.engine.ruleset import is_rule_file, read_folder
+    from gateway.engine.ruleset import is_rule_file, read_file, read_folder
 
     if path.is_dir():
         return path.name, read_folder(path)
     if path.is_file():
         if not is_rule_file(path.name):
-            _fail(f"{path}: not a rule file (.drl, .dsl, .dslr)", code=2)
-        return path.stem, {path.name: path.read_text(encoding="utf-8")}
+            _fail(f"{path}: not a rule file (.drl, .dsl, .dslr, .csv, .xlsx)", code=2)
+        return path.stem, {path.name: read_file(path)}
     _fail(f"{path}: no such file or folder", code=2)
     raise AssertionError  # unreachable
 
@@ -69,6 +69,9 @@ def format_errors(errors: list[dict[str, Any]], folder: Path | None) -> list[str
     for e in errors:
         fname = e.get("file") or ""
         where = str(folder / fname) if folder is not None and fname else (fname or "<rule set>")
+        if e.get("cell"):  # a decision table: file!Sheet!C7
+            lines.append(f"{where}!{e.get('sheet')}!{e['cell']}: {e.get('message', '')}")
+            continue
         lines.append(f"{where}:{e.get('line', 0)}:{e.get('column', 0)}: {e.get('message', '')}")
     return lines
 
@@ -247,6 +250,83 @@ def rules_validate(
     typer.echo(f"{path}: ok ({len(files)} files)")
 
 
+# --- issue 16: rule test scenarios ------------------------------------------------------------
+
+
+@rules_app.command("test")
+def rules_test(
+    path: Optional[Path] = typer.Argument(None, help="A rule set folder with tests/*.yaml (run locally; "
+                                                      "with --server its files are tested there as a draft)."),
+    server: Optional[str] = typer.Option(None, help="Run on this gateway; without PATH, test the deployed --ruleset."),
+    ruleset: Optional[str] = typer.Option(None, help="Rule set name (default: the folder name)."),
+    version: Optional[int] = typer.Option(None, help="With --server and no PATH: this stored version (default: current)."),
+    token: Optional[str] = typer.Option(None, help="Token (default: $PRINTEPS_TOKEN)."),
+    junit: Optional[Path] = typer.Option(None, "--junit", help="Also write the results as JUnit XML to this file."),
+    config: Optional[Path] = ConfigOption,
+) -> None:
+    """Run a rule set's test scenarios; print green/red per scenario and the rules no scenario
+    fires; exit 1 if any scenario is red or the rules do not compile."""
+    from gateway.engine.scenarios import junit_xml, text_report
+
+    folder = None
+    if path is not None:
+        if not path.is_dir():
+            _fail(f"{path}: not a rule set folder", code=2)
+        folder_name, files = read_ruleset(path)
+        name, folder = ruleset or folder_name, path
+    elif server:
+        if not ruleset:
+            _fail("--ruleset NAME is needed with --server and no folder", code=2)
+        name, files = ruleset, None
+    else:
+        _fail("give a rule set folder, or --server URL --ruleset NAME", code=2)
+        raise AssertionError  # unreachable
+    if server:
+        report = _test_on_server(_server(server), name, files, version, token, folder)
+    else:
+        from gateway.engine import Engine, EngineError
+        from gateway.engine.scenarios import run_scenarios
+
+        engine = Engine(_settings(config))
+        try:
+            report = run_scenarios(engine, files, name).to_dict()
+        except EngineError as exc:
+            body = exc.to_dict()
+            for line in format_errors(body.get("errors") or [{"message": str(exc)}], folder):
+                typer.echo(line)
+            raise typer.Exit(1)
+    for line in text_report(report, str(folder) if folder else None):
+        typer.echo(line)
+    if junit is not None:
+        junit.write_text(junit_xml(report), encoding="utf-8")
+    if not report.get("ok"):
+        raise typer.Exit(1)
+
+
+def _test_on_server(url: str, name: str, files: Optional[dict[str, str]], version: Optional[int],
+                    token: Optional[str], folder: Optional[Path]) -> dict[str, Any]:
+    import httpx
+
+    body: dict[str, Any] = {"files": files} if files is not None else ({"version": version} if version else {})
+    endpoint = f"{url}/api/rulesets/{name}/test"
+    try:
+        response = httpx.post(endpoint, json=body, headers=_headers(token), timeout=300)
+    except httpx.HTTPError as exc:
+        _fail(f"{endpoint}: {exc}")
+    data = _json_or_text(response)
+    if response.status_code == 200 and isinstance(data, dict):
+        return data
+    if response.status_code == 422 and isinstance(data, dict) and data.get("errors"):
+        for line in format_errors(data["errors"], folder):
+            typer.echo(line)
+        raise typer.Exit(1)
+    _fail(f"{endpoint}: HTTP {response.status_code}: {data.get('error') if isinstance(data, dict) else data}")
+    raise AssertionError  # unreachable
+
+
+# --- end issue 16 --------------------------------------------------------------------------------
+
+
 @rules_app.command("deploy")
 def rules_deploy(
     path: Path = typer.Argument(..., help="A rule set folder (its name is the rule set name)."),
@@ -255,14 +335,18 @@ def rules_deploy(
     name: Optional[str] = typer.Option(None, help="Rule set name (default: the folder name)."),
     comment: str = typer.Option("", help="Version comment."),
     base_version: Optional[int] = typer.Option(None, help="Refuse (409) if the current version is not this."),
+    force: bool = typer.Option(False, "--force", help="Deploy even if test scenarios are red."),
 ) -> None:
-    """Deploy a rule set folder to a running gateway (PUT /api/rulesets/{name})."""
+    """Deploy a rule set folder to a running gateway (PUT /api/rulesets/{name}); a red test
+    scenario refuses the deploy unless --force."""
     import httpx
 
     folder_name, files = read_ruleset(path)
     name = name or folder_name
     folder = path if path.is_dir() else path.parent
     body: dict[str, Any] = {"files": files, "comment": comment}
+    if force:
+        body["force"] = True
     if base_version is not None:
         body["base_version"] = base_version
     url = f"{_server(server)}/api/rulesets/{name}"
@@ -277,6 +361,8 @@ def rules_deploy(
     if response.status_code == 422 and isinstance(data, dict) and data.get("errors"):
         for line in format_errors(data["errors"], folder):
             typer.echo(line)
+        if data.get("kind") == "scenarios":  # issue 16: red test scenarios refuse the deploy
+            typer.echo(f"{data.get('error')}")
         raise typer.Exit(1)
     _fail(f"{url}: HTTP {response.status_code}: {data.get('error') if isinstance(data, dict) else data}")
 

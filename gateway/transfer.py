@@ -23,6 +23,7 @@ from typing import Any
 
 import yaml
 
+from gateway.engine.ruleset import write_file
 from gateway.versions import Catalog
 
 RULES = Path("rules") / "drl"
@@ -51,8 +52,11 @@ def export_to(catalog: Catalog, folder: Path) -> list[str]:
         written.append(str(rel))
 
     for name, files in _current(catalog, "ruleset"):
-        for fname, text in sorted(files.items()):
-            write(RULES / name / fname, text)
+        for fname, text in sorted(files.items()):  # tests/<x>.yaml in tests/, a workbook as itself
+            path = folder / RULES / name / fname
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_file(path, text)
+            written.append(str(RULES / name / fname))
     for name, payload in _current(catalog, "workflow"):
         write(WORKFLOWS / f"{name}.yaml", payload["text"])
     for name, payload in _current(catalog, "knowledge"):

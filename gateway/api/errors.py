@@ -34,6 +34,7 @@ from gateway.engine import (
     VersionConflict,
     VersionNotFound,
 )
+from gateway.engine.errors import ScenariosFailed
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +64,7 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
         return 409, body
     if isinstance(exc, (RuleSetNotFound, VersionNotFound)):
         return 404, body
-    if isinstance(exc, (CompileFailed, InvalidRuleSet, FactError, RunawayRules, RuleRuntimeError)):
+    if isinstance(exc, (CompileFailed, InvalidRuleSet, FactError, RunawayRules, RuleRuntimeError, ScenariosFailed)):
         return 422, body
     return 500, body
 

@@ -5,7 +5,8 @@ This is the thin JVM adapter of the engine. The order of checks matters for good
 
 1. the ``.dsl`` mapping files are parsed on their own (a broken mapping line names its line);
 2. each ``.dslr`` is expanded with the DSL files it names (``expander x.dsl``): a sentence that
-   matches no mapping is reported at its own line;
+   matches no mapping is reported at its own line; each decision table (``.csv``, ``.xlsx``) is
+   converted to DRL (:mod:`gateway.engine.decision_table`), its problems named by sheet and cell;
 3. every DRL text (written or expanded) goes through Drools' DRL parser: syntax errors with line
    and column;
 4. only then the executable-model build, whose errors (unknown types and fields, Java errors in
@@ -26,8 +27,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gateway import jvm
+from gateway.engine import decision_table, scenarios
 from gateway.engine.errors import CompileError, CompileFailed
-from gateway.engine.ruleset import check_files, content_hash
+from gateway.engine.ruleset import check_files, content_hash, is_table_file
 
 _build_counter = itertools.count(1)
 _compile_lock = threading.RLock()
@@ -46,6 +48,7 @@ class CompiledRuleSet:
     types: dict[str, dict[str, str]]
     type_names: dict[str, str]
     expanded: dict[str, str] = field(default_factory=dict)
+    rule_names: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -59,6 +62,7 @@ class _Source:
     file: str
     drl: str
     line_map: list[int] | None = None
+    table: decision_table.ConvertedTable | None = None  # a decision table: errors go to its cells
 
     def source_line(self, line: int) -> int:
         if self.line_map is None or line <= 0:
@@ -222,6 +226,11 @@ def expand(files: dict[str, str]) -> dict[str, str]:
                 errors.extend(errs)
                 if drl is not None:
                     out[fname] = drl
+            elif is_table_file(fname):  # a decision table's DRL shows in the same preview
+                table = decision_table.convert(fname, text)
+                errors.extend(table.errors)
+                if table.drl is not None:
+                    out[fname] = table.drl
     if errors:
         raise CompileFailed(errors)
     return out
@@ -285,7 +294,22 @@ def _sources(files: dict[str, str]) -> tuple[list[_Source], dict[str, str], list
                 expanded[fname] = drl
             if drl is not None and not errs:  # a half-expanded text would only add confusing errors
                 sources.append(_Source(fname, drl, _align_lines(drl, text)))
+        elif is_table_file(fname):
+            table = decision_table.convert(fname, text)
+            errors.extend(table.errors)
+            if table.drl is not None:
+                expanded[fname] = table.drl
+                if not table.errors:
+                    sources.append(_Source(fname, table.drl, table=table))
     return sources, expanded, errors
+
+
+def _in_tables(errors: list[CompileError], sources: list[_Source]) -> list[CompileError]:
+    """Errors found in a decision table's generated DRL, moved to the table's cells."""
+    tables = {s.file: s.table for s in sources if s.table is not None}
+    if not tables:
+        return errors
+    return [tables[e.file].locate(e) if e.file in tables else e for e in errors]
 
 
 _cache: "OrderedDict[str, CompiledRuleSet]" = OrderedDict()
@@ -321,11 +345,15 @@ def compile_files(files: dict[str, str], label: str = "ruleset") -> CompiledRule
         raise CompileFailed(bad.errors or [CompileError("", 0, 0, str(bad))]) from None
     with _compile_lock:
         sources, expanded, errors = _sources(files)
-        for source in sources:
-            errors.extend(_syntax_errors(source))
-        if errors:
-            raise CompileFailed(_sorted(errors))
-        return _build(files, sources, expanded, label)
+        errors.extend(scenarios.format_errors(files))  # a malformed tests/*.yaml is refused like bad rules
+        try:
+            for source in sources:
+                errors.extend(_syntax_errors(source))
+            if errors:
+                raise CompileFailed(_sorted(errors))
+            return _build(files, sources, expanded, label)
+        except CompileFailed as failed:
+            raise CompileFailed(_sorted(_in_tables(failed.errors, sources))) from None
 
 
 _PACKAGE = re.compile(r"^\s*package\s+([A-Za-z_][\w.]*)\s*;?", re.MULTILINE)
@@ -369,7 +397,9 @@ def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, st
         raise CompileFailed(_sorted(mapped))
     container = ks.newKieContainer(release)
     ks.getRepository().removeKieModule(release)  # the container keeps it; don't let the repository grow
-    runner = j["Runner"](container.newKieBase(_kiebase_configuration(ks)))
+    kiebase = container.newKieBase(_kiebase_configuration(ks))
+    runner = j["Runner"](kiebase)
+    rule_names = sorted(str(rule.getName()) for package in kiebase.getKiePackages() for rule in package.getRules())
     return CompiledRuleSet(
         hash=content_hash(files),
         runner=runner,
@@ -378,6 +408,7 @@ def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, st
         types=json.loads(str(runner.describeTypes())),
         type_names=json.loads(str(runner.typeFullNames())),
         expanded=expanded,
+        rule_names=rule_names,
     )
 
 

@@ -28,7 +28,7 @@ from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler
+from gateway.engine import compiler, scenarios
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
@@ -210,17 +210,21 @@ class Engine:
         author: str = "anonymous",
         comment: str = "",
         base_version: int | None = None,
+        force: bool = False,
     ) -> VersionInfo:
         """Compiles ``files`` and, only if that succeeds, makes them the live version of ``name``.
 
         ``base_version`` is the version the author's edit started from: if anyone (in any gateway
         process) deployed in between, :class:`VersionConflict` is raised and nothing changes.
-        Compiling happens before anything is stored: requests keep hitting the old version until
-        the new one is ready.
+        The rule set's own test scenarios (``tests/*.yaml``) must pass: a red one raises
+        :class:`ScenariosFailed` unless ``force``. Compiling happens before anything is stored:
+        requests keep hitting the old version until the new one is ready.
         """
         check_name(name)
         started = time.perf_counter()
         compiled = self._compile(files, name)
+        if not force:
+            scenarios.require_green(self, name, files)
         try:
             info, seq = self.catalog.save(KIND, name, dict(files), author=author, comment=comment,
                                           hash=compiled.hash, base_version=base_version)
@@ -458,7 +462,8 @@ class Engine:
         if head is not None:
             return f"kept v{head.current}" if head.live else "kept (deleted)"
         try:
-            info = self.deploy(name, files, author="seed", comment=f"seeded from {folder}", base_version=0)
+            # a seed is what the repository holds: served as is (its red scenarios show in the Tests view)
+            info = self.deploy(name, files, author="seed", comment=f"seeded from {folder}", base_version=0, force=True)
         except VersionConflict:  # another process seeded it at the same moment
             return "kept (seeded by another process)"
         except (CompileFailed, InvalidRuleSet) as failed:

@@ -12,18 +12,36 @@ from typing import Any
 
 @dataclass(frozen=True)
 class CompileError:
-    """One compile problem. Lines and columns are 1-based; 0 means unknown."""
+    """One compile problem. Lines and columns are 1-based; 0 means unknown.
+
+    A problem in a decision table (``.csv``/``.xlsx``) also names its ``sheet`` and ``cell``
+    (``"C7"``); ``line`` and ``column`` are then the cell's row and column numbers, so editors that
+    only know positions still land on the right place.
+    """
 
     file: str
     line: int
     column: int
     message: str
+    sheet: str = ""
+    cell: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        if not self.cell:  # plain text files keep the four fields they always had
+            out.pop("sheet")
+            out.pop("cell")
+        return out
+
+    @property
+    def where(self) -> str:
+        """``file:line:col`` or, in a decision table, ``file!Sheet!C7``."""
+        if self.cell:
+            return f"{self.file}!{self.sheet}!{self.cell}" if self.sheet else f"{self.file}!{self.cell}"
+        return f"{self.file}:{self.line}:{self.column}"
 
     def __str__(self) -> str:
-        return f"{self.file}:{self.line}:{self.column}: {self.message}"
+        return f"{self.where}: {self.message}"
 
 
 class EngineError(Exception):
@@ -140,3 +158,17 @@ class VersionConflict(EngineError):
 
     def to_dict(self) -> dict[str, Any]:
         return {"error": "base version changed", "kind": self.kind, "current": self.current, "detail": str(self)}
+
+
+class ScenariosFailed(EngineError):
+    """The rule set's own test scenarios (``tests/*.yaml``) are red: a deploy refuses it unless forced."""
+
+    kind = "scenarios"
+
+    def __init__(self, message: str, errors: list[dict[str, Any]], report: dict[str, Any]):
+        super().__init__(message)
+        self.errors = errors
+        self.report = report
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "errors": self.errors, "report": self.report}

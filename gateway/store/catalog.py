@@ -11,9 +11,11 @@ Collections (see :mod:`gateway.versions` for the model):
 
 Concurrency without transactions (they need a replica set with a real oplog, and a single-node
 SecantusDB or a standalone mongod may not offer them): a version number is claimed by inserting
-its document under a unique ``_id``; the head then moves by compare-and-set on what was read
-(``last`` and, for ``base_version``, ``current``). Whoever loses a race retries, or gets
-CatalogConflict when its ``base_version`` went stale. The change log entry is written after the
+its document under a unique ``_id``; the head then moves forward by compare-and-set (only to a
+higher number and, for ``base_version``, only from the version that was read). Whoever loses a
+race retries after a short random pause, or gets CatalogConflict when its ``base_version`` went
+stale. A number claimed by a writer that died before moving the head (stored more than 10 s ago
+and never made current) is skipped. The change log entry is written after the
 head: a follower that sees it reads a head that already says the same or something newer.
 
 Followers are woken by a change stream on ``catalog_changes`` when the server offers change
@@ -24,7 +26,9 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 import time
+from datetime import datetime, timezone
 from typing import Any
 
 from pymongo import ReturnDocument
@@ -40,7 +44,8 @@ VERSIONS = "catalog_versions"
 HEADS = "catalog_heads"
 CHANGES = "catalog_changes"
 COUNTERS = "catalog_counters"
-MAX_RETRIES = 20
+MAX_RETRIES = 100
+ORPHAN_AFTER_S = 10.0
 
 
 def _key(kind: str, name: str) -> str:
@@ -133,18 +138,23 @@ class MongoCatalog:
     def save(self, kind: str, name: str, payload: Any, *, author: str, comment: str, hash: str,
              base_version: int | None = None) -> tuple[VersionInfo, int]:
         text = json.dumps(payload, ensure_ascii=False)
-        for _ in range(MAX_RETRIES):
+        skipped = 0  # numbers claimed by writers that died before moving the head
+        for attempt in range(MAX_RETRIES):
             head = self.head(kind, name)
             current = head.current if head and head.live else None
             if base_version is not None and int(base_version) != (current or 0):
                 raise CatalogConflict(kind, name, int(base_version), current or 0)
-            number = (head.last if head else 0) + 1
+            number = max(head.last if head else 0, skipped) + 1
             info = VersionInfo(name, number, now_iso(), author, comment, hash)
             try:
                 self._call(self.db[VERSIONS].insert_one, {"_id": f"{_key(kind, name)}/{number}", "kind": kind,
                                                           **info.to_dict(), "payload": text})
             except DuplicateKeyError:
-                continue  # someone claimed this number first: read again
+                if self._orphaned(kind, name, number):
+                    skipped = number
+                else:  # another writer is deploying right now: let it move the head, then read again
+                    time.sleep(random.uniform(0.001, 0.003 * (attempt + 1)))
+                continue
             seq = self._next_seq()
             if self._move_head(kind, name, head, base_version is not None, {"current": number, "last": number,
                                                                              "deleted": False, "seq": seq}):
@@ -153,6 +163,18 @@ class MongoCatalog:
             self._call(self.db[VERSIONS].delete_one, {"_id": f"{_key(kind, name)}/{number}"})
             self._log(seq, kind, name, "none", None, author, "lost a race; retried")
         raise CatalogUnavailable(f"{kind} {name!r}: too many concurrent changes; try again")
+
+    def _orphaned(self, kind: str, name: str, number: int) -> bool:
+        """True when version ``number`` was stored long ago yet the head never reached it: its
+        writer died between the two writes (a live writer moves the head within milliseconds)."""
+        doc = self._call(self.db[VERSIONS].find_one, {"_id": f"{_key(kind, name)}/{number}"}, {"deployed_at": 1})
+        if doc is None:
+            return False
+        try:
+            stored = datetime.fromisoformat(str(doc.get("deployed_at", "")).replace("Z", "+00:00"))
+        except ValueError:
+            return True  # not written by this code: never a live deploy
+        return (datetime.now(timezone.utc) - stored).total_seconds() > ORPHAN_AFTER_S
 
     def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str) -> tuple[VersionInfo, int]:
         stored = self.load(kind, name, version)
@@ -173,14 +195,16 @@ class MongoCatalog:
         return seq
 
     def _move_head(self, kind: str, name: str, seen: Head | None, check_current: bool, new: dict[str, Any]) -> bool:
-        """Compare-and-set the head from what was read (``seen``) to ``new``."""
+        """Move the head to ``new`` if it is still below it (and, with ``check_current``, still at
+        the version that was read: the ``base_version`` check, across processes)."""
         if seen is None:
             try:
                 self._call(self.db[HEADS].insert_one, {"_id": _key(kind, name), "kind": kind, "name": name, **new})
                 return True
             except DuplicateKeyError:
                 return False
-        spec: dict[str, Any] = {"_id": _key(kind, name), "last": seen.last}
+        # the head only moves forward: to a number above the last one it pointed at
+        spec: dict[str, Any] = {"_id": _key(kind, name), "last": {"$lt": new["last"]}}
         if check_current:
             spec.update({"current": seen.current, "deleted": seen.deleted})
         result = self._call(self.db[HEADS].update_one, spec, {"$set": new})

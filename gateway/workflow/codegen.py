@@ -16,7 +16,6 @@ on ``manual_done`` (or at once with ``--auto-manual``); ``wait`` -> sleep; ``ont
 from __future__ import annotations
 
 import inspect
-from typing import Any
 
 from gateway.workflow import expr
 from gateway.workflow.model import BranchStep, ModuleStep, ProcessStep, SetStep, Step, Workflow

@@ -201,8 +201,9 @@ def test_a_rest_deploy_changes_what_the_robot_says_next(domain_id, settings, mon
         assert wait_for(client.service_is_ready, 15)
         http = TestClient(gateway.app)
         current = http.get("/api/rulesets/reception").json()
-        files = dict(current["files"])
-        files["reception.dslr"] = files["reception.dslr"].replace("Welcome. Two seats?", "Hello, you two! A table?")
+        # the rules and their test scenarios (a red scenario would refuse the deploy)
+        files = {name: text.replace("Welcome. Two seats?", "Hello, you two! A table?")
+                 for name, text in current["files"].items()}
         assert files != current["files"]
         deployed = http.put("/api/rulesets/reception", json={"files": files, "comment": "friendlier",
                                                               "base_version": current["version"]})

@@ -146,3 +146,15 @@ def test_reconcile_asks_every_service(store):
     follower = ChangeFollower(MongoCatalog(store.db, "r"), {"ruleset": seen, "workflow": seen}, start_seq=0)
     follower.reconcile()
     assert seen.reconciled == 2
+
+
+def test_a_version_left_by_a_dead_writer_does_not_block_the_next_deploy(store):
+    from gateway.store.catalog import VERSIONS
+
+    catalog = MongoCatalog(store.db, "p")
+    catalog.save("ruleset", "r", {}, author="a", comment="", hash="1")
+    # a writer claimed version 2 and died before moving the head
+    store.db[VERSIONS].insert_one({"_id": "ruleset/r/2", "kind": "ruleset", "name": "r", "version": 2,
+                                   "deployed_at": "2026-01-01T00:00:00.000Z", "author": "dead", "comment": "", "hash": "x", "payload": "{}"})
+    info, _ = catalog.save("ruleset", "r", {}, author="b", comment="", hash="3", base_version=1)
+    assert info.version == 3 and catalog.head("ruleset", "r").current == 3

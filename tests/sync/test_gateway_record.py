@@ -40,7 +40,7 @@ def approaching_party(t0_ms: int = 10_000) -> list[dict]:
 
 
 def test_decisions_from_every_origin_are_recorded_and_survive_a_restart(tmp_path, mongo):
-    rclpy = pytest.importorskip("rclpy")
+    pytest.importorskip("rclpy")
     from gateway.app import build_gateway
     from gateway.ros.runtime import RosRuntime
 
@@ -155,10 +155,15 @@ def test_export_then_import_round_trips_and_bad_items_are_refused(gateway, tmp_p
     assert all(outcome.startswith("unchanged") for outcome in report.values()), report
     dslr = tmp_path / "out" / "rules" / "drl" / "reception" / "reception.dslr"
     dslr.write_text(dslr.read_text().replace("Welcome. Two seats?", "Two of you, welcome!"))
+    # the rule set's own scenarios still expect the old greeting: refused like a deploy, with the place
+    report = dict(import_from(gateway, tmp_path / "out", author="git", comment="rules only"))
+    assert report["rule set reception"].startswith("failed: tests/reception.yaml:"), report
+    scenarios = tmp_path / "out" / "rules" / "drl" / "reception" / "tests" / "reception.yaml"
+    scenarios.write_text(scenarios.read_text().replace("Welcome. Two seats?", "Two of you, welcome!"))
     workflow = tmp_path / "out" / "workflows" / "thanking.yaml"
     workflow.write_text(workflow.read_text().replace("kind: robot", "kind: android"))
     report = dict(import_from(gateway, tmp_path / "out", author="git", comment="from a branch"))
-    assert report["rule set reception"].startswith("deployed v")
+    assert report["rule set reception"].startswith("deployed v"), report
     assert report["workflow thanking.yaml"].startswith("failed: ") and "actors.pepper.kind" in report["workflow thanking.yaml"]
     assert "Two of you, welcome!" in gateway.engine.current("reception").files["reception.dslr"]
     assert gateway.engine.current("reception").info.author == "git"
@@ -199,8 +204,9 @@ def test_export_and_import_commands_join_a_running_gateway(tmp_path):
         exported = cli("export", str(out))
         assert exported.returncode == 0, exported.stderr
         assert (out / "rules" / "drl" / "reception" / "reception.dslr").exists()
-        dslr = out / "rules" / "drl" / "reception" / "reception.dslr"
-        dslr.write_text(dslr.read_text().replace("Welcome. Two seats?", "Welcome, you two!"))
+        for changed in ("reception.dslr", "tests/reception.yaml"):  # the rules and their scenarios
+            path = out / "rules" / "drl" / "reception" / changed
+            path.write_text(path.read_text().replace("Welcome. Two seats?", "Welcome, you two!"))
         imported = cli("import", str(out), "--comment", "from git")
         assert imported.returncode == 0, imported.stdout + imported.stderr
         assert "rule set reception: deployed v2" in imported.stdout

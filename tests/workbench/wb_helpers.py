@@ -13,11 +13,20 @@ OTHER_AUTHOR_TOKEN = "wb-other-author-token"
 CALLER_TOKEN = "wb-caller-token"
 TOKENS = f"{AUTHOR_TOKEN}:author:alice,{OTHER_AUTHOR_TOKEN}:author:bob,{CALLER_TOKEN}:caller:carol"
 RECEPTION = PROJECT_ROOT / "rules" / "drl" / "reception"
+GREETINGS = PROJECT_ROOT / "rules" / "drl" / "reception_greetings"
 
 
 def reception_files() -> dict[str, str]:
-    """The teahouse reception rule set, as the REST API takes it."""
+    """The teahouse reception rule set's rule files, as the REST API takes it (without its test
+    scenarios, so that tests changing what Pepper says can deploy)."""
     return {p.name: p.read_text(encoding="utf-8") for p in sorted(RECEPTION.iterdir()) if p.is_file()}
+
+
+def folder_files(folder) -> dict[str, str]:
+    """A rule set folder with everything in it (tests/*.yaml, workbooks as data: URLs)."""
+    from gateway.engine.ruleset import read_folder
+
+    return read_folder(folder)
 
 
 def new_page(browser, gateway, token: str | None):

@@ -6,6 +6,7 @@ import { EditorView, keymap } from "@codemirror/view";
 import { EditorState } from "@codemirror/state";
 import { indentWithTab } from "@codemirror/commands";
 import { setDiagnostics, lintGutter } from "@codemirror/lint";
+import { snippet } from "@codemirror/autocomplete";
 import { languageFor } from "./lang.js";
 
 const theme = EditorView.theme({
@@ -14,8 +15,9 @@ const theme = EditorView.theme({
 });
 
 /** A new editor in `parent`. onChange(text) is called after every edit of the text. */
-export function createEditor(parent, { doc, fileName, readOnly = false, onChange = null, onCursor = null, label = "" }) {
+export function createEditor(parent, { doc, fileName, readOnly = false, onChange = null, onCursor = null, label = "", extensions: extra = [] }) {
   const extensions = [
+    extra,
     basicSetup,
     lintGutter(),
     keymap.of([indentWithTab]),
@@ -73,7 +75,20 @@ function toDiagnostic(doc, problem) {
     if (from >= line.to && from > line.from) from -= 1; // past the end of the line: mark its last character
     to = Math.min(from + 1, line.to);
   }
-  return { from, to, severity: problem.severity || "error", message: problem.message, source: problem.source };
+  const diagnostic = { from, to, severity: problem.severity || "error", message: problem.message, source: problem.source };
+  if (problem.fixes && problem.fixes.length) {
+    // Quick fixes: replace the marked sentence with a known one, its holes as tab stops.
+    diagnostic.actions = problem.fixes.map((fix) => ({
+      name: fix.label,
+      apply(view, at, end) {
+        const line = view.state.doc.lineAt(at);
+        const start = line.from + (line.text.length - line.text.trimStart().length);
+        snippet(fix.template)(view, null, start, Math.max(end, line.from + line.text.trimEnd().length));
+        view.focus();
+      },
+    }));
+  }
+  return diagnostic;
 }
 
 /** When the message quotes the text found at `from` ("mismatched input ')'"), mark exactly that. */

@@ -95,8 +95,8 @@ async function showDiff(diffEl, name, from, to) {
     fill(diffEl, h("div", { class: "message error", role: "alert" }, `Cannot compare: ${err.message}`));
     return;
   }
-  const filesA = a.files || {};
-  const filesB = b.files || {};
+  const filesA = await tablesAsText(a.files || {});
+  const filesB = await tablesAsText(b.files || {});
   const names = orderedFiles([...new Set([...Object.keys(filesA), ...Object.keys(filesB)])]);
   const changed = names.filter((n) => filesA[n] !== filesB[n]);
   const same = names.filter((n) => filesA[n] === filesB[n]);
@@ -115,6 +115,24 @@ async function showDiff(diffEl, name, from, to) {
         h("span", { class: "muted" }, `  left: version ${from}, right: version ${to}`)), host);
     }),
     same.length ? h("p", { class: "muted" }, `Unchanged: ${same.join(", ")}`) : null);
+}
+
+/** Decision tables compared as their rows (cell texts separated by " | "), not as workbook bytes. */
+async function tablesAsText(files) {
+  const out = { ...files };
+  await Promise.all(Object.keys(files).filter((n) => /\.(csv|xlsx)$/i.test(n)).map(async (n) => {
+    try {
+      out[n] = tableText(await api("POST", "/api/decision-tables/read", { file: n, content: files[n] }));
+    } catch {
+      out[n] = files[n];
+    }
+  }));
+  return out;
+}
+
+function tableText(grid) {
+  return grid.sheets.map((sheet) => [`# sheet ${sheet.name}`,
+    ...sheet.rows.map((row, i) => `${String(i + 1).padStart(3)} | ${row.join(" | ")}`)].join("\n")).join("\n\n");
 }
 
 function readOnlySetup(fileName) {

@@ -4,6 +4,7 @@
 
 import { StreamLanguage, LanguageSupport } from "@codemirror/language";
 import { json } from "@codemirror/lang-json";
+import { yaml } from "@codemirror/lang-yaml";
 
 const KEYWORDS = new Set(
   ("package import global rule query declare function when then end extends dialect attributes " +
@@ -119,5 +120,6 @@ export function languageFor(fileName) {
   if (lower.endsWith(".dslr")) return new LanguageSupport(dslrLanguage);
   if (lower.endsWith(".drl")) return new LanguageSupport(drlLanguage);
   if (lower.endsWith(".json")) return json();
+  if (lower.endsWith(".yaml") || lower.endsWith(".yml")) return yaml();
   return [];
 }

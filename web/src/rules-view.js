@@ -7,15 +7,32 @@ import { api, rulesetPath } from "./api.js";
 import { createEditor, setText, showProblems, reveal, scrollToLine } from "./editor.js";
 import { localProblems } from "./checks.js";
 import { actionList, firedList } from "./actions.js";
+import { assistFor, declaredTypes, dslEntries } from "./dsl-assist.js";
+import { mountTests } from "./tests-view.js";
+import { mountTableEditor } from "./table-editor.js";
 
 const CHECK_DELAY_MS = 500;
 
 const KINDS = [
   [".dslr", "rules in plain sentences"],
+  [".xlsx", "decision table"],
+  [".csv", "decision table"],
   [".dsl", "sentence dictionary"],
   [".drl", "rules (technical)"],
   [".json", "examples"],
+  [".yaml", "tests"],
+  [".yml", "tests"],
 ];
+
+function isTable(fileName) {
+  return /\.(csv|xlsx)$/i.test(fileName);
+}
+
+/** Where a problem is, in words: "greetings.xlsx, cell Greetings!C7" or "x.dslr, line 3, column 5". */
+function problemWhere(p) {
+  if (p.cell) return `${p.file}, cell ${p.sheet ? `${p.sheet}!` : ""}${p.cell}`;
+  return `${p.file || "rule set"}${p.line ? `, line ${p.line}` : ""}${p.column ? `, column ${p.column}` : ""}`;
+}
 
 function kindOf(fileName) {
   const lower = fileName.toLowerCase();
@@ -65,6 +82,8 @@ class RulesView {
     this.examples = examples;
     this.editable = ctx.isAuthor();
     this.views = {};
+    this.tables = {}; // decision tables: file name -> grid editor (once mounted)
+    this.tableTexts = {}; // decision tables: file name -> the file's current text
     this.hosts = {};
     this.tabs = {};
     this.local = [];
@@ -89,6 +108,22 @@ class RulesView {
     this.saveDraft.cancel();
     this.storeDraft();
     this.seq++;
+    this.testsView?.dispose();
+    for (const table of Object.values(this.tables)) table.dispose();
+  }
+
+  /** The rule set's sentences and fact types as being edited (for completion and hover). */
+  assistSource() {
+    if (!this.assistCache) {
+      const files = this.files();
+      this.assistCache = { entries: dslEntries(files), types: declaredTypes(files, this.types) };
+    }
+    return this.assistCache;
+  }
+
+  /** Wait until every decision-table edit is written into its file. */
+  async flushTables() {
+    await Promise.all(Object.values(this.tables).map((t) => t.flush()));
   }
 
   // ---- layout -------------------------------------------------------------------------------
@@ -119,7 +154,7 @@ class RulesView {
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
           h("h2", { class: "small" }, "Problems"), this.problemsEl),
-        h("div", { class: "right" }, this.buildDeploy(), this.buildTry()))));
+        h("div", { class: "right" }, this.buildDeploy(), this.buildTry(), this.buildTests()))));
     this.renderLive();
   }
 
@@ -133,9 +168,11 @@ class RulesView {
       const host = h("div", { class: "editor-host", hidden: true, "data-file": fileName });
       this.editorsEl.append(host);
       this.hosts[fileName] = host;
-      this.views[fileName] = createEditor(host, {
+      if (isTable(fileName)) this.createTable(host, fileName, files[fileName]);
+      else this.views[fileName] = createEditor(host, {
         doc: files[fileName], fileName, readOnly: !this.editable,
         label: `Editor for ${fileName}`, onChange: () => this.changed(), onCursor: (line) => this.followCursor(fileName, line),
+        extensions: assistFor(fileName, () => this.assistSource()),
       });
       const tab = h("button", { class: "tab", role: "tab", "data-file": fileName, onclick: () => this.select(fileName) },
         h("span", { class: "tab-name" }, fileName), h("span", { class: "tab-kind" }, kindOf(fileName).label),
@@ -143,6 +180,26 @@ class RulesView {
       this.tabs[fileName] = tab;
       this.tabsEl.append(tab);
     }
+  }
+
+  /** A decision table opens as a grid (mounted once the gateway has read the file). */
+  createTable(host, fileName, text) {
+    host.classList.add("table-host");
+    this.tableTexts[fileName] = text;
+    fill(host, h("p", { class: "muted" }, `Opening the table ${fileName}…`));
+    mountTableEditor(host, {
+      fileName, content: text, readOnly: !this.editable,
+      onChange: (content) => {
+        this.tableTexts[fileName] = content;
+        this.changed();
+      },
+      onSelect: (row) => this.followTableRow(fileName, row),
+    }).then((editor) => {
+      this.tables[fileName] = editor;
+      editor.showProblems(this.allProblems().filter((p) => p.file === fileName));
+    }).catch((err) => {
+      fill(host, h("div", { class: "message error", role: "alert" }, `Cannot open ${fileName} as a table: ${err.message}`));
+    });
   }
 
   select(fileName) {
@@ -158,10 +215,12 @@ class RulesView {
   files() {
     const files = {};
     for (const [name, view] of Object.entries(this.views)) files[name] = view.state.doc.toString();
+    for (const [name, text] of Object.entries(this.tableTexts)) files[name] = text;
     return files;
   }
 
   changed() {
+    this.assistCache = null;
     this.updateDirty();
     this.saveDraft();
     this.statusEl.className = "check-status pending";
@@ -217,6 +276,9 @@ class RulesView {
     for (const [name, view] of Object.entries(this.views)) {
       if (name in this.original && view.state.doc.toString() !== this.original[name]) setText(view, this.original[name]);
     }
+    for (const [name, table] of Object.entries(this.tables)) {
+      if (name in this.original && this.tableTexts[name] !== this.original[name]) table.setContent(this.original[name]);
+    }
     this.base = this.info.version;
     localStorage.removeItem(draftKey(this.name));
   }
@@ -225,6 +287,8 @@ class RulesView {
 
   async check() {
     const seq = ++this.seq;
+    await this.flushTables();
+    if (seq !== this.seq) return;
     const files = this.files();
     this.local = localProblems(files);
     this.renderProblems(true);
@@ -248,21 +312,25 @@ class RulesView {
     // The server's compiler knows best: drop a browser-side note on a line it already reported.
     const reported = new Set(this.server.map((p) => `${p.file}:${p.line}`));
     const local = this.local.filter((p) => !reported.has(`${p.file}:${p.line}`));
-    return [...this.server, ...local].sort((a, b) => rank(a) - rank(b) || a.line - b.line || a.column - b.column);
+    // ...but keeps the browser's quick fixes for the line (the nearest known sentences).
+    const fixes = new Map(this.local.filter((p) => p.fixes && p.fixes.length).map((p) => [`${p.file}:${p.line}`, p.fixes]));
+    const server = this.server.map((p) => (fixes.has(`${p.file}:${p.line}`) && !p.cell ? { ...p, fixes: fixes.get(`${p.file}:${p.line}`) } : p));
+    return [...server, ...local].sort((a, b) => rank(a) - rank(b) || a.line - b.line || a.column - b.column);
   }
 
   renderProblems(pending) {
     const problems = this.allProblems();
-    for (const [name, view] of Object.entries(this.views)) {
+    for (const name of Object.keys(this.tabs)) {
       const mine = problems.filter((p) => p.file === name);
-      showProblems(view, mine);
+      if (this.views[name]) showProblems(this.views[name], mine);
+      else this.tables[name]?.showProblems(mine);
       const count = this.tabs[name].querySelector(".tab-count");
       count.textContent = mine.length ? String(mine.length) : "";
       count.className = `tab-count${mine.some((p) => p.severity === "error") ? " error" : mine.length ? " warning" : ""}`;
     }
     fill(this.problemsEl, problems.map((p) => h("li", { class: p.severity },
       h("button", { class: "problem", onclick: () => this.goTo(p) },
-        h("span", { class: "where" }, `${p.file || "rule set"}${p.line ? `, line ${p.line}` : ""}${p.column ? `, column ${p.column}` : ""}`),
+        h("span", { class: "where" }, problemWhere(p)),
         h("span", { class: "what" }, p.message)))));
     const errors = problems.filter((p) => p.severity === "error").length;
     const warnings = problems.length - errors;
@@ -279,6 +347,11 @@ class RulesView {
   }
 
   goTo(problem) {
+    if (this.tables[problem.file]) {
+      this.select(problem.file);
+      this.tables[problem.file].reveal(problem);
+      return;
+    }
     if (!this.views[problem.file]) return;
     this.select(problem.file);
     if (problem.line > 0) reveal(this.views[problem.file], problem);
@@ -308,10 +381,10 @@ class RulesView {
 
   renderPreview() {
     if (!this.previewOn) return;
-    const isDslr = this.active.toLowerCase().endsWith(".dslr");
+    const isDslr = this.active.toLowerCase().endsWith(".dslr") || isTable(this.active);
     let text = "";
     if (!isDslr) {
-      this.previewTitle.textContent = `${this.active} is not a .dslr file: there is nothing to expand.`;
+      this.previewTitle.textContent = `${this.active} is not a .dslr file or a decision table: there is nothing to expand.`;
     } else if (this.expandError) {
       this.previewTitle.textContent = `Cannot expand the current text (${this.expandError}). Showing the last good expansion.`;
       text = (this.expanded && this.expanded[this.active]) || "";
@@ -320,7 +393,21 @@ class RulesView {
       text = (this.expanded && this.expanded[this.active]) || "";
     }
     if (this.previewView.state.doc.toString() !== text) setText(this.previewView, text);
-    if (isDslr) this.followCursor(this.active, this.cursorLine || 1);
+    if (isTable(this.active)) this.followTableRow(this.active, this.tableRow || 1);
+    else if (isDslr) this.followCursor(this.active, this.cursorLine || 1);
+  }
+
+  /** Keep the rule a table's selected row becomes in view ("// RuleTable … , row N" heads it). */
+  followTableRow(fileName, row) {
+    this.tableRow = row;
+    if (!this.previewOn || fileName !== this.active) return;
+    const doc = this.previewView.state.doc;
+    for (let n = 1; n <= doc.lines; n++) {
+      if (doc.line(n).text.endsWith(`, row ${row}`)) {
+        scrollToLine(this.previewView, n, "start");
+        return;
+      }
+    }
   }
 
   /** Keep the generated DRL of the rule being edited in view. Expansion does not keep line
@@ -372,6 +459,7 @@ class RulesView {
   }
 
   async tryIt() {
+    await this.flushTables();
     const text = this.factsView.state.doc.toString();
     let facts;
     try {
@@ -417,12 +505,36 @@ class RulesView {
       this.deployResultEl);
   }
 
-  async deploy() {
+  // ---- Tests ------------------------------------------------------------------------------------
+
+  buildTests() {
+    const host = h("div", { class: "tests-host" });
+    this.testsView = mountTests(host, {
+      name: this.name,
+      files: async () => {
+        await this.flushTables();
+        return this.files();
+      },
+      goTo: (file, line) => this.goTo({ file, line, column: 1 }),
+      onErrors: (errors) => {
+        this.server = normalizeErrors(errors);
+        this.renderProblems(false);
+      },
+    });
+    return host;
+  }
+
+  // ---- Deploy ---------------------------------------------------------------------------------
+
+  async deploy(force = false) {
+    await this.flushTables();
     const files = this.files();
     const comment = this.commentEl.value.trim();
     fill(this.deployResultEl, h("p", { class: "muted" }, "Deploying…"));
     try {
-      const result = await api("PUT", rulesetPath(this.name), { files, comment, base_version: this.base });
+      const body = { files, comment, base_version: this.base };
+      if (force) body.force = true;
+      const result = await api("PUT", rulesetPath(this.name), body);
       this.original = files;
       this.base = result.version;
       this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
@@ -434,6 +546,7 @@ class RulesView {
       this.ctx.refreshRulesets();
     } catch (err) {
       if (err.status === 409) this.conflict(err.body && err.body.current);
+      else if (err.body && err.body.kind === "scenarios") this.redScenarios(err.body);
       else if (err.errors.length) {
         this.server = normalizeErrors(err.errors);
         this.renderProblems(false);
@@ -441,6 +554,18 @@ class RulesView {
           `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
       } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
     }
+  }
+
+  /** The deploy was refused because test scenarios are red: say which, offer to deploy anyway. */
+  redScenarios(body) {
+    const red = ((body.report && body.report.results) || []).filter((r) => r.status !== "passed");
+    fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "red-scenarios" },
+      h("p", {}, `Not deployed: ${red.length} test scenario${red.length === 1 ? " fails" : "s fail"} with these rules. Nothing was changed.`),
+      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status))),
+      h("p", {}, "Fix the rules (or the scenario, if the change is wanted), or deploy anyway."),
+      h("div", { class: "buttons" },
+        h("button", { class: "secondary", onclick: () => this.testsView.run() }, "Show the tests"),
+        h("button", { class: "danger", "data-testid": "deploy-anyway", onclick: () => this.deploy(true) }, "Deploy anyway"))));
   }
 
   conflict(current) {
@@ -485,6 +610,7 @@ function normalizeErrors(errors) {
   return errors.filter((e) => e && (e.message || e.msg)).map((e) => ({
     file: e.file || "", line: Number(e.line) || 0, column: Number(e.column) || 0,
     severity: e.severity === "warning" ? "warning" : "error", message: String(e.message || e.msg), source: "compiler",
+    sheet: e.sheet || "", cell: e.cell || "",
   }));
 }
 

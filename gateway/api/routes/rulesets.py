@@ -31,8 +31,9 @@ router = APIRouter(tags=["rule sets"])
 
 
 class FilesBody(BaseModel):
-    """Rule files of a rule set: file name -> text (``.drl``, ``.dsl``, ``.dslr``, ``examples.json``);
-    the engine checks names, sizes and content and answers 422 naming the file."""
+    """Rule files of a rule set: file name -> text (``.drl``, ``.dsl``, ``.dslr``, decision tables
+    ``.csv`` and ``.xlsx`` — the latter as a ``data:`` URL —, ``examples.json`` and test scenarios
+    ``tests/<name>.yaml``); the engine checks names, sizes and content and answers 422 naming the file."""
 
     model_config = ConfigDict(extra="forbid")
     files: dict[str, str] = Field(min_length=1, max_length=MAX_FILES)
@@ -43,6 +44,7 @@ class DeployBody(FilesBody):
     base_version: int | None = Field(
         default=None, ge=0, description="The version this edit started from; 409 if it is no longer current."
     )
+    force: bool = Field(default=False, description="Deploy even if test scenarios (tests/*.yaml) are red.")
 
 
 class RollbackBody(BaseModel):
@@ -117,9 +119,11 @@ def history(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
 @router.put("/api/rulesets/{name}", status_code=201)
 def deploy(name: RuleSetName, body: DeployBody, engine: EngineDep, who: Author) -> JSON:
     """Compile and make live on every gateway process; 422 with ``errors`` (file, line, column,
-    message) if it does not compile, 409 ``{"error": "base version changed", "current": n}`` if
-    ``base_version`` is stale."""
-    info = engine.deploy(name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version)
+    message) if it does not compile, 422 ``{"kind": "scenarios", ...}`` if one of its test
+    scenarios is red (unless ``force``), 409 ``{"error": "base version changed", "current": n}``
+    if ``base_version`` is stale."""
+    info = engine.deploy(name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version,
+                         force=body.force)
     return JSON({"name": info.name, "version": info.version}, status_code=201)
 
 
