@@ -36,6 +36,31 @@ class EngineSettings(BaseModel):
     max_facts: int = Field(default=100_000, description="Max facts in one fire request.")
 
 
+class SessionSettings(BaseModel):
+    """Stateful sessions (KIE ``lookup``, ``/api/rulesets/{name}/sessions``): defaults and limits."""
+
+    on_deploy: Literal["follow", "pin"] = Field(
+        default="follow",
+        description="What a live session does when a new version is deployed: move to it with its facts "
+        "(like KieContainer.updateToVersion) or stay pinned on its version. Per session: kmodule.xml "
+        "onDeploy, or the REST create body.")
+    no_lookup: Literal["stateless", "kie"] = Field(
+        default="stateless",
+        description="A KIE batch without a lookup: 'stateless' runs it in a fresh session (the gateway's "
+        "default); 'kie' uses the default stateful ksession when there is one, as KIE Server does.")
+    idle_ttl_s: float = Field(default=3600.0, description="A conversation's session idle this long is disposed (0: never).")
+    reap_interval_s: float = Field(default=30.0, description="How often idle sessions are looked for.")
+    max_per_ruleset: int = Field(default=100, description="Open sessions per rule set in one process (stream-bound ones not counted).")
+    max_facts: int = Field(default=100_000, description="Facts one conversation session may hold.")
+    advertise_url: str | None = Field(
+        default=None,
+        description="The URL other gateway processes reach this one at, for calls to the sessions it owns "
+        "(several hosts: this host's address; default: the local listening address, or a worker's private "
+        "loopback port).")
+    forward_timeout_s: float = Field(default=30.0, description="A call forwarded to the session's owner process.")
+    member_heartbeat_s: float = Field(default=5.0, description="How often a process renews its member record.")
+
+
 class StoreSettings(BaseModel):
     """The Information State (MongoDB, mongodb_store style): where it is and how writes survive outages."""
 
@@ -245,6 +270,7 @@ class Settings(BaseModel):
     workflows: WorkflowSettings = Field(default_factory=WorkflowSettings)
     streams: StreamSettings = Field(default_factory=StreamSettings)
     sync: SyncSettings = Field(default_factory=SyncSettings)
+    sessions: SessionSettings = Field(default_factory=SessionSettings)
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @property
@@ -261,6 +287,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),
     "PRINTEPS_API_OPEN": ("api", "open"),
     "PRINTEPS_ROS": ("ros", "enabled"),
+    "PRINTEPS_ADVERTISE_URL": ("sessions", "advertise_url"),
 }
 
 

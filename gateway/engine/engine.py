@@ -28,7 +28,7 @@ from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler, scenarios
+from gateway.engine import compiler, kmodule, scenarios
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
@@ -42,6 +42,7 @@ from gateway.engine.errors import (
 from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
+from gateway.engine.sessions import SessionManager, SessionNotFound, rule_fingerprints
 from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
@@ -87,7 +88,10 @@ class Engine:
         self._live: dict[str, LiveRuleSet] = {}
         self._lock = threading.RLock()
         self._listeners: list[Listener] = []
-        self._sessions: dict[str, StatefulSession] = {}
+        self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
+        self._unchanged: dict[tuple[str, int, int], list[str]] = {}
+        self.session_manager = SessionManager(self, self.settings.sessions)
+        self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
 
     # ------------------------------------------------------------------ events
 
@@ -105,7 +109,15 @@ class Engine:
     # ------------------------------------------------------------------ compile
 
     def _compile(self, files: dict[str, str], label: str) -> CompiledRuleSet:
-        return compiler.compile_cached(files, label)
+        problems = kmodule.check(files)  # the sessions a kmodule.xml declares are checked with the rules
+        try:
+            compiled = compiler.compile_cached(files, label)
+        except CompileFailed as failed:
+            raise CompileFailed(failed.errors + problems) if problems else failed from None
+        if problems:
+            raise CompileFailed(problems)
+        self._declared[compiled.hash] = kmodule.declarations(files)
+        return compiled
 
     def validate(self, name: str, files: dict[str, str]) -> list[CompileError]:
         """All compile errors of ``files`` ([] when they compile). Deploys nothing."""
@@ -151,8 +163,7 @@ class Engine:
                 return False
             if entry is None:
                 self._live.pop(name, None)
-                for session in [s for s in self._sessions.values() if s.ruleset == name]:
-                    self.close_session(session.id)
+                self.session_manager.dispose_ruleset(name)  # deleted: its sessions go (its history stays)
             else:
                 self._live[name] = entry
             return True
@@ -367,36 +378,71 @@ class Engine:
 
     # ------------------------------------------------------------------ sessions
 
-    def open_session(self, name: str, record_facts: bool = True) -> StatefulSession:
-        """A long-lived stateful session on the live version of ``name``."""
+    def open_session(self, name: str, record_facts: bool = True, *, clock: str = "pseudo",
+                     on_deploy: str | None = None) -> StatefulSession:
+        """A long-lived stateful session on the live version of ``name`` (a stream binding's):
+        it follows deploys as ``sessions.on_deploy`` says unless ``on_deploy`` is given."""
+        return self.session_manager.open(name, kind="stream", clock=clock, on_deploy=on_deploy, record_facts=record_facts)
+
+    def new_session(self, name: str, session_id: str, *, clock: str, on_deploy: str, kind: str, record_facts: bool,
+                    on_close: Any) -> StatefulSession:
+        """A :class:`StatefulSession` on the live version (the session manager registers it)."""
         info, compiled = self._live_entry(name)
-        java = jvm.helper_class("Session")(compiled.runner, record_facts)
-        session = StatefulSession(
-            java, name, info.version, self.settings.engine.fire_limit, self.settings.engine.max_facts,
-            on_close=self._forget_session,
-        )
-        with self._lock:
-            self._sessions[session.id] = session
-        return session
+        java = self.new_java_session(compiled, clock, kind, record_facts)
+        return StatefulSession(java, name, info.version, self.settings.engine.fire_limit, self.settings.engine.max_facts,
+                               on_close=on_close, session_id=session_id, clock=clock, on_deploy=on_deploy, kind=kind,
+                               record_facts=record_facts)
+
+    @staticmethod
+    def new_java_session(compiled: CompiledRuleSet, clock: str, kind: str, record_facts: bool) -> Any:
+        """A Java ``Session`` of ``compiled``: conversations keep a fact handle registry."""
+        return jvm.helper_class("Session")(compiled.runner, record_facts, clock == "realtime", kind != "stream")
+
+    def live_compiled(self, name: str) -> tuple[VersionInfo, CompiledRuleSet]:
+        """What ``name`` serves here now (sessions move to it)."""
+        return self._live_entry(name)
+
+    def declared_sessions(self, name: str) -> kmodule.Declarations:
+        """The sessions the live version of ``name`` declares (its kmodule.xml, else KIE's defaults)."""
+        info, compiled = self._live_entry(name)
+        found = self._declared.get(compiled.hash)
+        if found is None:
+            found = kmodule.declarations(self.version(name, info.version).files)
+            self._declared[compiled.hash] = found
+        return found
+
+    def unchanged_rules(self, name: str, old: int, new: int) -> list[str]:
+        """Rules whose text is the same in versions ``old`` and ``new`` (a moving session's
+        matches of these do not fire again; see Refraction.java)."""
+        key = (name, old, new)
+        if key not in self._unchanged:
+            before = rule_fingerprints(self._rule_texts(self.version(name, old).files))
+            after = rule_fingerprints(self._rule_texts(self.version(name, new).files))
+            self._unchanged[key] = sorted(r for r, digest in after.items() if before.get(r) == digest)
+        return self._unchanged[key]
+
+    @staticmethod
+    def _rule_texts(files: dict[str, str]) -> list[str]:
+        texts = [text for fname, text in files.items() if fname.endswith(".drl")]
+        try:
+            texts.extend(compiler.expand(files).values())
+        except EngineError:  # a version that no longer expands: its rules count as changed
+            pass
+        return texts
 
     def get_session(self, session_id: str) -> StatefulSession:
-        session = self._sessions.get(session_id)
+        session = self.session_manager.by_id(session_id)
         if session is None:
-            raise EngineError(f"no open session '{session_id}'")
+            raise SessionNotFound(f"no open session '{session_id}'")
         return session
 
     def sessions(self) -> list[StatefulSession]:
-        return list(self._sessions.values())
+        return self.session_manager.list()
 
     def close_session(self, session_id: str) -> None:
-        with self._lock:
-            session = self._sessions.pop(session_id, None)
+        session = self.session_manager.by_id(session_id)
         if session is not None:
             session.close()
-
-    def _forget_session(self, session_id: str) -> None:
-        with self._lock:
-            self._sessions.pop(session_id, None)
 
     # ------------------------------------------------------------------ warm-up
 

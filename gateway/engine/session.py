@@ -1,8 +1,11 @@
-"""Long-lived stateful sessions, for event streams (C-SPARQL results, sensor events).
+"""Long-lived stateful sessions: event streams (C-SPARQL results, sensor events), and the
+conversations of KIE Server and REST clients (command batches with real fact handles).
 
-A session is bound to the rule set version that was live when it was opened: a hot deploy does
-not change the rules under a running stream (open a new session to move on). Time is a pseudo
-clock driven by event timestamps, so replaying recorded data fires the same rules.
+A session runs on one rule set version. What happens when a new version is deployed is decided
+by :mod:`gateway.engine.sessions` (its deploy policy): by default the session moves to it with its
+facts (:meth:`StatefulSession.move_to`, like ``KieContainer.updateToVersion``); a pinned one stays.
+Time is a pseudo clock (moved by event timestamps or ``advance``), so replaying recorded data fires
+the same rules, or the wall clock for a session opened with ``clock="realtime"``.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import itertools
 import json
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import jpype.nio
@@ -30,8 +34,56 @@ def _check(answer: Any) -> dict[str, Any]:
     return data
 
 
+class CommandFailed(EngineError):
+    """A command batch was refused or stopped: which command (``index``, ``op``), what kind of
+    problem (``facts``, ``handle``, ``globals``, ``query``, ``clock``, ``runtime``, ``runaway``…),
+    the field, and whether earlier commands had already been applied (``applied``: only for
+    failures while executing — a batch that fails its checks changes nothing)."""
+
+    def __init__(self, index: int, op: str | None, kind: str, field: str | None, message: str, applied: bool = False,
+                 results: list[dict[str, Any]] | None = None) -> None:
+        where = f"command {index}" + (f" ({op})" if op else "") if index >= 0 else "the batch"
+        super().__init__(f"{where}: {message}")
+        self.index, self.op, self.kind, self.field, self.detail = index, op, kind, field, message
+        self.applied = applied
+        self.results = results or []
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": "command", "index": self.index, "op": self.op, "problem": self.kind,
+                "field": self.field, "message": self.detail, "applied": self.applied}
+
+
+@dataclass
+class BatchAnswer:
+    """What a batch of commands produced: per command ``{"i", "op", "out"?, "value"?, "handles"?,
+    "fire"?}`` (objects at their end-of-batch state), the session's clock and fact count after it,
+    and whether it disposed the session."""
+
+    results: list[dict[str, Any]]
+    time: int | None
+    fact_count: int | None
+    disposed: bool
+    version: int
+    duration_ms: float
+
+    @property
+    def fires(self) -> list[dict[str, Any]]:
+        return [r["fire"] for r in self.results if "fire" in r]
+
+    def actions(self) -> list[dict[str, Any]]:
+        return [a for f in self.fires for a in f.get("actions", [])]
+
+    def fired(self) -> list[dict[str, Any]]:
+        return [x for f in self.fires for x in f.get("fired", [])]
+
+
 class StatefulSession:
-    """A Drools KieSession kept between calls (thread-safe: the Java side synchronizes)."""
+    """A Drools KieSession kept between calls (thread-safe: one call at a time, under its lock).
+
+    ``id`` is unique within its rule set: a declared ksession's name (``defaultKieSession``) or a
+    generated one. ``kind`` says who opened it (``kie``/``rest``: a conversation; ``stream``: a
+    stream binding). ``on_deploy`` is ``follow`` (move to a new version with the facts) or ``pin``.
+    """
 
     def __init__(
         self,
@@ -41,22 +93,42 @@ class StatefulSession:
         fire_limit: int,
         max_facts: int,
         on_close: Callable[[str], None] | None = None,
+        *,
+        session_id: str | None = None,
+        clock: str = "pseudo",
+        on_deploy: str = "follow",
+        kind: str = "stream",
+        record_facts: bool = True,
     ):
-        self.id = f"s{next(_ids)}"
+        self.id = session_id or f"s{next(_ids)}"
         self.ruleset = ruleset
         self.version = version
+        self.clock = clock
+        self.on_deploy = on_deploy
+        self.kind = kind
+        self.record_facts = record_facts
+        self.created_at = time.time()
+        self.last_used = time.monotonic()
+        self.moves: list[dict[str, Any]] = []  # versions it moved to (or stayed on), newest last
+        self.pinned_reason: str | None = None  # why it did not follow a deploy
+        self.fact_limit: int | None = None  # facts the session may hold (conversations: sessions.max_facts)
         self._java = java_session
         self._fire_limit = fire_limit
         self._max_facts = max_facts
         self.closed = False
         self._on_close = on_close
         self._feeds: list[Any] = []  # EventFeeds into this session, stopped when it closes
+        # One call at a time, and none while the session moves to a new version.
+        self._lock = threading.RLock()
         # push() shares these with the Java session (see Session.attachBuffers): the facts go in
         # and the answer comes out as UTF-8 bytes, and the call itself carries only numbers.
-        self._push_lock = threading.Lock()
+        self._push_lock = self._lock
         self._in = bytearray(BUFFER_BYTES)
         self._out = bytearray(BUFFER_BYTES)
         self._in_view = memoryview(self._in)
+        self._attach(java_session)
+
+    def _attach(self, java_session: Any) -> None:
         java_session.attachBuffers(jpype.nio.convertToDirectBuffer(self._in), jpype.nio.convertToDirectBuffer(self._out))
 
     @property
@@ -77,17 +149,23 @@ class StatefulSession:
             raise EngineError(f"session {self.id} is closed")
         return self._java
 
+    def _call(self, method: str, *args: Any) -> Any:
+        """One call into the Java session, under the lock (a move to a new version swaps it)."""
+        with self._lock:
+            self.last_used = time.monotonic()
+            return getattr(self._live(), method)(*args)
+
     def insert(self, facts: list[dict[str, Any]]) -> int:
         """Inserts facts; facts with an ``id`` can later be updated/retracted by it."""
-        data = _check(self._live().insert(encode_facts(facts, self._max_facts)))
+        data = _check(self._call("insert", encode_facts(facts, self._max_facts)))
         return int(data["inserted"])
 
     def insert_event(self, fact: dict[str, Any], timestamp_ms: int) -> None:
         """Inserts one event stamped with its time; the session clock moves forward to it."""
-        _check(self._live().insertAt(encode_facts([fact], self._max_facts), int(timestamp_ms)))
+        _check(self._call("insertAt", encode_facts([fact], self._max_facts), int(timestamp_ms)))
 
     def insert_events(self, facts: list[dict[str, Any]], timestamp_ms: int) -> int:
-        data = _check(self._live().insertAt(encode_facts(facts, self._max_facts), int(timestamp_ms)))
+        data = _check(self._call("insertAt", encode_facts(facts, self._max_facts), int(timestamp_ms)))
         return int(data["inserted"])
 
     def push(self, facts: list[dict[str, Any]], timestamp_ms: int | None = None, return_facts: bool = False) -> FireResult:
@@ -100,12 +178,13 @@ class StatefulSession:
         started = time.perf_counter()
         stamp = NO_TIMESTAMP if timestamp_ms is None else int(timestamp_ms)
         data = encode_facts_bytes(facts, self._max_facts)
-        java = self._live()
         size = len(data)
         if size > BUFFER_BYTES:
-            answer = str(java.pushAt(data.decode("utf-8"), stamp, self._fire_limit, return_facts))
+            answer = str(self._call("pushAt", data.decode("utf-8"), stamp, self._fire_limit, return_facts))
             return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
         with self._push_lock:  # the buffers are the session's: one push at a time uses them
+            java = self._live()
+            self.last_used = time.monotonic()
             self._in_view[:size] = data
             length = java.pushBuffered(size, stamp, self._fire_limit, return_facts)
             answer = self._out[:length] if length >= 0 else str(java.takeOverflow())
@@ -126,56 +205,155 @@ class StatefulSession:
         return feed
 
     def update(self, fact: dict[str, Any]) -> None:
-        _check(self._live().update(json.dumps(fact, allow_nan=False)))
+        _check(self._call("update", json.dumps(fact, allow_nan=False)))
 
     def retract(self, fact_id: str) -> None:
-        _check(self._live().retract(str(fact_id)))
+        _check(self._call("retract", str(fact_id)))
 
     def query(self, name: str, arguments: list[Any] | None = None) -> dict[str, Any]:
         """Runs the rule set's DRL ``query name(...)``: ``{"identifiers": [...], "rows": [{id: value}]}``."""
-        data = _check(self._live().query(str(name), json.dumps(list(arguments or []), allow_nan=False)))
+        data = _check(self._call("query", str(name), json.dumps(list(arguments or []), allow_nan=False)))
         return {"identifiers": data["identifiers"], "rows": data["rows"]}
 
     def set_global(self, name: str, value: Any) -> None:
         """Sets a global the rule set declares (``global java.util.List seats;``), strictly typed."""
-        _check(self._live().setGlobal(str(name), json.dumps(value, allow_nan=False)))
+        _check(self._call("setGlobal", str(name), json.dumps(value, allow_nan=False)))
 
     def get_global(self, name: str) -> Any:
-        return _check(self._live().getGlobal(str(name)))["value"]
+        return _check(self._call("getGlobal", str(name)))["value"]
 
     def advance_clock(self, ms: int) -> int:
-        return int(self._live().advanceBy(int(ms)))
+        return int(self._call("advanceBy", int(ms)))
 
     def advance_to(self, timestamp_ms: int) -> int:
-        return int(self._live().advanceTo(int(timestamp_ms)))
+        return int(self._call("advanceTo", int(timestamp_ms)))
 
     @property
     def clock_ms(self) -> int:
-        return int(self._live().now())
+        return int(self._call("now"))
 
     @property
     def fact_count(self) -> int:
-        return int(self._live().factCount())
+        return int(self._call("factCount"))
 
     def fire(self, return_facts: bool = False) -> FireResult:
         """Fires what is activated; returns the actions and firings since the last fire."""
         started = time.perf_counter()
-        answer = str(self._live().fire(self._fire_limit, return_facts))
+        answer = str(self._call("fire", self._fire_limit, return_facts))
         return decode_result(answer, self.ruleset, self.version, (time.perf_counter() - started) * 1000)
 
     def insert_and_fire_count(self, facts_json: str) -> int:
         """Throughput path: a pre-encoded batch in, the number of firings out."""
-        return int(self._live().insertAndFireCount(facts_json, self._fire_limit))
+        return int(self._call("insertAndFireCount", facts_json, self._fire_limit))
 
-    def close(self) -> None:
-        """Disposes the Drools session and forgets it in the engine."""
+    # ------------------------------------------------------------------ command batches
+
+    def execute(self, commands: list[dict[str, Any]]) -> BatchAnswer:
+        """Runs a batch of commands (see ``java/…/Batch.java`` for the list) under the session's
+        lock: checked first (nothing changes if any is refused), then executed in order.
+        Raises :class:`CommandFailed` naming the command."""
+        payload = orjson.dumps(commands).decode("utf-8")
+        started = time.perf_counter()
+        with self._lock:
+            java = self._live()
+            self.last_used = time.monotonic()
+            self._check_fact_limit(java, commands)
+            answer = orjson.loads(str(java.execute(payload, self._fire_limit)))
+            version = self.version
+        if answer.get("disposed"):
+            self._closed_by_batch()
+        if not answer.get("ok"):
+            raise CommandFailed(int(answer.get("index", -1)), answer.get("op"), str(answer.get("kind")), answer.get("field"),
+                                str(answer.get("message")), bool(answer.get("applied")), answer.get("results"))
+        return BatchAnswer(answer["results"], answer.get("time"), answer.get("factCount"), bool(answer.get("disposed")),
+                           version, (time.perf_counter() - started) * 1000)
+
+    def _check_fact_limit(self, java: Any, commands: list[dict[str, Any]]) -> None:
+        if self.fact_limit is None:
+            return
+        inserts = [(i, len(c.get("facts") or ())) for i, c in enumerate(commands) if c.get("op") == "insert"]
+        adding = sum(n for _, n in inserts)
+        if not adding:
+            return
+        held = int(java.factCount())
+        if held + adding > self.fact_limit:
+            raise CommandFailed(inserts[0][0], "insert", "limit", "object",
+                                f"the session holds {held} facts; {adding} more would pass its limit of "
+                                f"{self.fact_limit} (sessions.max_facts): retract some or open another session")
+
+    def _closed_by_batch(self) -> None:
+        """A ``dispose`` command ended the Drools session: finish closing it here."""
         if not self.closed:
             for feed in self._feeds:
                 feed.abort()
             self.closed = True
-            self._java.dispose()
             if self._on_close is not None:
                 self._on_close(self.id)
 
+    # ------------------------------------------------------------------ moving to a new version
+
+    def move_to(self, compiled: Any, version: int, unchanged_rules: list[str], new_java: Any) -> bool:
+        """Moves the session's state (facts, handles, clock, globals, focus) into ``new_java``, a
+        fresh Java session of ``version``; True if it moved. A fact that does not fit the new
+        version (type or field gone, value no longer allowed) keeps the session on its version
+        (``pinned_reason`` says why) and changes nothing."""
+        with self._lock:
+            if self.closed:
+                new_java.dispose()
+                return False
+            if any(not f.closed for f in self._feeds):
+                new_java.dispose()
+                self._stay(version, "an event feed is open on it")
+                return False
+            answer = orjson.loads(str(new_java.moveFrom(self._java, orjson.dumps(sorted(unchanged_rules)).decode())))
+            if not answer.get("ok"):
+                new_java.dispose()
+                self._stay(version, str(answer.get("message")))
+                return False
+            old, old_version = self._java, self.version
+            self._java = new_java
+            self._attach(new_java)
+            self.version = version
+            self.pinned_reason = None
+            self.moves.append({"from": old_version, "to": version, "facts": int(answer.get("facts", 0)), "at": time.time()})
+            del self.moves[:-20]
+        old.dispose()
+        return True
+
+    def _stay(self, version: int, reason: str) -> None:
+        self.pinned_reason = f"stays on version {self.version} (version {version} was deployed): {reason}"
+        self.moves.append({"from": self.version, "to": self.version, "refused": version, "reason": reason, "at": time.time()})
+        del self.moves[:-20]
+
+    def close(self) -> None:
+        """Disposes the Drools session and forgets it in the engine."""
+        with self._lock:
+            if self.closed:
+                return
+            for feed in self._feeds:
+                feed.abort()
+            self.closed = True
+            self._java.dispose()
+        if self._on_close is not None:
+            self._on_close(self.id)
+
+    @property
+    def idle_s(self) -> float:
+        return time.monotonic() - self.last_used
+
     def to_dict(self) -> dict[str, Any]:
-        return {"id": self.id, "ruleset": self.ruleset, "version": self.version, "closed": self.closed}
+        out: dict[str, Any] = {"id": self.id, "ruleset": self.ruleset, "version": self.version, "kind": self.kind,
+                               "clock": self.clock, "on_deploy": self.on_deploy, "closed": self.closed,
+                               "created_at": self.created_at, "idle_s": round(self.idle_s, 3)}
+        if not self.closed:
+            try:
+                with self._lock:
+                    out["time"] = int(self._java.now())
+                    out["fact_count"] = int(self._java.factCount())
+            except Exception:  # disposed under us: the fields are simply left out
+                pass
+        if self.pinned_reason:
+            out["pinned_reason"] = self.pinned_reason
+        if self.moves:
+            out["moves"] = list(self.moves)
+        return out

@@ -58,6 +58,14 @@ public final class Runner {
         return kieBase.newKieSession(sessionConf, null);
     }
 
+    /** A session with a realtime clock (KIE's default) or, as {@link #newSession()}, a pseudo clock. */
+    KieSession newSession(boolean realtime) {
+        if (!realtime) return newSession();
+        KieSessionConfiguration conf = KieServices.Factory.get().newKieSessionConfiguration();
+        conf.setOption(ClockTypeOption.get("realtime"));
+        return kieBase.newKieSession(conf, null);
+    }
+
     /** Fires {@code factsJson} (a JSON list of facts) in a fresh session. */
     public String fire(String factsJson, int limit, boolean returnFacts, boolean recordFacts) {
         List<Object> facts = new ArrayList<Object>();
@@ -78,10 +86,16 @@ public final class Runner {
 
     /** Fires the session with the runaway guard and writes the result (shared with stateful sessions). */
     static String fireAndReport(KieSession session, Recorder recorder, TypeRegistry types, int limit, boolean returnFacts) {
+        return fireAndReport(session, recorder, types, limit, returnFacts, null);
+    }
+
+    /** {@link #fireAndReport} through an agenda filter (null: none). */
+    static String fireAndReport(KieSession session, Recorder recorder, TypeRegistry types, int limit, boolean returnFacts,
+                                org.kie.api.runtime.rule.AgendaFilter filter) {
         int n;
         try {
-            n = session.fireAllRules(limit);
-            if (n >= limit && session.fireAllRules(1) > 0) return recorder.runaway(limit);
+            n = filter == null ? session.fireAllRules(limit) : session.fireAllRules(filter, limit);
+            if (n >= limit && (filter == null ? session.fireAllRules(1) : session.fireAllRules(filter, 1)) > 0) return recorder.runaway(limit);
         } catch (ConsequenceException ce) {
             recorder.reset();
             return runtimeError(ce.getMatch() == null ? null : ce.getMatch().getRule().getName(), rootMessage(ce));

@@ -9,29 +9,101 @@ import java.util.Map;
 import java.util.concurrent.TimeUnit;
 
 import org.kie.api.runtime.KieSession;
+import org.kie.api.runtime.rule.AgendaFilter;
 import org.kie.api.runtime.rule.FactHandle;
+import org.kie.api.time.SessionClock;
 import org.kie.api.time.SessionPseudoClock;
 
 /**
- * A long-lived stateful session for event streams: facts stay between calls, events carry their
- * own timestamps and drive a pseudo clock, so replaying recorded data gives the same answers.
- * All methods are synchronized: a KieSession is not thread-safe.
+ * A long-lived stateful session: facts stay between calls. For event streams, events carry their
+ * own timestamps and drive a pseudo clock, so replaying recorded data gives the same answers; for
+ * KIE Server / REST conversations, {@link #execute} runs command batches with real fact handles
+ * (see {@link Batch}, {@link Handles}), and {@link #moveFrom} carries a session to a new rule set
+ * version. All methods are synchronized: a KieSession is not thread-safe.
  */
 public final class Session {
-    private final Runner runner;
-    private final KieSession session;
+    final Runner runner;
+    final KieSession session;
     private final Actions actions = new Actions();
     private final Recorder recorder;
-    private final SessionPseudoClock clock;
+    final SessionClock clock;
     private final Map<String, FactHandle> byId = new HashMap<String, FactHandle>();
+    /** Fact handles by their external form (sessions that answer commands; null for stream sessions). */
+    private final Handles handles;
+    /** Refraction carried over a move to a new version, until a fire empties the agenda (see Refraction). */
+    private Refraction refraction;
+    boolean disposed;
 
     public Session(Runner runner, boolean recordFacts) {
+        this(runner, recordFacts, false, false);
+    }
+
+    /**
+     * A session with a {@code realtime} (else pseudo) clock; {@code trackHandles} keeps the fact
+     * handle registry that {@link #execute}'s commands resolve handles with.
+     */
+    public Session(Runner runner, boolean recordFacts, boolean realtime, boolean trackHandles) {
         this.runner = runner;
-        this.session = runner.newSession();
+        this.session = runner.newSession(realtime);
         if (Runner.declaresGlobal(session.getKieBase(), "actions")) session.setGlobal("actions", actions);
         this.recorder = new Recorder(actions, runner.types(), recordFacts);
         session.addEventListener(recorder);
         this.clock = session.getSessionClock();
+        this.handles = trackHandles ? new Handles() : null;
+        if (handles != null) session.addEventListener(handles);
+    }
+
+    /** Runs a batch of commands (a JSON list, see {@link Batch}); the answer is JSON. */
+    public synchronized String execute(String commandsJson, int fireLimit) {
+        if (disposed) return "{\"ok\":false,\"index\":-1,\"op\":null,\"kind\":\"disposed\",\"field\":null,"
+                + "\"message\":\"the session is disposed\",\"applied\":false,\"disposed\":true}";
+        return new Batch(this, fireLimit).run(commandsJson);
+    }
+
+    /** The live handle a handle's text names (KIE's external form), or Handles.Stale. */
+    FactHandle resolve(String text) throws Handles.Stale {
+        if (handles != null) return handles.resolve(text);
+        Handles scan = new Handles();
+        for (FactHandle h : Handles.all(session)) scan.objectInserted(new InsertedEvent(h));
+        return scan.resolve(text);
+    }
+
+    /** A minimal event to feed a scan-only registry (stream sessions keep none). */
+    private static final class InsertedEvent implements org.kie.api.event.rule.ObjectInsertedEvent {
+        private final FactHandle h;
+        InsertedEvent(FactHandle h) { this.h = h; }
+        public FactHandle getFactHandle() { return h; }
+        public Object getObject() { return ((org.drools.core.common.InternalFactHandle) h).getObject(); }
+        public org.kie.api.definition.rule.Rule getRule() { return null; }
+        public org.kie.api.runtime.KieRuntime getKieRuntime() { return null; }
+    }
+
+    /**
+     * One fire of a batch: {@code max > 0} fires at most that many rules (KIE's
+     * {@code fire-all-rules max}, no runaway report); otherwise up to {@code limit} with the
+     * runaway guard. Moves' refraction applies until a fire leaves the agenda empty.
+     */
+    String fireForBatch(int max, int limit) {
+        if (max > 0) {
+            AgendaFilter filter = refraction;
+            int n;
+            try {
+                n = filter == null ? session.fireAllRules(max) : session.fireAllRules(filter, max);
+            } catch (org.kie.api.runtime.rule.ConsequenceException ce) {
+                recorder.reset();
+                return Runner.runtimeError(ce.getMatch() == null ? null : ce.getMatch().getRule().getName(), Runner.rootMessage(ce));
+            } catch (RuntimeException re) {
+                recorder.reset();
+                return Runner.runtimeError(null, Runner.rootMessage(re));
+            }
+            if (n < max) refraction = null;
+            StringBuilder b = new StringBuilder(256);
+            recorder.writeSuccess(b, n);
+            return b.append('}').toString();
+        }
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, false, refraction);
+        refraction = null;
+        return answer;
     }
 
     /** Inserts facts (a JSON list); facts with an "id" can later be updated or retracted by it. */
@@ -46,7 +118,10 @@ public final class Session {
     public synchronized String pushAt(String factsJson, long timestampMs, int limit, boolean returnFacts) {
         String error = insertFacts(factsJson, timestampMs);
         if (error != null) return error;
-        return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
+        if (refraction == null) return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction);
+        refraction = null;
+        return answer;
     }
 
     /** Inserts facts stamped with {@code timestampMs}: the clock first advances to it (never back). */
@@ -146,14 +221,18 @@ public final class Session {
 
     public synchronized long advanceTo(long timestampMs) {
         long now = clock.getCurrentTime();
-        if (timestampMs > now) clock.advanceTime(timestampMs - now, TimeUnit.MILLISECONDS);
+        if (timestampMs > now && clock instanceof SessionPseudoClock) {
+            ((SessionPseudoClock) clock).advanceTime(timestampMs - now, TimeUnit.MILLISECONDS);
+        }
         return clock.getCurrentTime();
     }
 
     public synchronized long advanceBy(long ms) {
-        if (ms > 0) clock.advanceTime(ms, TimeUnit.MILLISECONDS);
+        if (ms > 0 && clock instanceof SessionPseudoClock) ((SessionPseudoClock) clock).advanceTime(ms, TimeUnit.MILLISECONDS);
         return clock.getCurrentTime();
     }
+
+    public boolean realtime() { return !(clock instanceof SessionPseudoClock); }
 
     public synchronized long now() { return clock.getCurrentTime(); }
 
@@ -161,7 +240,9 @@ public final class Session {
 
     /** Fires what is activated; the result holds the actions and firings since the last fire. */
     public synchronized String fire(int limit, boolean returnFacts) {
-        return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction);
+        refraction = null;
+        return answer;
     }
 
     /** Inserts a batch and fires once; returns the number of firings (throughput path). */
@@ -219,8 +300,18 @@ public final class Session {
         return b.append("]}").toString();
     }
 
+    /** " (its queries: a, b)" or " (it has none)", for messages. */
+    String queryNames() {
+        java.util.List<String> names = new java.util.ArrayList<String>();
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Query q : p.getQueries()) names.add(q.getName());
+        }
+        java.util.Collections.sort(names);
+        return names.isEmpty() ? " (it has none)" : " (its queries: " + String.join(", ", names) + ")";
+    }
+
     /** The declared parameter types of a query (JSON numbers must become the declared int/long/...). */
-    private Class<?>[] queryParameterTypes(String name) {
+    Class<?>[] queryParameterTypes(String name) {
         for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
             for (org.kie.api.definition.rule.Query q : p.getQueries()) {
                 if (q.getName().equals(name) && q instanceof org.drools.core.definitions.rule.impl.QueryImpl) {
@@ -265,5 +356,139 @@ public final class Session {
         return b.append('}').toString();
     }
 
-    public synchronized void dispose() { session.dispose(); }
+    public synchronized void dispose() {
+        if (!disposed) {
+            disposed = true;
+            session.dispose();
+        }
+    }
+
+    public synchronized boolean isDisposed() { return disposed; }
+
+    // ------------------------------------------------------------------ moving to a new version
+
+    /**
+     * Takes over {@code old}'s state, as {@code KieContainer.updateToVersion} does for a live
+     * session: its facts (re-built as this version's types, into the same entry points), the clock
+     * (a pseudo clock is advanced to the old one's time), its globals but {@code actions}, the
+     * agenda focus and the fact handles clients hold (kept as aliases). Matches the old session had
+     * already fired do not fire again (see {@link Refraction}: {@code unchangedRulesJson} lists the
+     * rules whose text is the same in both versions). Call on a fresh session; {@code old} is
+     * left as it was unless the move succeeds, and must then be disposed by the caller.
+     * Returns {"ok":true,"facts":n} or {"ok":false,"message":...} naming the fact that does not fit.
+     */
+    public synchronized String moveFrom(Session old, String unchangedRulesJson) {
+        synchronized (old) {
+            if (old.disposed) return "{\"ok\":false,\"message\":\"the session to move is disposed\"}";
+            TypeRegistry mine = runner.types();
+            TypeRegistry theirs = old.runner.types();
+            List<FactHandle> oldHandles = Handles.all(old.session);
+            List<Object> built = new ArrayList<Object>(oldHandles.size());
+            List<org.kie.api.runtime.rule.EntryPoint> targets = new ArrayList<org.kie.api.runtime.rule.EntryPoint>();
+            for (FactHandle h : oldHandles) {
+                org.drools.core.common.InternalFactHandle ih = (org.drools.core.common.InternalFactHandle) h;
+                Object fact = ih.getObject();
+                if (fact instanceof Actions) { built.add(null); targets.add(null); continue; }
+                StringBuilder json = new StringBuilder();
+                if (!theirs.writeFact(json, fact)) {
+                    return problem("fact " + Handles.external(h) + " is not of a declared type (" + fact.getClass().getName() + ")");
+                }
+                @SuppressWarnings("unchecked")
+                Map<String, Object> values = (Map<String, Object>) Json.parse(json.toString());
+                String type = String.valueOf(values.get("type"));
+                TypeRegistry.TypeInfo info = mine.type(type);
+                if (info == null) return problem("fact " + Handles.external(h) + ": the new version declares no type " + type);
+                try {
+                    built.add(mine.build(info, values, 0));
+                } catch (TypeRegistry.FactProblem p) {
+                    return problem("fact " + Handles.external(h) + " (" + type + ") does not fit the new version: " + p.getMessage());
+                }
+                org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(ih.getEntryPointName());
+                if (ep == null) return problem("fact " + Handles.external(h) + ": the new version has no entry point " + ih.getEntryPointName());
+                targets.add(ep);
+            }
+            Map<String, Object> globals = new java.util.LinkedHashMap<String, Object>();
+            for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+                for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
+                    if (g.getName().equals("actions")) continue;
+                    Object v = old.session.getGlobals().get(g.getName());
+                    if (v == null) continue;
+                    StringBuilder json = new StringBuilder();
+                    Json.write(json, v, theirs);
+                    try {
+                        Class<?> type = mine.declaredClass(g.getType());
+                        if (type == null) type = Class.forName(g.getType(), false, Session.class.getClassLoader());
+                        globals.put(g.getName(), mine.convertValue(g.getName(), type, Json.parse(json.toString())));
+                    } catch (Exception e) {
+                        return problem("global '" + g.getName() + "' does not fit the new version: " + Runner.rootMessage(e));
+                    }
+                }
+            }
+            // the state fits: from here on nothing can refuse
+            if (clock instanceof SessionPseudoClock) advanceTo(old.clock.getCurrentTime());
+            for (Map.Entry<String, Object> g : globals.entrySet()) session.setGlobal(g.getKey(), g.getValue());
+            Map<Object, Object> mapped = new java.util.IdentityHashMap<Object, Object>();
+            java.util.Set<Object> unchanged = java.util.Collections.newSetFromMap(new java.util.IdentityHashMap<Object, Boolean>());
+            Map<String, FactHandle> oldAliases = old.handles == null ? new HashMap<String, FactHandle>() : old.handles.aliasHandles();
+            Map<FactHandle, FactHandle> moved = new java.util.IdentityHashMap<FactHandle, FactHandle>();
+            int count = 0;
+            for (int k = 0; k < oldHandles.size(); k++) {
+                Object fact = built.get(k);
+                if (fact == null) continue;
+                FactHandle nh = targets.get(k).insert(fact);
+                org.drools.core.common.InternalFactHandle oh = (org.drools.core.common.InternalFactHandle) oldHandles.get(k);
+                moved.put(oh, nh);
+                mapped.put(oh.getObject(), fact);
+                unchanged.add(fact);
+                String id = theirs.idOf(oh.getObject());
+                if (id != null && !types().isEvent(fact)) byId.put(id, nh);
+                if (handles != null) handles.alias(oh.getId(), oh.getIdentityHashCode(), nh);
+                count++;
+            }
+            if (handles != null) {
+                for (Map.Entry<String, FactHandle> a : oldAliases.entrySet()) {
+                    FactHandle nh = moved.get(a.getValue());
+                    if (nh == null) continue;
+                    String[] idHash = a.getKey().split(":");
+                    handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
+                }
+                handles.setUnchangedSinceMove(unchanged);
+            } else {
+                session.addEventListener(new org.kie.api.event.rule.DefaultRuleRuntimeEventListener() {
+                    @Override public void objectUpdated(org.kie.api.event.rule.ObjectUpdatedEvent e) {
+                        unchanged.remove(e.getOldObject());
+                        unchanged.remove(e.getObject());
+                    }
+                    @Override public void objectDeleted(org.kie.api.event.rule.ObjectDeletedEvent e) { unchanged.remove(e.getOldObject()); }
+                });
+            }
+            // the old session's pending matches: recorded (and consumed: it is discarded after the move)
+            final java.util.Set<String> pending = Refraction.emptyPending();
+            final Map<Object, Object> byOld = mapped;
+            try {
+                old.session.fireAllRules(match -> {
+                    pending.add(Refraction.key(match.getRule().getName(), match.getObjects(), byOld));
+                    return false;
+                });
+            } catch (RuntimeException e) {
+                // an agenda that cannot even be walked: its matches count as pending (they fire here)
+            }
+            old.recorder.reset();
+            java.util.Set<String> unchangedRules = new java.util.HashSet<String>();
+            Object parsed = Json.parse(unchangedRulesJson);
+            if (parsed instanceof List) for (Object r : (List<?>) parsed) unchangedRules.add(String.valueOf(r));
+            refraction = new Refraction(unchangedRules, unchanged, pending);
+            String focus = ((org.drools.core.common.InternalAgenda) old.session.getAgenda()).getFocusName();
+            if (focus != null && !focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
+            return "{\"ok\":true,\"facts\":" + count + "}";
+        }
+    }
+
+    private TypeRegistry types() { return runner.types(); }
+
+    private static String problem(String message) {
+        StringBuilder b = new StringBuilder("{\"ok\":false,\"message\":");
+        Json.quote(b, message);
+        return b.append('}').toString();
+    }
 }

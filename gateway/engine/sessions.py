@@ -1,0 +1,337 @@
+"""The live stateful sessions of this process: one registry for the KIE endpoint, the REST API
+and the stream bindings.
+
+Why one place: a session is a resource clients hold across calls — a KIE ``lookup`` of a
+declared ksession must reach the same live session as ``/api/rulesets/{name}/sessions/{id}``, and
+what happens to it on a deploy, after idling, or at a limit must be the same whoever opened it.
+
+- **Declared sessions** (a rule set's ``kmodule.xml`` ksessions, or KIE's defaults): a stateful one
+  has one live instance per rule set, created on first use and addressed by its name
+  (``defaultKieSession``); a stateless one is a fresh session per call (nothing kept here).
+- **Opened sessions** (``POST …/sessions``, stream bindings): addressed by a generated id.
+- **Deploy policy**: ``follow`` (the default, ``sessions.on_deploy``) moves a session to each new
+  version with its facts and fact handles, like ``KieContainer.updateToVersion`` (see
+  :meth:`StatefulSession.move_to`); ``pin`` keeps it on the version it was opened on. A session
+  whose facts do not fit the new version stays where it is and says why. Deleting the rule set
+  disposes its sessions (its history stays).
+- **Limits**: sessions per rule set, facts per session, and an idle TTL after which a
+  conversation's session is disposed (stream-bound sessions live as long as their binding).
+- **Across processes**: a session lives in the process that created it. With a ``directory``
+  (:class:`gateway.store.session_records.SessionDirectory`), creating one claims it in the
+  Information State, and asking for a session another process owns raises
+  :class:`SessionElsewhere` — the REST layer forwards the call to that owner.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import os
+import re
+import threading
+import time
+from typing import Any, Protocol
+
+from gateway.engine.errors import EngineError
+from gateway.engine.kmodule import Declarations, SessionDeclaration
+from gateway.engine.session import CommandFailed, StatefulSession
+
+log = logging.getLogger(__name__)
+
+CONVERSATION_KINDS = ("kie", "rest")  # sessions clients hold: counted in limits, reaped when idle
+ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")
+_ids = itertools.count(1)
+
+
+class SessionNotFound(EngineError):
+    """No such session (never opened, disposed, or reaped after idling)."""
+
+    kind = "session"
+
+
+class SessionLimit(EngineError):
+    """A limit on sessions per rule set or facts per session would be exceeded."""
+
+    kind = "limit"
+
+
+class SessionElsewhere(EngineError):
+    """The session lives in another gateway process (``owner``: its record in the directory)."""
+
+    kind = "elsewhere"
+
+    def __init__(self, ruleset: str, session_id: str, owner: dict[str, Any]) -> None:
+        super().__init__(f"session {session_id} of {ruleset} lives in process {owner.get('process')}")
+        self.ruleset, self.session_id, self.owner = ruleset, session_id, owner
+
+
+class SessionGone(EngineError):
+    """The session's owner process is gone, and the session (with its facts) with it."""
+
+    kind = "gone"
+
+
+class Directory(Protocol):
+    """Where sessions are recorded across processes (the Information State's ``sessions``)."""
+
+    process: str
+
+    def claim(self, ruleset: str, session_id: str, info: dict[str, Any]) -> dict[str, Any]:
+        """Records this process as the owner unless another one is; returns the owner record."""
+
+    def owner(self, ruleset: str, session_id: str) -> dict[str, Any] | None: ...
+
+    def release(self, ruleset: str, session_id: str) -> None: ...
+
+    def records(self, ruleset: str | None = None) -> list[dict[str, Any]]: ...
+
+
+class SessionManager:
+    """The sessions of one engine (thread-safe). Built by :class:`gateway.engine.Engine`."""
+
+    def __init__(self, engine: Any, settings: Any) -> None:
+        self.engine = engine
+        self.settings = settings  # gateway.config.SessionSettings
+        self.directory: Directory | None = None
+        self._sessions: dict[tuple[str, str], StatefulSession] = {}
+        self._lock = threading.RLock()
+        self._creating: dict[tuple[str, str], threading.Lock] = {}
+        self._reaper: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    # ------------------------------------------------------------------ declarations
+
+    def declarations(self, ruleset: str) -> Declarations:
+        return self.engine.declared_sessions(ruleset)
+
+    def resolve_lookup(self, ruleset: str, lookup: str | None) -> SessionDeclaration:
+        """The declared session a KIE batch's ``lookup`` names (None: the default one, see
+        ``sessions.no_lookup``); :class:`SessionNotFound` in KIE's words when there is none."""
+        declared = self.declarations(ruleset)
+        if lookup:
+            found = declared.get(lookup)
+            if found is None:
+                raise SessionNotFound(f"Session '{lookup}' not found on container '{ruleset}' "
+                                      f"(its sessions: {', '.join(declared.names()) or 'none'})")
+            return found
+        order = (False, True) if self.settings.no_lookup == "stateless" else (True, False)
+        for stateful in order:
+            found = declared.default(stateful)
+            if found is not None:
+                return found
+        raise SessionNotFound(f"No default KieSession found on container '{ruleset}'.")
+
+    # ------------------------------------------------------------------ opening
+
+    def open(self, ruleset: str, *, session_id: str | None = None, kind: str = "rest", clock: str | None = None,
+             on_deploy: str | None = None, record_facts: bool = True) -> StatefulSession:
+        """Opens a session on the live version of ``ruleset``. ``session_id`` names a declared
+        stateful ksession (its clock and policy come from the declaration) or, for REST, any
+        free id; None generates one."""
+        declared: SessionDeclaration | None = None
+        if session_id is not None:
+            if not ID_PATTERN.match(session_id):
+                raise EngineError(f"invalid session id {session_id!r}: 1-128 letters, digits, '_', '.', ':' or '-'")
+            declared = self.declarations(ruleset).get(session_id)
+            if declared is not None and not declared.stateful:
+                raise EngineError(f"session '{session_id}' of {ruleset} is declared stateless: it keeps nothing to open")
+        key = (ruleset, session_id or "")
+        with self._lock:
+            if session_id is not None and key in self._sessions:
+                raise EngineError(f"session '{session_id}' of {ruleset} is already open")
+            if kind in CONVERSATION_KINDS:
+                self._check_session_limit(ruleset)
+        sid = session_id or self._new_id()
+        clock = clock or (declared.clock if declared else "pseudo")
+        policy = on_deploy or (declared.on_deploy if declared and declared.on_deploy else self.settings.on_deploy)
+        if self.directory is not None and kind in CONVERSATION_KINDS:
+            owner = self.directory.claim(ruleset, sid, {"kind": kind, "clock": clock, "on_deploy": policy})
+            if owner.get("process") != self.directory.process:
+                raise SessionElsewhere(ruleset, sid, owner)
+        session = self.engine.new_session(ruleset, sid, clock=clock, on_deploy=policy, kind=kind, record_facts=record_facts,
+                                          on_close=lambda _id, r=ruleset, s=sid: self._forget(r, s))
+        if kind in CONVERSATION_KINDS:
+            session.fact_limit = self.settings.max_facts
+        with self._lock:
+            self._sessions[(ruleset, sid)] = session
+        self._ensure_reaper()
+        return session
+
+    def lookup(self, ruleset: str, lookup: str | None) -> tuple[SessionDeclaration, StatefulSession | None]:
+        """A KIE batch's session: the declaration, and for a stateful one its live session (made
+        on first use); None for a stateless one (the caller fires a throwaway session)."""
+        declared = self.resolve_lookup(ruleset, lookup)
+        if not declared.stateful:
+            return declared, None
+        return declared, self.named(ruleset, declared.name)
+
+    def named(self, ruleset: str, name: str) -> StatefulSession:
+        """The live session of declared stateful ksession ``name`` (created on first use)."""
+        key = (ruleset, name)
+        session = self._sessions.get(key)
+        if session is not None and not session.closed:
+            return session
+        with self._lock:
+            gate = self._creating.setdefault(key, threading.Lock())
+        with gate:  # two first calls at once make one session
+            session = self._sessions.get(key)
+            if session is not None and not session.closed:
+                return session
+            return self.open(ruleset, session_id=name, kind="kie")
+
+    def _check_session_limit(self, ruleset: str) -> None:
+        open_here = sum(1 for (r, _), s in self._sessions.items() if r == ruleset and s.kind in CONVERSATION_KINDS)
+        limit = self.settings.max_per_ruleset
+        if open_here >= limit:
+            raise SessionLimit(f"rule set {ruleset} already has {open_here} open sessions (at most {limit}: "
+                               f"sessions.max_per_ruleset); dispose one first")
+
+    @staticmethod
+    def _new_id() -> str:
+        return f"s{os.getpid():x}-{int(time.time() * 1000):x}-{next(_ids)}"
+
+    # ------------------------------------------------------------------ finding
+
+    def find(self, ruleset: str, session_id: str) -> StatefulSession | None:
+        session = self._sessions.get((ruleset, session_id))
+        return session if session is not None and not session.closed else None
+
+    def get(self, ruleset: str, session_id: str) -> StatefulSession:
+        """This process's session, else :class:`SessionElsewhere` (another process owns it) or
+        :class:`SessionNotFound`. A declared stateful ksession is created on first use."""
+        session = self.find(ruleset, session_id)
+        if session is not None:
+            return session
+        if self.directory is not None:
+            owner = self.directory.owner(ruleset, session_id)
+            if owner is not None and owner.get("process") != self.directory.process:
+                raise SessionElsewhere(ruleset, session_id, owner)
+            if owner is not None:  # recorded as ours but not here: disposed under the record
+                self.directory.release(ruleset, session_id)
+        declared = self.declarations(ruleset).get(session_id)
+        if declared is not None and declared.stateful:
+            return self.named(ruleset, session_id)
+        raise SessionNotFound(f"no session '{session_id}' on rule set {ruleset} (disposed, idle longer than "
+                              f"{self.settings.idle_ttl_s:g} s, or never opened)")
+
+    def list(self, ruleset: str | None = None) -> list[StatefulSession]:
+        with self._lock:
+            return [s for (r, _), s in self._sessions.items() if (ruleset is None or r == ruleset) and not s.closed]
+
+    def by_id(self, session_id: str) -> StatefulSession | None:
+        """Any rule set's session with this id (the engine's old ``get_session``)."""
+        return next((s for (_, sid), s in list(self._sessions.items()) if sid == session_id), None)
+
+    # ------------------------------------------------------------------ closing
+
+    def dispose(self, ruleset: str, session_id: str) -> None:
+        session = self.find(ruleset, session_id)
+        if session is None:
+            self.get(ruleset, session_id)  # SessionElsewhere / SessionNotFound
+            return
+        session.close()
+
+    def dispose_ruleset(self, ruleset: str) -> None:
+        for session in self.list(ruleset):
+            session.close()
+
+    def close_all(self) -> None:
+        self._stop.set()
+        for session in self.list():
+            try:
+                session.close()
+            except Exception:  # closing at shutdown is best effort
+                log.debug("closing session %s failed", session.id, exc_info=True)
+
+    def _forget(self, ruleset: str, session_id: str) -> None:
+        with self._lock:
+            self._sessions.pop((ruleset, session_id), None)
+            self._creating.pop((ruleset, session_id), None)
+        if self.directory is not None:
+            try:
+                self.directory.release(ruleset, session_id)
+            except Exception:  # the record is cleaned when this process's member record goes
+                log.warning("could not release the record of session %s/%s", ruleset, session_id, exc_info=True)
+
+    # ------------------------------------------------------------------ deploys
+
+    def on_engine_event(self, kind: str, payload: dict[str, Any]) -> None:
+        """Engine listener: a new version of a rule set is live here (deploy, rollback, a sync
+        from another process): move the sessions that follow it."""
+        if kind in ("deploy", "rollback", "sync"):
+            self.follow(str(payload.get("name")))
+
+    def follow(self, ruleset: str) -> dict[str, str]:
+        """Moves every ``follow`` session of ``ruleset`` to the live version; ``{id: outcome}``."""
+        report: dict[str, str] = {}
+        sessions = [s for s in self.list(ruleset) if s.on_deploy == "follow"]
+        if not sessions:
+            return report
+        try:
+            target = self.engine.live_compiled(ruleset)
+        except EngineError:
+            return report
+        info, compiled = target
+        for session in sessions:
+            if session.version == info.version:
+                continue
+            try:
+                unchanged = self.engine.unchanged_rules(ruleset, session.version, info.version)
+                java = self.engine.new_java_session(compiled, session.clock, session.kind, session.record_facts)
+                moved = session.move_to(compiled, info.version, unchanged, java)
+            except Exception as exc:  # a move that fails leaves the session where it was
+                log.exception("session %s of %s could not move to version %d", session.id, ruleset, info.version)
+                session._stay(info.version, str(exc))
+                moved = False
+            report[session.id] = f"moved to v{info.version}" if moved else (session.pinned_reason or "stayed")
+            (log.info if moved else log.warning)("session %s of %s: %s", session.id, ruleset, report[session.id])
+        return report
+
+    # ------------------------------------------------------------------ idle sessions
+
+    def _ensure_reaper(self) -> None:
+        if self._reaper is not None or self.settings.idle_ttl_s <= 0:
+            return
+        with self._lock:
+            if self._reaper is None:
+                self._reaper = threading.Thread(target=self._reap_loop, name="session-reaper", daemon=True)
+                self._reaper.start()
+
+    def _reap_loop(self) -> None:
+        interval = max(0.05, min(self.settings.reap_interval_s, self.settings.idle_ttl_s / 2))
+        while not self._stop.wait(interval):
+            try:
+                self.reap()
+            except Exception:
+                log.exception("reaping idle sessions failed")
+
+    def reap(self) -> list[str]:
+        """Disposes conversation sessions idle longer than ``sessions.idle_ttl_s``."""
+        ttl = self.settings.idle_ttl_s
+        gone = []
+        for session in self.list():
+            if ttl > 0 and session.kind in CONVERSATION_KINDS and session.idle_s > ttl:
+                log.info("session %s of %s idle for %.0f s: disposed", session.id, session.ruleset, session.idle_s)
+                session.close()
+                gone.append(session.id)
+        return gone
+
+
+_RULE = re.compile(r"""^[ \t]*rule\s+("(?:[^"\\]|\\.)*"|'[^']*'|\S+)(.*?)^[ \t]*end\b""", re.MULTILINE | re.DOTALL)
+_COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.DOTALL)
+
+
+def rule_fingerprints(drl_texts: list[str]) -> dict[str, str]:
+    """Rule name -> its text with comments and spacing normalised (to tell unchanged rules)."""
+    import hashlib
+
+    out: dict[str, str] = {}
+    for text in drl_texts:
+        for match in _RULE.finditer(_COMMENT.sub(" ", text)):
+            name = match.group(1).strip("\"'")
+            out[name] = hashlib.sha256(" ".join(match.group(0).split()).encode()).hexdigest()
+    return out
+
+
+__all__ = ["CommandFailed", "Directory", "SessionElsewhere", "SessionGone", "SessionLimit", "SessionManager",
+           "SessionNotFound", "rule_fingerprints"]

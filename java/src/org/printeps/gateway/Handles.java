@@ -1,0 +1,132 @@
+package org.printeps.gateway;
+
+import java.util.HashMap;
+import java.util.HashSet;
+import java.util.Map;
+import java.util.Set;
+
+import org.drools.core.common.InternalFactHandle;
+import org.kie.api.event.rule.ObjectDeletedEvent;
+import org.kie.api.event.rule.ObjectInsertedEvent;
+import org.kie.api.event.rule.ObjectUpdatedEvent;
+import org.kie.api.event.rule.RuleRuntimeEventListener;
+import org.kie.api.runtime.KieSession;
+import org.kie.api.runtime.rule.EntryPoint;
+import org.kie.api.runtime.rule.FactHandle;
+
+/**
+ * The fact handles of one session in KIE's external form
+ * ({@code 0:id:identityHashCode:objectHashCode:recency:entryPoint:traitType:className}), and their
+ * way back from that text to the live handle.
+ *
+ * Why a registry of our own: a client holds the text of a handle across calls (KIE Server returns
+ * it from {@code insert}); Drools resolves such a handle by its id alone, so a handle of a
+ * disposed session silently hits whatever fact now has that id. Here a handle resolves only when
+ * its id is live in this session and its identity hash is one the fact has had (an update swaps
+ * the object, and with it the hash), so stale handles are reported, not misapplied. After a
+ * session moved to a new rule set version (see {@link Session#moveFrom}) the handles clients hold
+ * from before are kept as aliases of the facts' new handles.
+ */
+final class Handles implements RuleRuntimeEventListener {
+
+    /** A live handle and every identity hash its object has had (the text clients may hold). */
+    static final class Entry {
+        final FactHandle handle;
+        final Set<Integer> hashes = new HashSet<Integer>(2);
+        Entry(FactHandle handle) {
+            this.handle = handle;
+            hashes.add(((InternalFactHandle) handle).getIdentityHashCode());
+        }
+    }
+
+    private final Map<Long, Entry> byId = new HashMap<Long, Entry>();
+    /** "id:identityHash" of a handle from before a move -> the entry of its fact now. */
+    private final Map<String, Entry> aliases = new HashMap<String, Entry>();
+    /** Facts that came across in a move and were not changed since (see Refraction). */
+    private Set<Object> unchangedSinceMove;
+
+    void setUnchangedSinceMove(Set<Object> objects) { this.unchangedSinceMove = objects; }
+
+    @Override
+    public void objectInserted(ObjectInsertedEvent event) {
+        FactHandle h = event.getFactHandle();
+        byId.put(((InternalFactHandle) h).getId(), new Entry(h));
+    }
+
+    @Override
+    public void objectUpdated(ObjectUpdatedEvent event) {
+        InternalFactHandle h = (InternalFactHandle) event.getFactHandle();
+        Entry e = byId.get(h.getId());
+        if (e != null) e.hashes.add(h.getIdentityHashCode());
+        if (unchangedSinceMove != null) {
+            unchangedSinceMove.remove(event.getOldObject());
+            unchangedSinceMove.remove(event.getObject());
+        }
+    }
+
+    @Override
+    public void objectDeleted(ObjectDeletedEvent event) {
+        InternalFactHandle h = (InternalFactHandle) event.getFactHandle();
+        Entry e = byId.remove(h.getId());
+        if (e != null) aliases.values().removeIf(x -> x == e);
+        if (unchangedSinceMove != null) unchangedSinceMove.remove(event.getOldObject());
+    }
+
+    /** Registers a handle from before a move as an alias of the fact's handle now. */
+    void alias(long oldId, int oldHash, FactHandle now) {
+        Entry e = byId.get(((InternalFactHandle) now).getId());
+        if (e != null) aliases.put(oldId + ":" + oldHash, e);
+    }
+
+    /** The aliases this registry resolves (old "id:hash" -> live handle), to carry into a next move. */
+    Map<String, FactHandle> aliasHandles() {
+        Map<String, FactHandle> out = new HashMap<String, FactHandle>();
+        for (Map.Entry<String, Entry> a : aliases.entrySet()) out.put(a.getKey(), a.getValue().handle);
+        return out;
+    }
+
+    /** Thrown when a handle's text does not name a live fact of this session. */
+    static final class Stale extends Exception {
+        Stale(String message) { super(message); }
+    }
+
+    /** The live handle that {@code text} names, or {@link Stale} saying why there is none. */
+    FactHandle resolve(String text) throws Stale {
+        String[] parts = text == null ? new String[0] : text.trim().split(":");
+        long id;
+        Integer hash = null;
+        try {
+            if (parts.length < 2) throw new NumberFormatException();
+            id = Long.parseLong(parts[1]);
+            if (parts.length > 2 && !parts[2].isEmpty()) hash = Integer.valueOf(parts[2]);
+        } catch (NumberFormatException e) {
+            throw new Stale("'" + text + "' is not a fact handle (KIE's external form is "
+                    + "0:id:identityHashCode:objectHashCode:recency:entryPoint:traitType:className)");
+        }
+        if (hash != null) {
+            Entry alias = aliases.get(id + ":" + hash);
+            if (alias != null) return alias.handle;
+        }
+        Entry e = byId.get(id);
+        if (e == null) {
+            throw new Stale("fact handle " + text + " is not in this session (retracted, or from a session that was disposed)");
+        }
+        if (hash != null && !e.hashes.contains(hash)) {
+            throw new Stale("fact handle " + text + " does not belong to this session (a handle of a disposed "
+                    + "session, or of another one: this session's fact " + id + " is " + external(e.handle) + ")");
+        }
+        return e.handle;
+    }
+
+    static String external(FactHandle h) {
+        return ((InternalFactHandle) h).toExternalForm();
+    }
+
+    /** Every live handle of the session, in id order, over all its entry points. */
+    static java.util.List<FactHandle> all(KieSession session) {
+        java.util.List<FactHandle> out = new java.util.ArrayList<FactHandle>();
+        for (EntryPoint ep : session.getEntryPoints()) out.addAll(ep.getFactHandles());
+        out.sort((a, b) -> Long.compare(((InternalFactHandle) a).getId(), ((InternalFactHandle) b).getId()));
+        return out;
+    }
+}
