@@ -65,6 +65,8 @@ class Gateway:
     ros: Any = None
     follower: ChangeFollower | None = None
     app: Any = None
+    members: Any = None  # gateway.store.members.Membership: where other processes reach this one
+
     name: str = field(default_factory=process_name)
     _closers: list[tuple[str, Callable[[], None]]] = field(default_factory=list, repr=False)
 
@@ -78,6 +80,12 @@ class Gateway:
             "knowledge": {"status": "ok" if not self.knowledge.error else "degraded", "error": self.knowledge.error},
         }
         return report
+
+    def announce(self, url: str) -> None:
+        """Serving at ``url`` (``sessions.advertise_url`` wins): other processes forward calls for
+        the sessions this one holds there (see gateway.api.forwarding)."""
+        if self.members is not None:
+            self.members.register(self.settings.sessions.advertise_url or url)
 
     def close(self) -> None:
         """Stop everything this gateway started, last started first; each step is best effort."""
@@ -133,6 +141,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
     catalog: Catalog
     decisions = None
+    members = None
     if use_store:
         from gateway.store import open_store
         from gateway.store.catalog import MongoCatalog
@@ -146,6 +155,10 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                                poll_interval_s=settings.sync.poll_interval_s)
         closers.append(("the catalog", catalog.close))
         decisions = DecisionRecord(store, enabled=settings.store.record_fires, max_facts=settings.store.decision_facts_max)
+        from gateway.store.members import Membership
+
+        members = Membership(store.db, name, heartbeat_s=settings.sessions.member_heartbeat_s)
+        closers.append(("the member record", members.close))
     else:
         catalog = MemoryCatalog(name)
     start_seq = catalog.last_seq()  # follow from here: nothing changed after loading is missed
@@ -153,7 +166,12 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     engine = Engine(settings, catalog)
     if decisions is not None:
         engine.add_listener(decisions.on_engine_event)
-    closers.append(("the rules engine's sessions", lambda: [engine.close_session(s.id) for s in engine.sessions()]))
+    if members is not None:  # sessions are recorded with their owner, so other processes can forward to it
+        from gateway.store.session_records import SessionDirectory
+
+        engine.session_manager.directory = SessionDirectory(store.db, name, members)
+        closers.append(("the session records", engine.session_manager.directory.release_all))
+    closers.append(("the rules engine's sessions", engine.session_manager.close_all))
 
     cfg = settings.streams
     knowledge = KnowledgeBase(catalog)
@@ -205,7 +223,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     gateway = Gateway(settings=settings, catalog=catalog, engine=engine, knowledge=knowledge, mapper=mapper,
                       mappings=mappings, streams=streams, queries=queries, robots=robots, workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
-                      _closers=closers)
+                      members=members, _closers=closers)
     if rest:
         from gateway.api.main import create_app
 

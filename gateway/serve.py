@@ -30,12 +30,25 @@ log = logging.getLogger(__name__)
 RESTART_BACKOFF_S = (0.5, 1.0, 2.0, 5.0, 10.0)
 
 
-def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | None = None) -> None:
-    """Serve ``gateway.app`` with uvicorn until SIGINT/SIGTERM (the caller closes the gateway)."""
+def local_url(host: str, port: int) -> str:
+    """The URL a process on this host reaches a server bound to ``host:port`` at."""
+    if host in ("", "0.0.0.0", "::"):
+        host = "127.0.0.1"
+    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+
+
+def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | None = None,
+          announce: str | None = None) -> None:
+    """Serve ``gateway.app`` with uvicorn until SIGINT/SIGTERM (the caller closes the gateway).
+
+    The process announces where other gateway processes reach it (``announce``, else
+    ``host:port``; ``sessions.advertise_url`` wins): calls for the sessions it holds are
+    forwarded there."""
     import gc
 
     import uvicorn
 
+    gateway.announce(announce or local_url(host, port))
     gc.collect()
     gc.freeze()  # start-up objects (JPype, FastAPI, Drools proxies) leave the GC's scans: shorter pauses
     # uvicorn shuts down gracefully on SIGTERM, then raises the signal again for the handler it
@@ -58,6 +71,9 @@ def serve_in_thread(app: Any, port: int, name: str = "uvicorn", timeout_s: float
     import uvicorn
 
     server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off"))
+    gateway = getattr(app.state, "gateway", None)
+    if gateway is not None:
+        gateway.announce(local_url(host, port))
     thread = threading.Thread(target=server.run, name=name, daemon=True)
     thread.start()
     deadline = time.monotonic() + timeout_s
@@ -204,8 +220,15 @@ def worker_main(argv: list[str] | None = None) -> int:
     settings = load_settings(args.config)
     gateway = build_gateway(settings, ros=args.ros)
     sock = listening_socket(args.host, args.port)  # after the build: a worker takes connections once it serves
+    # A private loopback port of this worker alone: calls forwarded to the sessions it holds must
+    # not land on the shared port, which may hand them to another worker.
+    private = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    private.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    private.bind(("127.0.0.1", 0))
+    private.listen(256)
     try:
-        serve(gateway, args.host, args.port, sockets=[sock])
+        serve(gateway, args.host, args.port, sockets=[sock, private],
+              announce=local_url("127.0.0.1", private.getsockname()[1]))
     finally:
         gateway.close()
     return 0

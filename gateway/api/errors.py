@@ -35,6 +35,8 @@ from gateway.engine import (
     VersionNotFound,
 )
 from gateway.engine.errors import ScenariosFailed
+from gateway.engine.session import CommandFailed
+from gateway.engine.sessions import SessionGone, SessionLimit, SessionNotFound, SessionRefused
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +64,16 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
     if isinstance(exc, VersionConflict):
         body["error"] = "base version changed"
         return 409, body
-    if isinstance(exc, (RuleSetNotFound, VersionNotFound)):
+    if isinstance(exc, (RuleSetNotFound, VersionNotFound, SessionNotFound)):
         return 404, body
+    if isinstance(exc, SessionLimit) or (isinstance(exc, CommandFailed) and exc.kind == "limit"):
+        return 429, body
+    if isinstance(exc, SessionGone):
+        return 410, body
+    if isinstance(exc, SessionRefused):
+        return (409 if exc.conflict else 422), body
+    if isinstance(exc, CommandFailed):
+        return 422, body
     if isinstance(exc, (CompileFailed, InvalidRuleSet, FactError, RunawayRules, RuleRuntimeError, ScenariosFailed)):
         return 422, body
     return 500, body

@@ -49,6 +49,16 @@ class SessionNotFound(EngineError):
     kind = "session"
 
 
+class SessionRefused(EngineError):
+    """A session cannot be opened as asked (a bad id, a stateless ksession, one already open)."""
+
+    kind = "session"
+
+    def __init__(self, message: str, conflict: bool = False) -> None:
+        super().__init__(message)
+        self.conflict = conflict
+
+
 class SessionLimit(EngineError):
     """A limit on sessions per rule set or facts per session would be exceeded."""
 
@@ -131,14 +141,14 @@ class SessionManager:
         declared: SessionDeclaration | None = None
         if session_id is not None:
             if not ID_PATTERN.match(session_id):
-                raise EngineError(f"invalid session id {session_id!r}: 1-128 letters, digits, '_', '.', ':' or '-'")
+                raise SessionRefused(f"invalid session id {session_id!r}: 1-128 letters, digits, '_', '.', ':' or '-'")
             declared = self.declarations(ruleset).get(session_id)
             if declared is not None and not declared.stateful:
-                raise EngineError(f"session '{session_id}' of {ruleset} is declared stateless: it keeps nothing to open")
+                raise SessionRefused(f"session '{session_id}' of {ruleset} is declared stateless: it keeps nothing to open")
         key = (ruleset, session_id or "")
         with self._lock:
             if session_id is not None and key in self._sessions:
-                raise EngineError(f"session '{session_id}' of {ruleset} is already open")
+                raise SessionRefused(f"session '{session_id}' of {ruleset} is already open", conflict=True)
             if kind in CONVERSATION_KINDS:
                 self._check_session_limit(ruleset)
         sid = session_id or self._new_id()
@@ -334,4 +344,4 @@ def rule_fingerprints(drl_texts: list[str]) -> dict[str, str]:
 
 
 __all__ = ["CommandFailed", "Directory", "SessionElsewhere", "SessionGone", "SessionLimit", "SessionManager",
-           "SessionNotFound", "rule_fingerprints"]
+           "SessionNotFound", "SessionRefused", "rule_fingerprints"]

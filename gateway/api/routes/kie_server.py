@@ -1,404 +1,399 @@
-"""KIE Server 7.x compatible endpoints, so existing KIE Server clients work unchanged.
+"""KIE Server 7.x compatible endpoints: a KIE client switches to this gateway by changing its URL.
 
-``/kie-server/services/rest/server`` (server info), ``…/containers`` (rule sets as containers, the
-container id is the rule set name), ``…/containers/{id}`` and ``POST …/containers/instances/{id}``
-with a batch of commands. Answers use KIE Server's ``ServiceResponse`` JSON:
-``{"type": "SUCCESS"|"FAILURE", "msg": "...", "result": ...}``. Like KIE Server, a command batch
-that cannot be executed (unknown container, bad facts, unsupported command) is answered with HTTP
-200 and ``type: FAILURE`` plus a message naming the problem; only a body that is not JSON at all
-gets a 4xx.
+``/kie-server/services/rest/server``: server info, ``readycheck``, ``healthcheck``; containers
+(a rule set is a container: id = rule set name) — list, get, ``PUT`` with a release id, ``DELETE``,
+``GET``/``POST …/release-id`` to move to another version (a number or ``LATEST``); and
+``POST …/containers/instances/{id}`` with a batch of commands (:mod:`gateway.api.kie.batch`).
 
-Translation (plain functions, testable without HTTP): an inserted ``{"org.pkg.Customer": {...}}``
-becomes the engine fact ``{"type": "Customer", ...}``; facts going back out get the package they
-came in with, else the package the rule set declares them in. Then-part actions are returned as an extra result
-with key ``actions``; the serving version is in the ``X-Ruleset-Version`` header.
+A batch runs on the session its ``lookup`` names (:mod:`gateway.engine.sessions`): a declared
+stateful ksession (``defaultKieSession`` unless the rule set's ``kmodule.xml`` says otherwise)
+is one live session whose facts persist across calls; a stateless one, or no lookup (see
+``sessions.no_lookup``), runs in a fresh session. Every batch that fires is a decision.
+
+Every answer is KIE's ``ServiceResponse`` JSON ``{"type": "SUCCESS"|"FAILURE", "msg", "result"}``,
+errors included. Statuses: where KIE Server answers a FAILURE with 200 (get container, release id)
+so does the gateway, since KIE clients branch on ``type`` there; where KIE answers an error status
+(a failed batch: 500; a failed ``PUT``: 400) the gateway answers the 4xx that names the kind of
+problem — 400 unreadable body, 404 unknown container or session, 415 XML, 422 a command refused or
+the rules failed, 429 a limit — and 410/503 for a session whose owner process is gone/unreachable.
 """
 
 from __future__ import annotations
 
-import itertools
 import time
-from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 from fastapi import APIRouter, Depends, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import Response
+from fastapi.routing import APIRoute
 
-from gateway.api.auth import Principal, kie_caller
+from gateway.api.auth import Principal, kie_caller, require_kie
 from gateway.api.deps import correlation_id
-from gateway.api.jsonio import JSON, read_json, run_blocking
-from gateway.engine import EngineError, FireResult, RuleSetNotFound
+from gateway.api.errors import ApiError
+from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
+from gateway.api.jsonio import JSON, BadBody, parse_json, run_blocking
+from gateway.api.kie.batch import Batch, BatchError, Marshal, execution_results, parse_batch
+from gateway.api.kie.containers import (
+    LATEST, ReleaseIdError, container_resource, conversation_id, external_release_id, parse_release_id, release_id,
+    server_info, service_response,
+)
+from gateway.engine import EngineError, FireResult, RuleSetNotFound, VersionNotFound
+from gateway.engine.session import CommandFailed
+from gateway.engine.sessions import SessionElsewhere, SessionGone, SessionLimit, SessionNotFound
 
 PREFIX = "/kie-server/services/rest/server"
-KIE_VERSION = "7.74.1.Final"  # the KIE Server API level these answers follow
-CAPABILITIES = ["KieServer", "BRM"]
-GROUP_ID = "org.printeps.rules"
-FACT_HANDLE = "org.drools.core.common.DefaultFactHandle"
-SUPPORTED = ("insert", "insert-elements", "fire-all-rules", "get-objects", "set-global", "get-global",
-             "query", "dispose")
-
-router = APIRouter(prefix=PREFIX, tags=["KIE Server compatible"])
-_handle_ids = itertools.count(1)
+KIND = "ruleset"
+kie_author = require_kie("author")
 
 
-class BatchError(Exception):
-    """The batch cannot be executed; the message goes into a FAILURE response."""
+def failure(status: int, msg: str, headers: dict[str, str] | None = None) -> JSON:
+    return JSON(service_response(False, msg), status_code=status, headers=headers)
 
 
-def service_response(ok: bool, msg: str, result: Any = None) -> dict[str, Any]:
-    return {"type": "SUCCESS" if ok else "FAILURE", "msg": msg, "result": result}
+class KieRoute(APIRoute):
+    """Every error under the KIE prefix answers as a KIE ``FAILURE`` body (auth, validation,
+    bad bodies and faults included), with the status the module docstring describes."""
+
+    def get_route_handler(self) -> Callable[[Request], Any]:
+        handler = super().get_route_handler()
+
+        async def route(request: Request) -> Response:
+            try:
+                return await handler(request)
+            except ApiError as exc:
+                return failure(exc.status, exc.message, exc.headers)
+            except BadBody as exc:
+                return failure(exc.status, exc.message)
+            except RequestValidationError as exc:
+                return failure(422, f"invalid request: {exc.errors()}")
+            except Exception as exc:  # noqa: BLE001 - a fault still answers in KIE's shape
+                metrics = getattr(request.app.state, "metrics", None)
+                if metrics is not None:
+                    metrics.errors.labels("internal").inc()
+                import logging
+
+                logging.getLogger(__name__).exception("KIE endpoint %s failed", request.url.path)
+                return failure(500, f"Unexpected error during processing: {type(exc).__name__}: {exc}")
+
+        return route
 
 
-def release_id(name: str, version: int) -> dict[str, str]:
-    return {"group-id": GROUP_ID, "artifact-id": name, "version": str(version)}
+router = APIRouter(prefix=PREFIX, tags=["KIE Server compatible"], route_class=KieRoute)
 
 
-def container_resource(info: Any) -> dict[str, Any]:
-    """A rule set version as a ``kie-container`` resource."""
-    rid = release_id(info.name, info.version)
-    return {
-        "container-id": info.name,
-        "release-id": rid,
-        "resolved-release-id": dict(rid),
-        "status": "STARTED",
-        "scanner": {"status": "DISPOSED", "poll-interval": None},
-        "config-items": [],
-        "messages": [
-            {
-                "severity": "INFO",
-                "timestamp": {"java.util.Date": _epoch_ms(info.deployed_at)},
-                "content": [f"Container {info.name} version {info.version} deployed by {info.author}"],
-            }
-        ],
-        "container-alias": info.name,
-    }
+def check_content_type(request: Request) -> None:
+    """JSON only: an XSTREAM/JAXB (XML) client is told so with a 415."""
+    kie_type = request.headers.get("x-kie-contenttype", "")
+    content_type = request.headers.get("content-type", "")
+    if (kie_type and kie_type.strip().upper() != "JSON") or "xml" in content_type.lower():
+        raise BadBody(f"this KIE Server speaks JSON only (got X-KIE-ContentType {kie_type or '-'}, Content-Type "
+                      f"{content_type or '-'}): send Content-Type: application/json and X-KIE-ContentType: JSON", status=415)
 
 
-def _epoch_ms(iso: str) -> int:
-    from datetime import datetime
-
-    try:
-        return int(datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp() * 1000)
-    except (ValueError, AttributeError):
-        return 0
-
-
-def server_info(server_id: str, location: str) -> dict[str, Any]:
-    return {
-        "id": server_id,
-        "name": server_id,
-        "version": KIE_VERSION,
-        "location": location,
-        "capabilities": list(CAPABILITIES),
-        "messages": [
-            {
-                "severity": "INFO",
-                "timestamp": {"java.util.Date": int(time.time() * 1000)},
-                "content": [f"Server {server_id} (PRINTEPS gateway, KIE Server compatible) is running"],
-            }
-        ],
-        "mode": "PRODUCTION",
-    }
-
-
-# --- command batches -------------------------------------------------------------------------
-
-
-def parse_commands(body: Any) -> list[tuple[str, dict[str, Any]]]:
-    """The (name, arguments) of each command of a batch (or of a single bare command)."""
-    if not isinstance(body, dict):
-        raise BatchError("Bad request, the body must be a JSON object with 'commands'")
-    if "commands" in body:
-        raw = body["commands"]
-    elif len(body) == 1 and next(iter(body)) in SUPPORTED:
-        raw = [body]  # KIE Server also accepts one command without a batch around it
-    else:
-        raise BatchError("Bad request, no commands to be executed - either wrong format or no data")
-    if not isinstance(raw, list) or not raw:
-        raise BatchError("Bad request, no commands to be executed - either wrong format or no data")
-    commands = []
-    for index, cmd in enumerate(raw):
-        if not isinstance(cmd, dict) or len(cmd) != 1:
-            raise BatchError(f"command {index}: expected an object with exactly one command name")
-        name, args = next(iter(cmd.items()))
-        if name not in SUPPORTED:
-            raise BatchError(f"command {index}: '{name}' is not supported (supported: {', '.join(SUPPORTED)})")
-        if args is None:
-            args = {}
-        if not isinstance(args, dict):
-            raise BatchError(f"command {index} ({name}): its arguments must be an object")
-        commands.append((name, args))
-    return commands
-
-
-def fact_from_kie(obj: Any, where: str, packages: dict[str, str]) -> dict[str, Any]:
-    """``{"org.pkg.Customer": {...}}`` -> ``{"type": "Customer", ...}``; remembers the package."""
-    if not isinstance(obj, dict) or len(obj) != 1:
-        raise BatchError(f"{where}: the object must be {{\"<package>.<Type>\": {{fields}}}}")
-    fqcn, fields = next(iter(obj.items()))
-    if not isinstance(fields, dict):
-        raise BatchError(f"{where}: the fields of {fqcn} must be an object")
-    if "type" in fields:
-        raise BatchError(f"{where}: the field name 'type' is reserved by the gateway")
-    package, _, simple = fqcn.rpartition(".")
-    if not simple:
-        raise BatchError(f"{where}: {fqcn!r} is not a type name")
-    if package:
-        packages[simple] = package
-    return {"type": simple, **fields}
-
-
-def fact_to_kie(fact: dict[str, Any], packages: dict[str, str], default_package: str) -> dict[str, Any]:
-    fields = {k: v for k, v in fact.items() if k != "type"}
-    simple = str(fact.get("type", "Object"))
-    return {f"{packages.get(simple, default_package)}.{simple}": fields}
-
-
-def fact_handle(fqcn: str) -> dict[str, Any]:
-    n = next(_handle_ids)
-    return {FACT_HANDLE: {"external-form": f"0:{n}:{n}:{n}:{n}:DEFAULT:NON_TRAIT:{fqcn}"}}
-
-
-@dataclass
-class BatchRun:
-    """State of one batch: what was inserted, what the session holds, what to answer."""
-
-    name: str
-    packages: dict[str, str] = field(default_factory=dict)
-    pending: list[dict[str, Any]] = field(default_factory=list)
-    inserted: list[tuple[dict[str, Any], str | None, bool]] = field(default_factory=list)
-    known_facts: list[dict[str, Any]] = field(default_factory=list)
-    results: list[dict[str, Any]] = field(default_factory=list)
-    facts_out: list[dict[str, Any]] = field(default_factory=list)
-    actions: list[Any] = field(default_factory=list)
-    fired: list[str] = field(default_factory=list)
-    fired_any: bool = False
-    version: int | None = None
-
-    @property
-    def default_package(self) -> str:
-        return next(iter(self.packages.values()), f"org.printeps.{self.name}")
-
-
-def run_batch(engine: Any, name: str, commands: list[tuple[str, dict[str, Any]]]) -> BatchRun:
-    """Execute the commands in order on one stateful session of rule set ``name``."""
-    run = BatchRun(name)
-    session = engine.open_session(name)
-    run.version = session.version
-    for simple, fqcn in engine.type_names(name).items():
-        run.packages[simple] = fqcn.rpartition(".")[0]
-    try:
-        for index, (cmd, args) in enumerate(commands):
-            where = f"command {index} ({cmd})"
-            if cmd == "insert":
-                fact = fact_from_kie(args.get("object"), where, run.packages)
-                _insert(run, session, [fact], args.get("out-identifier"), bool(args.get("return-object", True)))
-            elif cmd == "insert-elements":
-                objects = args.get("objects")
-                if not isinstance(objects, list):
-                    raise BatchError(f"{where}: 'objects' must be a list")
-                facts = [fact_from_kie(o, f"{where} object {i}", run.packages) for i, o in enumerate(objects)]
-                _insert(run, session, facts, None, False)
-                if args.get("out-identifier"):
-                    run.results.append({"key": args["out-identifier"], "value": [
-                        fact_to_kie(f, run.packages, run.default_package) for f in facts]})
-            elif cmd == "fire-all-rules":
-                _flush(run, session)
-                result = session.fire(return_facts=True)
-                _absorb(run, result)
-                if args.get("out-identifier"):
-                    run.results.append({"key": args["out-identifier"], "value": len(result.fired)})
-            elif cmd == "get-objects":
-                _flush(run, session)
-                wanted = _class_filter(args.get("class-object-filter"))
-                objs = [fact_to_kie(f, run.packages, run.default_package) for f in _current_facts(run)
-                        if wanted is None or f.get("type") == wanted]
-                run.results.append({"key": args.get("out-identifier") or "objects", "value": objs})
-            elif cmd == "set-global":
-                _flush(run, session)
-                identifier = _required(args, "identifier", where)
-                _engine_call(where, session.set_global, identifier, _unwrap_object(args.get("object")))
-                if args.get("out-identifier"):
-                    run.results.append({"key": args["out-identifier"], "value": args.get("object")})
-            elif cmd == "get-global":
-                identifier = _required(args, "identifier", where)
-                value = _engine_call(where, session.get_global, identifier)
-                run.results.append({"key": args.get("out-identifier") or identifier, "value": value})
-            elif cmd == "query":
-                _flush(run, session)
-                query_name = _required(args, "name", where)
-                arguments = args.get("arguments") or []
-                if not isinstance(arguments, list):
-                    raise BatchError(f"{where}: 'arguments' must be a list")
-                answer = _engine_call(where, session.query, query_name, arguments)
-                run.results.append({"key": args.get("out-identifier") or query_name,
-                                    "value": flat_query_results(answer, run.packages, run.default_package)})
-            elif cmd == "dispose":
-                pass
-        _flush(run, session)
-    finally:
-        engine.close_session(session.id)
-    _returned_objects(run)
-    return run
-
-
-def _required(args: dict[str, Any], key: str, where: str) -> str:
-    value = args.get(key)
-    if not isinstance(value, str) or not value:
-        raise BatchError(f"{where}: '{key}' is required")
-    return value
-
-
-def _engine_call(where: str, fn: Any, *args: Any) -> Any:
-    from gateway.engine import EngineError
-
-    try:
-        return fn(*args)
-    except EngineError as exc:
-        raise BatchError(f"{where}: {exc}") from None
-
-
-def _unwrap_object(value: Any) -> Any:
-    """KIE clients send typed values, ``{"java.lang.Integer": 18}``; plain JSON works too."""
-    if isinstance(value, dict) and len(value) == 1:
-        key = next(iter(value))
-        if "." in key:
-            return value[key]
-    return value
-
-
-def flat_query_results(answer: dict[str, Any], packages: dict[str, str], default_package: str) -> dict[str, Any]:
-    """A query answer in KIE Server's marshalled ``FlatQueryResults`` shape."""
-    def value(v: Any) -> Any:
-        return fact_to_kie(v, packages, default_package) if isinstance(v, dict) and "type" in v else v
-
-    rows = [{"element": [{"key": k, "value": value(v)} for k, v in row.items()]} for row in answer["rows"]]
-    return {"org.drools.core.runtime.rule.impl.FlatQueryResults": {
-        "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": []},
-        "idResultMaps": {"type": "LIST", "componentType": None, "element": rows},
-        "identifiers": {"type": "SET", "componentType": None, "element": answer["identifiers"]},
-    }}
-
-
-def _insert(run: BatchRun, session: Any, facts: list[dict[str, Any]], out_id: str | None, ret: bool) -> None:
-    run.pending.extend(facts)
-    for fact in facts:
-        run.inserted.append((fact, out_id, ret))
-
-
-def _flush(run: BatchRun, session: Any) -> None:
-    if run.pending:
-        session.insert(run.pending)
-        run.known_facts.extend(run.pending)
-        run.pending = []
-
-
-def _absorb(run: BatchRun, result: Any) -> None:
-    run.fired_any = True
-    run.version = result.version
-    run.actions.extend(result.actions)
-    run.fired.extend(f.get("rule", "?") for f in result.fired)
-    run.known_facts = list(result.facts)
-
-
-def _current_facts(run: BatchRun) -> list[dict[str, Any]]:
-    return run.known_facts
-
-
-def _class_filter(value: Any) -> str | None:
-    if isinstance(value, dict):
-        value = value.get("string")
-    if not isinstance(value, str) or value in ("java.lang.Object", ""):
+async def read_body(request: Request, *, required: bool = True) -> Any:
+    check_content_type(request)
+    raw = await request.body()
+    if not raw.strip() and not required:
         return None
-    return value.rpartition(".")[2]
+    try:
+        return parse_json(raw, request.app.state.settings.api.max_json_depth)
+    except BadBody as bad:
+        where = f" (line {bad.extra['line']}, column {bad.extra['column']})" if "line" in bad.extra else ""
+        raise BadBody(f"Bad request: {bad.message}{where}", status=bad.status) from None
 
 
-def _returned_objects(run: BatchRun) -> None:
-    """Inserted objects with an out-identifier: their final state (results) and a fact handle (facts)."""
-    by_key = {(f.get("type"), f.get("id")): f for f in run.known_facts if f.get("id") is not None}
-    for fact, out_id, ret in run.inserted:
-        if not out_id:
-            continue
-        final = by_key.get((fact.get("type"), fact.get("id")), fact) if fact.get("id") is not None else fact
-        kie = fact_to_kie(final, run.packages, run.default_package)
-        if ret:
-            run.results.append({"key": out_id, "value": kie})
-        run.facts_out.append({"key": out_id, "value": fact_handle(next(iter(kie)))})
+def _engine(request: Request) -> Any:
+    return request.app.state.gateway.engine
 
 
-# --- routes ----------------------------------------------------------------------------------
+# --- server ---------------------------------------------------------------------------------------
 
 
 @router.get("")
 def get_server_info(request: Request, _: Principal = Depends(kie_caller)) -> JSON:
     """KIE Server info (``kie-server-info``: id, version, capabilities)."""
+    check_content_type(request)
     settings = request.app.state.settings.api
     location = str(request.base_url).rstrip("/") + PREFIX
     return JSON(service_response(True, "Kie Server info", {"kie-server-info": server_info(settings.server_id, location)}))
 
 
+@router.get("/readycheck")
+def readycheck(request: Request) -> Response:
+    """200 once the gateway serves (every current rule set compiled, as at start); 503 before."""
+    health = request.app.state.gateway.health()
+    ok = health["engine"]["status"] == "ok"
+    return Response("" if ok else "not ready", status_code=200 if ok else 503, media_type="text/plain")
+
+
+@router.get("/healthcheck")
+def healthcheck(request: Request, report: bool = False) -> Response:
+    """200 when every part of this gateway works (engine, Information State…), else 503;
+    ``?report=true`` lists KIE ``Message``s per part."""
+    health = request.app.state.gateway.health()
+    messages = []
+    failed = False
+    for part, state in health.items():
+        status = state.get("status", "ok")
+        bad = status in ("down", "degraded") if part in ("engine", "store") else status == "down"
+        failed = failed or bad
+        messages.append({"severity": "ERROR" if bad else ("WARN" if status == "degraded" else "INFO"),
+                         "timestamp": {"java.util.Date": int(time.time() * 1000)},
+                         "content": [f"{part}: {status}" + (f" ({state['error']})" if state.get("error") else "")]})
+    status_code = 503 if failed else 200
+    if report:
+        return JSON(messages, status_code=status_code)
+    return Response("", status_code=status_code, media_type="text/plain")
+
+
+# --- containers -----------------------------------------------------------------------------------
+
+
+def _sessions_of(engine: Any, name: str) -> list[dict[str, Any]] | None:
+    try:
+        return engine.declared_sessions(name).to_list()
+    except EngineError:
+        return None
+
+
 @router.get("/containers")
-def list_containers(request: Request, _: Principal = Depends(kie_caller)) -> JSON:
-    """Every rule set as a ``kie-container`` (status STARTED)."""
-    infos = request.app.state.engine.list_rulesets()
-    return JSON(service_response(True, "List of created containers",
-                                 {"kie-containers": {"kie-container": [container_resource(i) for i in infos]}}))
+def list_containers(request: Request, groupId: str | None = None, artifactId: str | None = None,  # noqa: N803 - KIE's names
+                    version: str | None = None, status: str | None = None, _: Principal = Depends(kie_caller)) -> JSON:
+    """Every rule set as a ``kie-container`` (status STARTED), filtered like KIE Server."""
+    check_content_type(request)
+    engine = _engine(request)
+    out = []
+    for info in engine.list_rulesets():
+        rid = release_id(info.name, info.version)
+        if (groupId and groupId != rid["group-id"]) or (artifactId and artifactId != info.name) \
+                or (version and version != rid["version"]) or (status and "STARTED" not in status.upper().split(",")):
+            continue
+        out.append(container_resource(info, sessions=_sessions_of(engine, info.name)))
+    return JSON(service_response(True, "List of created containers", {"kie-containers": {"kie-container": out}}))
 
 
 @router.get("/containers/{container_id}")
 def get_container(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> JSON:
-    """One rule set as a ``kie-container``; FAILURE if there is none of that name."""
+    """One rule set as a ``kie-container``; FAILURE (200, as KIE) if none is served by that name."""
+    check_content_type(request)
+    engine = _engine(request)
     try:
-        info = request.app.state.engine.current(container_id).info
-    except RuleSetNotFound:
+        info = engine.current(container_id).info
+    except EngineError:
         return JSON(service_response(False, f"Container {container_id} is not instantiated."))
-    return JSON(service_response(True, f"Info for container {container_id}", {"kie-container": container_resource(info)}))
+    return JSON(service_response(True, f"Info for container {container_id}",
+                                 {"kie-container": container_resource(info, sessions=_sessions_of(engine, container_id))}))
 
+
+def _version_for(engine: Any, name: str, wanted: str | int) -> int:
+    if wanted == LATEST:
+        return max(i.version for i in engine.versions(name))
+    engine.version(name, int(wanted))  # VersionNotFound
+    return int(wanted)
+
+
+@router.put("/containers/{container_id}", status_code=201)
+async def create_container(container_id: str, request: Request, who: Principal = Depends(kie_author)) -> JSON:
+    """Serve a stored version of rule set ``container_id`` (``release-id.version``: a number or
+    LATEST): 201; FAILURE 400 if it is served already, or there is no such rule set or version."""
+    body = await read_body(request)
+    engine = _engine(request)
+    try:
+        wanted = parse_release_id(body.get("release-id") if isinstance(body, dict) else body, container_id)
+    except ReleaseIdError as exc:
+        return failure(400, f"Failed to create container {container_id}: {exc}")
+    if isinstance(body, dict) and body.get("container-id") not in (None, container_id):
+        return failure(400, f"Failed to create container {container_id}: the body's container-id "
+                            f"{body.get('container-id')!r} is not the one in the URL")
+
+    def work() -> JSON:
+        head = engine.catalog.head(KIND, container_id)
+        if head is None:
+            return failure(400, f"Failed to create container {container_id} with module "
+                                f"{external_release_id(container_id, wanted)}: no rule set named {container_id} is stored; "
+                                f"deploy its files first (PUT /api/rulesets/{container_id})")
+        if head.live:
+            current = engine.current(container_id).info
+            return JSON(service_response(False, f"Container {container_id} already exists.",
+                                         {"kie-container": container_resource(current)}), status_code=400)
+        try:
+            target = _version_for(engine, container_id, wanted)
+        except (VersionNotFound, RuleSetNotFound):
+            return failure(400, f"Failed to create container {container_id} with module "
+                                f"{external_release_id(container_id, wanted)}: no such version is stored")
+        info = engine.rollback(container_id, target, author=who.name, comment=f"KIE: container created with version {target}")
+        return JSON(service_response(True, f"Container {container_id} successfully deployed with module "
+                                           f"{external_release_id(container_id, info.version)}.",
+                                     {"kie-container": container_resource(info, sessions=_sessions_of(engine, container_id))}),
+                    status_code=201)
+
+    return await run_blocking(work)
+
+
+@router.delete("/containers/{container_id}")
+def dispose_container(container_id: str, request: Request, who: Principal = Depends(kie_author)) -> JSON:
+    """Stop serving the rule set and dispose its sessions (in every process); its versions and
+    history stay, so ``PUT`` can bring it back."""
+    check_content_type(request)
+    try:
+        _engine(request).delete(container_id, author=who.name)
+    except EngineError:
+        return JSON(service_response(True, f"Container {container_id} was not instantiated."))
+    return JSON(service_response(True, f"Container {container_id} successfully disposed."))
+
+
+@router.get("/containers/{container_id}/release-id")
+def get_release_id(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> JSON:
+    check_content_type(request)
+    try:
+        info = _engine(request).current(container_id).info
+    except EngineError:
+        return JSON(service_response(False, f"Container {container_id} is not instantiated."))
+    return JSON(service_response(True, f"ReleaseId for container {container_id}",
+                                 {"release-id": release_id(info.name, info.version)}))
+
+
+@router.post("/containers/{container_id}/release-id")
+async def update_release_id(container_id: str, request: Request, who: Principal = Depends(kie_author)) -> JSON:
+    """Move the container to another stored version (a number or LATEST). Its live sessions follow
+    as the deploy policy says (``sessions.on_deploy``)."""
+    body = await read_body(request)
+    engine = _engine(request)
+    try:
+        wanted = parse_release_id(body, container_id)
+    except ReleaseIdError as exc:
+        return JSON(service_response(False, f"Error updating release id on container {container_id}: {exc}"))
+
+    def work() -> JSON:
+        try:
+            current = engine.current(container_id).info
+        except EngineError:
+            return JSON(service_response(False, f"Container {container_id} is not instantiated."))
+        try:
+            target = _version_for(engine, container_id, wanted)
+        except (VersionNotFound, RuleSetNotFound):
+            return JSON(service_response(False, f"Error updating release id on container {container_id} to "
+                                                f"{external_release_id(container_id, wanted)}: no such version is stored",
+                                         {"release-id": release_id(container_id, current.version)}))
+        info = current
+        if target != current.version:
+            info = engine.rollback(container_id, target, author=who.name,
+                                   comment=f"KIE: release id updated to version {target}")
+        return JSON(service_response(True, "Release id successfully updated.",
+                                     {"release-id": release_id(container_id, info.version)}))
+
+    return await run_blocking(work)
+
+
+# --- command batches ------------------------------------------------------------------------------
 
 BATCH_SCHEMA: dict[str, Any] = {
     "requestBody": {
         "required": True,
-        "content": {
-            "application/json": {
-                "schema": {
-                    "type": "object",
-                    "properties": {
-                        "lookup": {"type": ["string", "null"]},
-                        "commands": {"type": "array", "items": {"type": "object"}},
-                    },
-                }
-            }
-        },
+        "content": {"application/json": {"schema": {
+            "type": "object",
+            "properties": {"lookup": {"type": ["string", "null"]}, "commands": {"type": "array", "items": {"type": "object"}}},
+        }}},
     }
 }
 
 
 @router.post("/containers/instances/{container_id}", openapi_extra=BATCH_SCHEMA)
-async def execute(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> JSON:
-    """Run a command batch (insert, insert-elements, fire-all-rules, get-objects, dispose)."""
-    body = await read_json(request)
-    metrics = request.app.state.metrics
-    engine = request.app.state.engine
+async def execute(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> Response:
+    """Run a command batch on the session its ``lookup`` names (see the module docstring)."""
+    body = await read_body(request)
+    state = request.app.state
+    engine = _engine(request)
+    metrics = state.metrics
     try:
-        commands = parse_commands(body)
-        start = time.perf_counter()
-        run = await run_blocking(run_batch, engine, container_id, commands)
+        batch = parse_batch(body)
+    except BatchError as exc:
+        return failure(400 if exc.index < 0 else 422, f"Error calling container {container_id}: {exc}")
+    start = time.perf_counter()
+    try:
+        session_id, answer = await run_blocking(_run_batch, engine, container_id, batch)
+    except SessionElsewhere as elsewhere:
+        try:
+            return await forward(request, elsewhere)
+        except SessionGone as gone:
+            return failure(410, f"Error calling container {container_id}: {gone}")
+        except OwnerUnreachable as exc:
+            return failure(503, f"Error calling container {container_id}: {exc}")
+        except Misdirected as exc:
+            return failure(421, f"Error calling container {container_id}: {exc}")
     except RuleSetNotFound:
-        return JSON(service_response(False, f"Container {container_id} is not instantiated."))
-    except (BatchError, EngineError) as exc:
+        return failure(404, f"Container {container_id} is not instantiated.")
+    except CommandFailed as exc:
         metrics.fire_failed(container_id)
         metrics.errors.labels("kie_failure").inc()
-        return JSON(service_response(False, f"Error calling container {container_id}: {exc}"))
-    metrics.observe_fire(container_id, time.perf_counter() - start, len(run.fired))
-    results = list(run.results)
-    headers = {"X-Ruleset-Version": str(run.version)} if run.version is not None else {}
-    if run.fired_any:
-        decision = FireResult(container_id, run.version or 0, run.actions, [{"rule": r} for r in run.fired],
-                              fire_count=len(run.fired))
-        decision_id = engine.record_decision(decision, [f for f, _, _ in run.inserted], origin="kie",
+        return failure(429 if exc.kind == "limit" else 422, f"Error calling container {container_id}: {_failed(batch, exc)}")
+    except SessionNotFound as exc:
+        return failure(404, str(exc))
+    except SessionLimit as exc:
+        return failure(429, f"Error calling container {container_id}: {exc}")
+    except EngineError as exc:
+        metrics.fire_failed(container_id)
+        return failure(422, f"Error calling container {container_id}: {exc}")
+    fired = answer.fired()
+    metrics.observe_fire(container_id, time.perf_counter() - start, len(fired))
+    marshal = Marshal(engine.type_names(container_id))
+    payload = execution_results(batch, answer.results, marshal)
+    headers = {"X-Ruleset-Version": str(answer.version),
+               "X-KIE-ConversationId": request.headers.get("x-kie-conversationid")
+               or conversation_id(state.settings.api.server_id, container_id, answer.version)}
+    if session_id:
+        headers["X-Session-Id"] = session_id
+    if answer.fires:
+        decision = FireResult(container_id, answer.version, answer.actions(), fired, fire_count=len(fired),
+                              duration_ms=answer.duration_ms)
+        decision_id = engine.record_decision(decision, batch.inserted_facts(), origin="kie",
                                              correlation_id=correlation_id(request),
-                                             context={"lookup": body.get("lookup") if isinstance(body, dict) else None})
-        results.append({"key": "actions", "value": run.actions})
-        results.append({"key": "decision-id", "value": decision_id})
+                                             context={"lookup": batch.lookup, "session": session_id})
+        payload["results"].append({"key": "actions", "value": answer.actions()})
+        payload["results"].append({"key": "decision-id", "value": decision_id})
         headers["X-Decision-Id"] = decision_id
-    payload = {"execution-results": {"results": results, "facts": run.facts_out}}
-    return JSON(service_response(True, f"Container {container_id} successfully called.", payload), headers=headers)
+    return JSON(service_response(True, f"Container {container_id} successfully called.", {"execution-results": payload}),
+                headers=headers)
+
+
+def _run_batch(engine: Any, container_id: str, batch: Batch) -> tuple[str | None, Any]:
+    """Runs ``batch`` on its session: the live one of a stateful lookup, or a fresh stateless one
+    (which, as KIE's stateless sessions do, fires at the end unless the batch fires itself)."""
+    engine.live_compiled(container_id)  # RuleSetNotFound before anything else
+    declared, session = engine.session_manager.lookup(container_id, batch.lookup)
+    commands = batch.commands
+    if session is not None:
+        return session.id, session.execute(commands)
+    if not batch.fires:
+        commands = commands + [{"op": "fire", "max": -1}]
+    temp = engine.new_session(container_id, declared.name, clock=declared.clock, on_deploy="pin", kind="kie",
+                              record_facts=True, on_close=None)
+    try:
+        return None, temp.execute(commands)
+    finally:
+        temp.close()
+
+
+def _failed(batch: Batch, exc: CommandFailed) -> str:
+    """The failure in KIE's terms: the KIE command's index and name, and what happened to the session."""
+    name = batch.steps[exc.index].name if 0 <= exc.index < len(batch.steps) else exc.op or "fire-all-rules"
+    index = exc.index if exc.index < len(batch.steps) else len(batch.steps)
+    outcome = ("the commands before it were applied (as in KIE Server, rules that fired are not undone)"
+               if exc.applied else "nothing was executed: the session is as it was")
+    where = f"command {index} ({name})" if exc.index >= 0 else "the batch"
+    return f"{where}: {exc.detail}; {outcome}"
+
+
+# --- anything else under the prefix -----------------------------------------------------------------
+
+
+@router.api_route("/{rest:path}", methods=["GET", "POST", "PUT", "DELETE", "PATCH"], include_in_schema=False)
+def not_supported(rest: str, request: Request) -> JSON:
+    """KIE endpoints this gateway does not offer (processes, tasks, DMN, scanners, …)."""
+    first = rest.split("/")[0]
+    what = "processes, tasks and jobs are not supported (this gateway runs rules: KIE Server's BRM capability)" \
+        if first in ("queries", "admin", "jobs") or "process" in rest or "tasks" in rest \
+        else f"{request.method} {PREFIX}/{rest} is not a KIE Server endpoint of this gateway"
+    return failure(404, f"{what}; supported: server info, readycheck, healthcheck, containers (list, get, PUT, DELETE, "
+                        "release-id) and containers/instances/{id} command batches")

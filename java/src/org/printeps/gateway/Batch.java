@@ -131,6 +131,7 @@ final class Batch {
             case "set_global": p.value = globalValue(p); break;
             case "query": p.args = queryArgs(p); break;
             case "advance":
+            case "advance_to":
                 if (!(s.clock instanceof SessionPseudoClock)) {
                     throw new Refused(p.index, p.op, "clock", "amount", "the session's clock is realtime: only a pseudo-clock "
                             + "session can be advanced (declare the ksession with clockType=\"pseudo\", or open the session with \"clock\": \"pseudo\")");
@@ -441,6 +442,14 @@ final class Batch {
             case "clear_activation_group": ks.getAgenda().getActivationGroup(String.valueOf(p.cmd.get("group"))).clear(); break;
             case "advance": {
                 ((SessionPseudoClock) s.clock).advanceTime(number(p, "ms"), TimeUnit.MILLISECONDS);
+                o.value = s.clock.getCurrentTime();
+                o.hasValue = true;
+                break;
+            }
+            case "advance_to": {  // to a timestamp; never back (an event older than the clock is simply inserted)
+                long to = number(p, "to");
+                long now = s.clock.getCurrentTime();
+                if (to > now) ((SessionPseudoClock) s.clock).advanceTime(to - now, TimeUnit.MILLISECONDS);
                 o.value = s.clock.getCurrentTime();
                 o.hasValue = true;
                 break;

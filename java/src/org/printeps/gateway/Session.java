@@ -84,6 +84,11 @@ public final class Session {
      * runaway guard. Moves' refraction applies until a fire leaves the agenda empty.
      */
     String fireForBatch(int max, int limit) {
+        if (max == 0) {  // fireAllRules(0): nothing fires
+            StringBuilder b = new StringBuilder(64);
+            recorder.writeSuccess(b, 0);
+            return b.append('}').toString();
+        }
         if (max > 0) {
             AgendaFilter filter = refraction;
             int n;
