@@ -298,9 +298,9 @@ class StatefulSession:
         version (type or field gone, value no longer allowed) keeps the session on its version
         (``pinned_reason`` says why) and changes nothing."""
         with self._lock:
-            if self.closed:
+            if self.closed or self.version == version:  # gone, or moved there already (another thread)
                 new_java.dispose()
-                return False
+                return not self.closed
             if any(not f.closed for f in self._feeds):
                 new_java.dispose()
                 self._stay(version, "an event feed is open on it")

@@ -106,6 +106,7 @@ class SessionManager:
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()
         self._creating: dict[tuple[str, str], threading.Lock] = {}
+        self._follow_lock = threading.Lock()  # a deploy and the follower's sync of it move a session once
         self._reaper: threading.Thread | None = None
         self._stop = threading.Event()
 
@@ -273,6 +274,10 @@ class SessionManager:
 
     def follow(self, ruleset: str) -> dict[str, str]:
         """Moves every ``follow`` session of ``ruleset`` to the live version; ``{id: outcome}``."""
+        with self._follow_lock:
+            return self._follow(ruleset)
+
+    def _follow(self, ruleset: str) -> dict[str, str]:
         report: dict[str, str] = {}
         sessions = [s for s in self.list(ruleset) if s.on_deploy == "follow"]
         if not sessions:

@@ -19,6 +19,7 @@ What comes back is keyed as KIE Server returns it (``results`` and ``facts`` lis
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -289,11 +290,15 @@ def fact_from_kie(obj: Any, index: int, name: str, element: int | None = None) -
     return {"type": fqcn, **{k: unwrap_nested(v) for k, v in fields.items()}}
 
 
+_CLASS_NAME = re.compile(r"^[A-Za-z_$][\w$]*(\.[A-Za-z_$][\w$]*)+$")
+
+
 def unwrap_typed(value: Any) -> Any:
-    """KIE clients send typed values, ``{"java.lang.Integer": 18}``; plain JSON works too."""
+    """KIE clients send typed values, ``{"java.lang.Integer": 18}`` or ``{"org.pkg.Person": {…}}``
+    (a global or query argument of a declared type); plain JSON works too."""
     if isinstance(value, dict) and len(value) == 1:
         key = next(iter(value))
-        if key.startswith("java.") or key.startswith("javax."):
+        if _CLASS_NAME.match(key):
             return value[key]
     return value
 
