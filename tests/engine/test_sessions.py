@@ -1,0 +1,122 @@
+"""Sessions in the core (no HTTP): kmodule.xml declarations and their errors, the deploy policy
+(a session that cannot follow stays on its version and says why; a stream-bound session follows
+like any other), refraction across a move, and a stream session resolving KIE handles."""
+
+from __future__ import annotations
+
+import pytest
+
+from gateway.engine import kmodule
+from gateway.engine.errors import CompileFailed
+from gateway.engine.session import CommandFailed
+
+TYPES = """package org.printeps.sess;
+import org.printeps.gateway.Actions;
+global Actions actions;
+declare Guest
+    id : String
+    party : int
+end
+"""
+RULES = """package org.printeps.sess;
+import org.printeps.gateway.Actions;
+global Actions actions;
+rule "Seat"
+when
+    $g : Guest( party > 0 )
+then
+    actions.say("pepper", "SEAT " + $g.getId());
+end
+rule "Count"
+when
+    Number( $n : intValue > 0 ) from accumulate( Guest(), count(1) )
+then
+    actions.call("count", "n", $n);
+end
+"""
+
+
+def files(word: str = "Seat", types: str = TYPES) -> dict[str, str]:
+    return {"types.drl": types, "rules.drl": RULES.replace("SEAT", word)}
+
+
+def test_kmodule_parsing_and_positions():
+    assert kmodule.declarations({}) is kmodule.KIE_DEFAULTS
+    parsed = kmodule.parse("""<kmodule xmlns="http://www.drools.org/xsd/kmodule">
+  <kbase name="k" packages="a.b" eventProcessingMode="stream">
+    <ksession name="s1" default="true"/>
+    <ksession name="s2" type="stateless" default="true" clockType="pseudo"/>
+  </kbase>
+</kmodule>""")
+    assert [(s.name, s.stateful, s.clock, s.default) for s in parsed.sessions] == [
+        ("s1", True, "realtime", True), ("s2", False, "pseudo", True)]
+    for text, line, column, message in (
+        ("<kmodule><kbase>", 1, 17, "not well-formed XML"),
+        ("<module/>", 1, 1, "the root element must be <kmodule>"),
+        ('<kmodule>\n<kbase>\n<ksession/>\n</kbase></kmodule>', 3, 1, "a <ksession> needs a name"),
+        ('<kmodule>\n<kbase>\n <ksession name="a" clockType="wall"/>\n</kbase></kmodule>', 3, 2, "clockType must be"),
+        ('<kmodule><kbase><ksession name="a"/><ksession name="a"/></kbase></kmodule>', 1, 37, "declared twice"),
+        ('<kmodule><kbase><ksession name="a" colour="red"/></kbase></kmodule>', 1, 17, "unknown attribute(s) colour"),
+        ('<!DOCTYPE x [<!ENTITY a "b">]><kmodule/>', 1, 1, "DTDs and entities are not allowed"),
+    ):
+        with pytest.raises(kmodule.KmoduleError) as caught:
+            kmodule.parse(text)
+        error = caught.value.errors[0]
+        assert (error.file, error.line, error.column) == ("kmodule.xml", line, column), (text, error)
+        assert message in error.message
+
+
+def test_kmodule_errors_come_with_compile_errors(engine):
+    broken = {**files(), "kmodule.xml": "<kmodule><kbase><ksession name='x' default='maybe'/></kbase></kmodule>"}
+    errors = engine.validate("kx", broken)
+    assert [(e.file, e.message) for e in errors] == [("kmodule.xml", "ksession 'x': default must be true or false, not 'maybe'")]
+    with pytest.raises(CompileFailed):
+        engine.deploy("kx", broken, force=True)
+
+
+def test_a_session_that_cannot_follow_stays_and_says_why(engine):
+    engine.deploy("stay", files(), force=True)
+    session = engine.session_manager.open("stay", kind="rest")
+    session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "g", "party": 2}]}, {"op": "fire", "max": -1}])
+    renamed = TYPES.replace("party : int", "size : int")
+    engine.deploy("stay", {"types.drl": renamed, "rules.drl": RULES.replace("party > 0", "size > 0")}, force=True)
+    assert session.version == 1
+    assert "does not fit the new version" in session.pinned_reason and "unknown field 'party'" in session.pinned_reason
+    answer = session.execute([{"op": "get_objects"}])  # still answering, on version 1, with its facts
+    assert answer.version == 1 and answer.results[0]["value"][0]["party"] == 2
+    session.close()
+
+
+def test_stream_bound_sessions_follow_deploys(engine):
+    engine.deploy("streamed", files("Seat"), force=True)
+    session = engine.open_session("streamed")  # as the stream engine's stateful binding does
+    first = session.push([{"type": "Guest", "id": "g1", "party": 2}], 1_000)
+    assert [a["params"]["text"] for a in first.actions if a["module"] == "say"] == ["Seat g1"]
+    engine.deploy("streamed", files("Welcome"), force=True)
+    assert session.version == 2
+    second = session.push([{"type": "Guest", "id": "g2", "party": 3}], 2_000)
+    # "Seat" changed: it sees the guest who came across, and the new one; "Count" (unchanged) fires for the new count only
+    assert sorted(a["params"]["text"] for a in second.actions if a["module"] == "say") == ["Welcome g1", "Welcome g2"]
+    assert [a["params"]["n"] for a in second.actions if a["module"] == "count"] == [2]
+    assert session.clock_ms == 2_000
+    pinned = engine.open_session("streamed", on_deploy="pin")
+    engine.deploy("streamed", files("Hi"), force=True)
+    assert session.version == 3 and pinned.version == 2
+    for s in (session, pinned):
+        engine.close_session(s.id)
+
+
+def test_pending_matches_survive_a_move(engine):
+    engine.deploy("pending", files("Seat"), force=True)
+    session = engine.session_manager.open("pending", kind="rest")
+    session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "early", "party": 1}]}, {"op": "fire", "max": -1}])
+    session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "late", "party": 1}]}])  # not fired yet
+    engine.deploy("pending", {**files("Seat"), "extra.drl": "package org.printeps.sess;\n"}, force=True)  # rules unchanged
+    assert session.version == 2
+    answer = session.execute([{"op": "fire", "max": -1}])
+    says = [a["params"]["text"] for a in answer.actions() if a["module"] == "say"]
+    assert says == ["Seat late"]  # the early guest was seated before the move: not again
+    with pytest.raises(CommandFailed) as caught:
+        session.execute([{"op": "delete", "handle": "0:999:1:1:1:DEFAULT:NON_TRAIT:x"}])
+    assert caught.value.index == 0 and caught.value.kind == "handle"
+    session.close()
