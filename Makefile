@@ -14,6 +14,7 @@ $(STAMP): pyproject.toml ros/install.sh ros/requirements-jazzy.txt $(wildcard ro
 	[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e ".[embedded-db,test]"
+	$(BIN)/pip install -q --no-deps python-drools-sdk==0.0.3
 	bash ros/install.sh $(BIN)/python
 	$(BIN)/printeps build-java
 	touch $(STAMP)

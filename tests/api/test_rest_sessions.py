@@ -60,6 +60,10 @@ def test_create_insert_fire_read_retract_dispose(rs, api_gateway):
                                                                {"type": "Customer", "id": "bad", "age": "x"}]})
     assert bad.status_code == 422 and "object 1" in bad.json()["error"] and bad.json()["field"] == "age"
     assert rs.get(f"{PREFIX}/sessions/{sid}").json()["fact_count"] == 2  # nothing of the refused insert
+    both = rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "d", "age": 70}], "fire": True})
+    assert both.status_code == 201 and both.json()["fact_count"] == 3 and both.json()["decision_id"]
+    assert [a["params"]["text"] for a in both.json()["actions"]] == ["Welcome d (S1)"]
+    assert rs.delete(f"{PREFIX}/sessions/{sid}/facts/{both.json()['handles'][0]}").json()["fact_count"] == 2
     assert rs.delete(f"{PREFIX}/sessions/{sid}").json() == {"id": sid, "ruleset": "rs", "disposed": True}
     assert rs.get(f"{PREFIX}/sessions/{sid}").status_code == 404
     assert rs.post(f"{PREFIX}/sessions/{sid}/fire").status_code == 404

@@ -7,7 +7,7 @@ import asyncio
 import pytest
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBasicCredentials
 
-from gateway.api.routes import kie_server as kie
+from gateway.api.kie import batch as kie_batch
 from gateway.api.auth import Authenticator
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import BadBody, json_depth_ok, parse_json
@@ -102,33 +102,50 @@ def test_file_diffs_only_changed_files():
 
 
 def test_kie_command_parsing():
-    cmds = kie.parse_commands({"lookup": None, "commands": [
+    batch = kie_batch.parse_batch({"lookup": None, "commands": [
         {"insert": {"object": {"org.x.Customer": {"id": "c1"}}, "out-identifier": "c"}},
-        {"fire-all-rules": {}},
+        {"fire-all-rules": ""},
+        {"delete": {"fact-handle": {kie_batch.FACT_HANDLE: {"external-form": "0:1:2:3:4:DEFAULT:NON_TRAIT:x"}}}},
+        {"modify": {"fact-handle": "0:1:2", "setters": {"accessor": "age", "value": "3"}}},
+        {"advance-session-time": {"amount": 2, "unit": "SECONDS"}},
+        {"get-session-time": {}},
     ]})
-    assert [c for c, _ in cmds] == ["insert", "fire-all-rules"]
-    assert kie.parse_commands({"fire-all-rules": {"max": 5}}) == [("fire-all-rules", {"max": 5})]
+    assert [s.name for s in batch.steps] == ["insert", "fire-all-rules", "delete", "modify", "advance-session-time",
+                                             "get-session-time"]
+    assert batch.commands == [
+        {"op": "insert", "facts": [{"type": "org.x.Customer", "id": "c1"}], "ep": "DEFAULT", "out": "c", "ret": True},
+        {"op": "fire", "max": -1, "out": None},
+        {"op": "delete", "handle": "0:1:2:3:4:DEFAULT:NON_TRAIT:x"},
+        {"op": "modify", "handle": "0:1:2", "set": [["age", "3"]]},
+        {"op": "advance", "ms": 2000, "out": "session-advancecurrenttime"},
+        {"op": "get_time", "out": "session-currenttime"},
+    ]
+    assert kie_batch.parse_batch({"fire-all-rules": {"max": 5}}).commands == [{"op": "fire", "max": 5, "out": None}]
     for bad, msg in (([], "JSON object"), ({"commands": []}, "no commands"),
-                     ({"commands": [{"start-process": {}}]}, "not supported"),
-                     ({"commands": [{"insert": 3}]}, "must be an object")):
-        with pytest.raises(kie.BatchError, match=msg):
-            kie.parse_commands(bad)
+                     ({"commands": [{"start-process": {}}]}, "command 0 .start-process.: processes are not supported"),
+                     ({"commands": [{"fire-all-rules": {}}, {"insert": 3}]}, "command 1 .insert.: its arguments must be an object"),
+                     ({"commands": [{"fire-all-rules": {"max": "lots"}}]}, "'max' must be an integer"),
+                     ({"commands": [{"retract": {}}]}, "'fact-handle' is required"),
+                     ({"commands": [{"dance": {}}]}, "unknown command 'dance'")):
+        with pytest.raises(kie_batch.BatchError, match=msg):
+            kie_batch.parse_batch(bad)
 
 
 def test_kie_fact_translation_round_trip():
-    packages: dict[str, str] = {}
-    fact = kie.fact_from_kie({"org.printeps.reception.Customer": {"id": "c1", "age": 3}}, "c0", packages)
-    assert fact == {"type": "Customer", "id": "c1", "age": 3}
-    assert packages == {"Customer": "org.printeps.reception"}
-    assert kie.fact_to_kie({"type": "Customer", "id": "c1"}, packages, "dflt") == {
-        "org.printeps.reception.Customer": {"id": "c1"}}
-    assert kie.fact_to_kie({"type": "Group", "size": 2}, packages, "dflt") == {"dflt.Group": {"size": 2}}
-    with pytest.raises(kie.BatchError, match="reserved"):
-        kie.fact_from_kie({"a.B": {"type": "x"}}, "c0", {})
-    with pytest.raises(kie.BatchError):
-        kie.fact_from_kie({"a.B": 1, "c.D": {}}, "c0", {})
-    handle = kie.fact_handle("org.x.Customer")[kie.FACT_HANDLE]["external-form"]
-    assert handle.endswith(":DEFAULT:NON_TRAIT:org.x.Customer")
+    assert kie_batch.fact_from_kie({"org.printeps.reception.Customer": {"id": "c1", "age": 3}}, 0, "insert") == {
+        "type": "org.printeps.reception.Customer", "id": "c1", "age": 3}
+    assert kie_batch.fact_from_kie({"containedObject": {"@class": "Person", "age": 2}}, 0, "insert-elements", 1) == {
+        "type": "Person", "age": 2}
+    marshal = kie_batch.Marshal({"Customer": "org.printeps.reception.Customer"})
+    assert marshal.object({"type": "Customer", "id": "c1", "home": {"type": "Address", "city": "Tokyo"}}) == {
+        "org.printeps.reception.Customer": {"id": "c1", "home": {"city": "Tokyo"}}}
+    assert kie_batch.unwrap_typed({"java.lang.Integer": 18}) == 18
+    assert kie_batch.unwrap_typed({"plain": 1}) == {"plain": 1}
+    with pytest.raises(kie_batch.BatchError, match="reserved"):
+        kie_batch.fact_from_kie({"a.B": {"type": "x"}}, 0, "insert")
+    with pytest.raises(kie_batch.BatchError, match="object 2"):
+        kie_batch.fact_from_kie({"a.B": 1, "c.D": {}}, 0, "insert-elements", 2)
+    assert marshal.handle("0:1")[kie_batch.FACT_HANDLE] == {"external-form": "0:1"}
 
 
 def _run_asgi(app, headers, chunks):

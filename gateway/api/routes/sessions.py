@@ -55,6 +55,7 @@ class InsertBody(BaseModel):
     facts: list[Fact] = Field(min_length=1, max_length=100_000)
     timestamp: int | None = Field(default=None, ge=0, description="Move the pseudo clock to this time (ms) first")
     entry_point: str = Field(default="DEFAULT", min_length=1, max_length=200)
+    fire: bool = Field(default=False, description="Fire afterwards, in the same call (a decision)")
 
 
 class ModifyBody(BaseModel):
@@ -201,13 +202,19 @@ async def read_facts(name: RuleSetName, session_id: SessionId, request: Request,
 async def insert_facts(name: RuleSetName, session_id: SessionId, body: InsertBody, request: Request, engine: EngineDep,
                        _: Caller) -> Response:
     """Insert facts (events with a ``timestamp`` move the pseudo clock there first): 201
-    ``{"handles": [...], "time", "fact_count"}``; 422 naming the fact and field, nothing inserted."""
+    ``{"handles": [...], "time", "fact_count"}``; 422 naming the fact and field, nothing inserted.
+    With ``"fire": true`` the session fires in the same call: the answer is also the decision
+    (``decision_id``, ``actions``, ``fired``…), as from ``…/fire``."""
+    commands: list[dict[str, Any]] = []
+    if body.timestamp is not None:
+        commands.append({"op": "advance_to", "to": body.timestamp})
+    commands.append({"op": "insert", "facts": _facts(body.facts), "ep": body.entry_point})
+    if body.fire:
+        commands.append({"op": "fire", "max": -1})
+        return await _at_owner(request, _fire, engine, name, session_id, commands, correlation_id(request), 201)
+
     def work() -> JSON:
         session = engine.session_manager.get(name, session_id)
-        commands: list[dict[str, Any]] = []
-        if body.timestamp is not None:
-            commands.append({"op": "advance_to", "to": body.timestamp})
-        commands.append({"op": "insert", "facts": _facts(body.facts), "ep": body.entry_point})
         answer = session.execute(commands)
         return JSON({"handles": answer.results[-1]["handles"], "time": answer.time, "fact_count": answer.fact_count,
                      "version": answer.version}, status_code=201)
@@ -283,16 +290,21 @@ async def advance_clock(name: RuleSetName, session_id: SessionId, body: AdvanceB
     return await _at_owner(request, work)
 
 
-def _fire(engine: Any, name: str, session_id: str, commands: list[dict[str, Any]], correlation: str | None) -> JSON:
+def _fire(engine: Any, name: str, session_id: str, commands: list[dict[str, Any]], correlation: str | None,
+          status: int = 200) -> JSON:
     session = engine.session_manager.get(name, session_id)
     started = time.perf_counter()
     answer = session.execute(commands)
     fire = answer.results[-1]["fire"]
     result = FireResult(name, answer.version, fire["actions"], fire["fired"], [], int(fire["fireCount"]),
                         (time.perf_counter() - started) * 1000)
-    result.decision_id = engine.record_decision(result, [], origin="rest", correlation_id=correlation,
+    inserted = [f for c in commands if c["op"] == "insert" for f in c["facts"]]
+    result.decision_id = engine.record_decision(result, inserted, origin="rest", correlation_id=correlation,
                                                 context={"session": session_id, "fact_count": answer.fact_count})
     out = result.to_dict()
     out.pop("facts", None)
     out.update({"session": session_id, "time": answer.time, "fact_count": answer.fact_count})
-    return JSON(out)
+    handles = [h for r in answer.results if r["op"] == "insert" for h in r.get("handles", [])]
+    if handles:
+        out["handles"] = handles
+    return JSON(out, status_code=status)
