@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -27,8 +26,8 @@ import httpx
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from http_bench import drive, free_port, one_connection, request_bytes, summarize  # noqa: E402
-from report import machine_note, write_section  # noqa: E402
+from http_bench import drive, free_port, one_connection, request_bytes, summarize
+from report import machine_note, write_section
 
 ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Stateful sessions"

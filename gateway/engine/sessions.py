@@ -159,8 +159,14 @@ class SessionManager:
             owner = self.directory.claim(ruleset, sid, {"kind": kind, "clock": clock, "on_deploy": policy})
             if owner.get("process") != self.directory.process:
                 raise SessionElsewhere(ruleset, sid, owner)
-        session = self.engine.new_session(ruleset, sid, clock=clock, on_deploy=policy, kind=kind, record_facts=record_facts,
-                                          on_close=lambda _id, r=ruleset, s=sid: self._forget(r, s))
+        try:
+            session = self.engine.new_session(ruleset, sid, clock=clock, on_deploy=policy, kind=kind,
+                                              record_facts=record_facts,
+                                              on_close=lambda _id, r=ruleset, s=sid: self._forget(r, s))
+        except Exception:
+            if self.directory is not None and kind in CONVERSATION_KINDS:
+                self.directory.release(ruleset, sid)  # claimed, never made
+            raise
         if kind in CONVERSATION_KINDS:
             session.fact_limit = self.settings.max_facts
         with self._lock:

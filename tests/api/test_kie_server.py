@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import httpx
 import pytest
-
 from api_helpers import files
 
 BASE = "/kie-server/services/rest/server"
@@ -272,7 +271,7 @@ end
 
 def test_session_clock_and_temporal_rules(kie, client):
     assert client.put("/api/rulesets/temporal", json={"files": TEMPORAL}).status_code == 201
-    visit = lambda vid, ts: {"insert": {"object": {"org.printeps.temporal.Visit": {"id": vid, "ts": ts}}}}  # noqa: E731
+    visit = lambda vid, ts: {"insert": {"object": {"org.printeps.temporal.Visit": {"id": vid, "ts": ts}}}}
     out = results(batch(kie, [{"get-session-time": ""}], container="temporal"))
     assert out["session-currenttime"] == 0  # a pseudo clock, KIE's default out-identifier
     out = results(batch(kie, [visit("question", 0), {"fire-all-rules": {"out-identifier": "n"}}], container="temporal"))

@@ -8,7 +8,6 @@ from __future__ import annotations
 import time
 
 import pytest
-
 from api_helpers import files
 from test_kie_server import BASE, TEMPORAL
 

@@ -13,7 +13,6 @@ import time
 import httpx
 import pytest
 import yaml
-
 from test_processes import Process, files, wait_for
 
 pytestmark = pytest.mark.slow
@@ -114,7 +113,7 @@ def test_workers_keep_one_conversation_on_the_shared_port(home):
                 owners.add(r.headers.get("x-session-owner", "here"))
         assert len(owners) == 2  # some calls were answered by the owner itself, some forwarded to it
         deadline = time.monotonic() + 5
-        while time.monotonic() < deadline and not httpx.get(f"{served.url}/health").status_code == 200:
+        while time.monotonic() < deadline and httpx.get(f"{served.url}/health").status_code != 200:
             time.sleep(0.1)
     finally:
         served.stop()

@@ -33,14 +33,32 @@ from gateway.api.deps import correlation_id
 from gateway.api.errors import ApiError
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
 from gateway.api.jsonio import JSON, BadBody, parse_json, run_blocking
-from gateway.api.kie.batch import Batch, BatchError, Marshal, execution_results, parse_batch
+from gateway.api.kie.batch import (
+    Batch,
+    BatchError,
+    Marshal,
+    execution_results,
+    parse_batch,
+)
 from gateway.api.kie.containers import (
-    LATEST, ReleaseIdError, container_resource, conversation_id, external_release_id, parse_release_id, release_id,
-    server_info, service_response,
+    LATEST,
+    ReleaseIdError,
+    container_resource,
+    conversation_id,
+    external_release_id,
+    parse_release_id,
+    release_id,
+    server_info,
+    service_response,
 )
 from gateway.engine import EngineError, FireResult, RuleSetNotFound, VersionNotFound
 from gateway.engine.session import CommandFailed
-from gateway.engine.sessions import SessionElsewhere, SessionGone, SessionLimit, SessionNotFound
+from gateway.engine.sessions import (
+    SessionElsewhere,
+    SessionGone,
+    SessionLimit,
+    SessionNotFound,
+)
 
 PREFIX = "/kie-server/services/rest/server"
 KIND = "ruleset"
@@ -67,7 +85,7 @@ class KieRoute(APIRoute):
                 return failure(exc.status, exc.message)
             except RequestValidationError as exc:
                 return failure(422, f"invalid request: {exc.errors()}")
-            except Exception as exc:  # noqa: BLE001 - a fault still answers in KIE's shape
+            except Exception as exc:
                 metrics = getattr(request.app.state, "metrics", None)
                 if metrics is not None:
                     metrics.errors.labels("internal").inc()
@@ -158,7 +176,7 @@ def _sessions_of(engine: Any, name: str) -> list[dict[str, Any]] | None:
 
 
 @router.get("/containers")
-def list_containers(request: Request, groupId: str | None = None, artifactId: str | None = None,  # noqa: N803 - KIE's names
+def list_containers(request: Request, groupId: str | None = None, artifactId: str | None = None,
                     version: str | None = None, status: str | None = None, _: Principal = Depends(kie_caller)) -> JSON:
     """Every rule set as a ``kie-container`` (status STARTED), filtered like KIE Server."""
     check_content_type(request)

@@ -14,7 +14,8 @@ from __future__ import annotations
 import time
 from typing import Annotated, Any, Callable, Literal
 
-from fastapi import APIRouter, Path as PathParam, Query, Request
+from fastapi import APIRouter, Query, Request
+from fastapi import Path as PathParam
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
