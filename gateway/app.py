@@ -85,7 +85,8 @@ class Gateway:
         """Serving at ``url`` (``sessions.advertise_url`` wins): other processes forward calls for
         the sessions this one holds there (see gateway.api.forwarding)."""
         if self.members is not None:
-            self.members.register(self.settings.sessions.advertise_url or url)
+            advertised = self.settings.sessions.advertise_url
+            self.members.register(url if not advertised or "{port}" in advertised else advertised)
 
     def close(self) -> None:
         """Stop everything this gateway started, last started first; each step is best effort."""

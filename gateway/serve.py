@@ -222,13 +222,18 @@ def worker_main(argv: list[str] | None = None) -> int:
     sock = listening_socket(args.host, args.port)  # after the build: a worker takes connections once it serves
     # A private loopback port of this worker alone: calls forwarded to the sessions it holds must
     # not land on the shared port, which may hand them to another worker.
-    private = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    # With sessions.advertise_url (several hosts) it listens on the serving address instead, and
+    # "{port}" in that URL names it.
+    advertised = settings.sessions.advertise_url
+    private_host = args.host if advertised else "127.0.0.1"
+    private = socket.socket(socket.AF_INET6 if ":" in private_host else socket.AF_INET, socket.SOCK_STREAM)
     private.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    private.bind(("127.0.0.1", 0))
+    private.bind((private_host, 0))
     private.listen(256)
+    private_port = private.getsockname()[1]
     try:
         serve(gateway, args.host, args.port, sockets=[sock, private],
-              announce=local_url("127.0.0.1", private.getsockname()[1]))
+              announce=advertised.replace("{port}", str(private_port)) if advertised else local_url("127.0.0.1", private_port))
     finally:
         gateway.close()
     return 0
