@@ -141,6 +141,7 @@ class Val:
     ids: np.ndarray
     valid: np.ndarray
     scale: int = SCALE
+    num_only: bool = False  # every valid row is a number (lets comparisons skip the kind checks)
 
     @property
     def n(self) -> int:
@@ -150,30 +151,97 @@ class Val:
 BOOL = -1
 
 
+def _const(n: int, value: Any, dtype: Any) -> np.ndarray:
+    """A read-only column holding one value (no memory per row)."""
+    return np.broadcast_to(np.asarray(value, dtype=dtype), (n,))
+
+
+def _pick(arr: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    if arr.ndim == 1 and arr.strides == (0,) and len(arr):
+        return np.broadcast_to(arr[:1], (len(idx),))
+    return arr[idx]
+
+
 def _bool_val(value: np.ndarray, valid: np.ndarray) -> Val:
     n = len(value)
-    return Val(np.full(n, BOOL, dtype=np.int8), value.astype(np.int64), np.full(n, -1, dtype=np.int64), valid, 0)
+    return Val(_const(n, BOOL, np.int8), value, _const(n, -1, np.int64), valid, 0)
 
 
-@dataclass
+def _is_bool(v: Val) -> bool:
+    return v.n > 0 and v.kind.strides == (0,) and int(v.kind[0]) == BOOL
+
+
 class Frame:
-    """Solutions: term-id columns per variable, timestamp columns per triple pattern, computed values."""
+    """Solutions, lazily. A scanned pattern holds its columns; a join holds its two sides and the
+    row index of each side per solution; a filter of a join only shortens those two index arrays.
+    A column is gathered (and cached) when something reads it, so a join of 1,800 × 1,800 readings
+    never copies columns nobody looks at."""
 
-    n: int
-    cols: dict[str, np.ndarray] = field(default_factory=dict)
-    ts: dict[int, np.ndarray] = field(default_factory=dict)
-    computed: dict[str, Val] = field(default_factory=dict)
+    def __init__(self, n: int, cols: dict[str, np.ndarray] | None = None, ts: dict[int, np.ndarray] | None = None,
+                 join: tuple["Frame", "Frame", np.ndarray, np.ndarray] | None = None,
+                 computed: dict[str, Val] | None = None) -> None:
+        self.n = n
+        self.cols = cols or {}
+        self.ts = ts or {}
+        self.join = join
+        self.computed = computed or {}
+        self._cache: dict[Any, np.ndarray] = {}
+        if join is None:
+            self._vars = set(self.cols)
+            self._ts_keys = set(self.ts)
+            # patterns with triples of the static graphs only (no timestamp) in their column
+            self.nullable_ts = {k for k, c in self.ts.items() if len(c) and bool((c == NO_TS).any())}
+        else:
+            self._vars = join[0]._vars | join[1]._vars
+            self._ts_keys = join[0]._ts_keys | join[1]._ts_keys
+            self.nullable_ts = join[0].nullable_ts | join[1].nullable_ts
+
+    def has(self, var: str) -> bool:
+        return var in self._vars
+
+    def vars(self) -> set[str]:
+        return self._vars
+
+    def col(self, var: str) -> np.ndarray:
+        got = self._cache.get(var)
+        if got is None:
+            if self.join is None:
+                got = self.cols[var]
+            else:
+                left, right, li, ri = self.join
+                got = left.col(var)[li] if var in left._vars else right.col(var)[ri]
+            self._cache[var] = got
+        return got
+
+    def ts_col(self, key: int) -> np.ndarray:
+        got = self._cache.get(("ts", key))
+        if got is None:
+            if self.join is None:
+                got = self.ts[key]
+            else:
+                left, right, li, ri = self.join
+                got = left.ts_col(key)[li] if key in left._ts_keys else right.ts_col(key)[ri]
+            self._cache[("ts", key)] = got
+        return got
 
     def take(self, idx: np.ndarray) -> "Frame":
-        return Frame(len(idx), {k: v[idx] for k, v in self.cols.items()}, {k: v[idx] for k, v in self.ts.items()},
-                     {k: _take(v, idx) for k, v in self.computed.items()})
+        computed = {k: _take(v, idx) for k, v in self.computed.items()}
+        if self.join is None:
+            out = Frame(len(idx), {v: c[idx] for v, c in self.cols.items()}, {k: c[idx] for k, c in self.ts.items()},
+                        computed=computed)
+            out.nullable_ts = self.nullable_ts  # (a subset of rows: still a safe answer)
+            return out
+        left, right, li, ri = self.join
+        return Frame(len(idx), join=(left, right, li[idx], ri[idx]), computed=computed)
 
     def keep(self, mask: np.ndarray) -> "Frame":
+        if mask.all():
+            return self
         return self.take(np.flatnonzero(mask))
 
 
 def _take(v: Val, idx: np.ndarray) -> Val:
-    return Val(v.kind[idx], v.units[idx], v.ids[idx], v.valid[idx], v.scale)
+    return Val(_pick(v.kind, idx), _pick(v.units, idx), _pick(v.ids, idx), _pick(v.valid, idx), v.scale, v.num_only)
 
 
 Expr = Callable[[Frame, "RunContext"], Val]
@@ -224,6 +292,9 @@ class Plan:
     tail: list[tuple[str, str | None, Any]]  # group-level ("bind"|"filter", var, rdflib expression)
     project: list[str]
     distinct: bool
+    needed: set[str] = field(default_factory=set)  # variables read after the joins
+    ts_refs: set[int] = field(default_factory=set)  # patterns whose timestamps are read
+    lookup_predicates: list[NamedNode] = field(default_factory=list)  # f:timestamp outside the patterns
     table: TermTable = field(default_factory=TermTable)
     key: int = field(default_factory=lambda: next(_ids))
     _static: tuple[Any, ...] | None = None  # (static graph, table generation, its encoded columns)
@@ -247,6 +318,8 @@ class _Compiler:
         self.ts_patterns: dict[tuple[Any, ...], int] = {}
         self.ts_predicates: set[NamedNode] = set()
         self.bnodes: dict[str, str] = {}
+        self.needed: set[str] = set()
+        self.ts_refs: set[int] = set()
 
     def compile(self, algebra: Any) -> Plan:
         if algebra.name != "SelectQuery":
@@ -293,7 +366,9 @@ class _Compiler:
         for n in reversed(lower):
             if n.name == "Extend":
                 var = str(n.var)
-                expr, _ = self._expr(n.expr)
+                expr, refs = self._expr(n.expr)
+                self.needed |= _vars_of(n.expr)
+                self.ts_refs |= refs
                 steps.append(("bind", var, expr))
                 self.bound[var] = "val"
             else:
@@ -303,6 +378,8 @@ class _Compiler:
                     if used <= self.bgp_vars and not (used & set(self.bound)):
                         early.append((used, refs, expr))
                     else:
+                        self.needed |= used
+                        self.ts_refs |= refs
                         steps.append(("filter", None, expr))
         for v in group_by:
             if v not in self.bgp_vars:
@@ -324,7 +401,10 @@ class _Compiler:
         if distinct and (grouped or any(v not in self.bgp_vars for v in project)):
             raise NotCompilable("DISTINCT over computed values")
         predicates = sorted({p.p for p in self.patterns} | self.ts_predicates, key=lambda x: x.value)
-        return Plan(self.patterns, predicates, early, steps, grouped, group_by, aggregates, tail, project, distinct)
+        self.needed |= set(group_by) | (set() if grouped else set(project))
+        return Plan(self.patterns, predicates, early, steps, grouped, group_by, aggregates, tail, project, distinct,
+                    self.needed & self.bgp_vars, self.ts_refs,
+                    sorted(self.ts_predicates, key=lambda x: x.value))
 
     # -- the graph pattern -----------------------------------------------------------------
     def _triples(self, node: Any) -> list[tuple[Any, Any, Any]]:
@@ -367,7 +447,7 @@ class _Compiler:
             if var in self.bound:
                 return lambda f, ctx, v=var: f.computed[v] if v in f.computed else _unbound(f.n)
             if var in self.bgp_vars:
-                return lambda f, ctx, v=var: _term_val(f.cols[v], ctx)
+                return lambda f, ctx, v=var: _term_val(f.col(v), ctx)
             return lambda f, ctx: _unbound(f.n)  # never bound: an error in every row
         if _is_literal(e) or _is_iri(e):
             term = _to_ox(e)
@@ -375,7 +455,7 @@ class _Compiler:
                 raise NotCompilable(f"the constant {e!r}")
             if isinstance(term, Literal) and term.datatype.value == XSD + "boolean":
                 value = term.value in ("true", "1")
-                return lambda f, ctx: _bool_val(np.full(f.n, value), np.ones(f.n, dtype=bool))
+                return lambda f, ctx: _bool_val(_const(f.n, value, bool), _const(f.n, True, bool))
             kind, _ = _classify(term)
             if kind == KIND_OTHER:
                 raise NotCompilable(f"the constant {term} (only integers, decimals, strings and IRIs)")
@@ -424,7 +504,7 @@ class _Compiler:
         for pat in self.patterns:
             if pat.s == s and pat.p == p and pat.o == o:
                 refs.add(pat.index)
-                return lambda f, ctx, i=pat.index: _ts_val(f.ts[i])
+                return lambda f, ctx, i=pat.index: _ts_val(f.ts_col(i), i in f.nullable_ts)
         for x in (s, o):
             if x[0] == "var" and x[1] not in self.bgp_vars:
                 raise NotCompilable("f:timestamp of a variable outside the graph pattern")
@@ -448,7 +528,9 @@ class _Compiler:
             raise NotCompilable("SAMPLE of something else than a group key")
         if distinct and kind != "COUNT":
             raise NotCompilable(f"{kind}(DISTINCT …)")
-        expr, _ = self._expr(arg)
+        expr, refs = self._expr(arg)
+        self.needed |= _vars_of(arg)
+        self.ts_refs |= refs
         return Aggregate(res, kind, expr, str(arg) if _is_var(arg) else None, distinct)
 
 
@@ -543,24 +625,30 @@ _CMP: dict[str, Callable[[Any, Any], Any]] = {
 
 
 def _unbound(n: int) -> Val:
-    return Val(np.full(n, KIND_OTHER, dtype=np.int8), np.zeros(n, dtype=np.int64), np.full(n, -1, dtype=np.int64),
-               np.zeros(n, dtype=bool))
+    return Val(_const(n, KIND_OTHER, np.int8), _const(n, 0, np.int64), _const(n, -1, np.int64),
+               _const(n, False, bool), SCALE, True)
 
 
 def _term_val(ids: np.ndarray, ctx: RunContext) -> Val:
-    return Val(ctx.table.kind[ids], ctx.table.units[ids], ids, np.ones(len(ids), dtype=bool))
+    kind = ctx.table.kind[ids]
+    return Val(kind, ctx.table.units[ids], ids, _const(len(ids), True, bool), SCALE,
+               bool(np.all(kind <= KIND_DEC)))
 
 
 def _const_val(term: Term, n: int, ctx: RunContext) -> Val:
     tid = ctx.table.id(term)
-    return Val(np.full(n, ctx.table.kind[tid], dtype=np.int8), np.full(n, ctx.table.units[tid], dtype=np.int64),
-               np.full(n, tid, dtype=np.int64), np.ones(n, dtype=bool))
+    kind = int(ctx.table.kind[tid])
+    return Val(_const(n, kind, np.int8), _const(n, int(ctx.table.units[tid]), np.int64), _const(n, tid, np.int64),
+               _const(n, True, bool), SCALE, kind <= KIND_DEC)
 
 
-def _ts_val(ts: np.ndarray) -> Val:
+def _ts_val(ts: np.ndarray, nullable: bool = True) -> Val:
+    """Timestamps (exact ms, xsd:integer); NO_TS (a static-only triple) is unbound."""
     n = len(ts)
+    if not nullable:
+        return Val(_const(n, KIND_INT, np.int8), ts, _const(n, -1, np.int64), _const(n, True, bool), 0, True)
     valid = ts != NO_TS
-    return Val(np.full(n, KIND_INT, dtype=np.int8), np.where(valid, ts, 0), np.full(n, -1, dtype=np.int64), valid, 0)
+    return Val(_const(n, KIND_INT, np.int8), np.where(valid, ts, 0), _const(n, -1, np.int64), valid, 0, True)
 
 
 def _ts_lookup(f: Frame, ctx: RunContext, s: tuple[str, Any], p: NamedNode, o: tuple[str, Any]) -> Val:
@@ -568,7 +656,7 @@ def _ts_lookup(f: Frame, ctx: RunContext, s: tuple[str, Any], p: NamedNode, o: t
 
     def column(x: tuple[str, Any]) -> np.ndarray:
         if x[0] == "var":
-            return f.cols[x[1]]
+            return f.col(x[1])
         return np.full(f.n, ctx.table.ids.get(x[1], -1), dtype=np.int64)
 
     cs, co = column(s), column(o)
@@ -583,15 +671,17 @@ def _ts_lookup(f: Frame, ctx: RunContext, s: tuple[str, Any], p: NamedNode, o: t
 def _num(v: Val, ctx: RunContext) -> Val:
     """``v`` in a numeric context: IRIs, strings and booleans are type errors (invalid); other
     literals (doubles, dates …) cannot be decided exactly here."""
+    if v.num_only:
+        return v
     numeric = v.kind <= KIND_DEC
     numeric &= v.kind >= 0
     if np.any(v.valid & (v.kind == KIND_OTHER)):
         raise Fallback("a value that is not an exact integer/decimal in arithmetic or comparison")
-    return Val(v.kind, v.units, v.ids, v.valid & numeric, v.scale)
+    return Val(v.kind, v.units, v.ids, v.valid & numeric, v.scale, True)
 
 
 def _negate(v: Val) -> Val:
-    return Val(v.kind, -v.units, np.full(v.n, -1, dtype=np.int64), v.valid, v.scale)
+    return Val(v.kind, -v.units, _const(v.n, -1, np.int64), v.valid, v.scale, True)
 
 
 def _align(a: Val, b: Val) -> tuple[np.ndarray, np.ndarray, int]:
@@ -612,7 +702,7 @@ def _rescale(v: Val, scale: int) -> np.ndarray:
 def _arith(op: str, a: Val, b: Val) -> Val:
     valid = a.valid & b.valid
     kind = np.where((a.kind == KIND_INT) & (b.kind == KIND_INT), KIND_INT, KIND_DEC).astype(np.int8)
-    ids = np.full(a.n, -1, dtype=np.int64)
+    ids = _const(a.n, -1, np.int64)
     peak_a = int(np.abs(a.units[valid]).max()) if np.any(valid) else 0
     peak_b = int(np.abs(b.units[valid]).max()) if np.any(valid) else 0
     if op == "*":
@@ -622,12 +712,12 @@ def _arith(op: str, a: Val, b: Val) -> Val:
         if peak_a * peak_b > LIMIT:
             raise Fallback("product too large for exact fixed-point arithmetic")
         units = np.where(valid, a.units * b.units, 0)
-        return Val(kind, units, ids, valid, a.scale + b.scale)
+        return Val(kind, units, ids, valid, a.scale + b.scale, True)
     ua, ub, scale = _align(a, b)
     if (peak_a + peak_b) * 10 ** (scale - min(a.scale, b.scale)) > LIMIT:
         raise Fallback("sum too large for exact fixed-point arithmetic")
     units = np.where(valid, ua + ub if op == "+" else ua - ub, 0)
-    return Val(kind, units, ids, valid, scale)
+    return Val(kind, units, ids, valid, scale, True)
 
 
 def _shrink(v: Val, valid: np.ndarray) -> Val:
@@ -640,11 +730,14 @@ def _shrink(v: Val, valid: np.ndarray) -> Val:
     if scale == v.scale:
         return v
     factor = 10 ** (v.scale - scale)
-    return Val(v.kind, np.where(valid, v.units // factor, 0), v.ids, v.valid, scale)
+    return Val(v.kind, np.where(valid, v.units // factor, 0), v.ids, v.valid, scale, v.num_only)
 
 
 def _compare(op: str, a: Val, b: Val, ctx: RunContext) -> Val:
     valid = a.valid & b.valid
+    if a.num_only and b.num_only:  # the common case: numbers on both sides
+        ua, ub, _ = _align(a, b)
+        return _bool_val(_CMP[op](ua, ub), valid)
     num = (a.kind >= 0) & (a.kind <= KIND_DEC) & (b.kind >= 0) & (b.kind <= KIND_DEC)
     iri = (a.kind == KIND_IRI) | (b.kind == KIND_IRI)
     strs = (a.kind == KIND_STR) & (b.kind == KIND_STR)
@@ -670,6 +763,8 @@ def _compare(op: str, a: Val, b: Val, ctx: RunContext) -> Val:
 
 def _ebv(v: Val, ctx: RunContext) -> tuple[np.ndarray, np.ndarray]:
     """The effective boolean value: booleans, numbers (non-zero), simple strings (non-empty)."""
+    if v.num_only or _is_bool(v):
+        return v.valid & (v.units != 0), v.valid
     if np.any(v.valid & (v.kind == KIND_OTHER)):
         raise Fallback("the boolean value of a literal that is not a number or a simple string")
     ok = v.valid & (v.kind != KIND_IRI)
@@ -708,7 +803,7 @@ def run_plan(plan: Plan, window: WindowData) -> Evaluation:
         plan._static = None
     relations = _relations(plan, window)
     ctx = RunContext(table, {}, max(len(table), 1))
-    for p in plan.predicates:  # f:timestamp lookups of triples outside the pattern's own columns
+    for p in plan.lookup_predicates:  # f:timestamp of triples outside the pattern's own columns
         s, o, ts = relations.get(p.value, _EMPTY_REL)
         keys = s * ctx.m + o
         order = np.argsort(keys, kind="stable")
@@ -801,66 +896,85 @@ def _scan(pat: Pattern, relations: dict[str, tuple[np.ndarray, np.ndarray, np.nd
     if pat.s[0] == "var" and pat.o[0] == "var" and pat.s[1] == pat.o[1]:
         mask &= s == o
     idx = np.flatnonzero(mask)
-    frame = Frame(len(idx))
+    cols: dict[str, np.ndarray] = {}
     if pat.s[0] == "var":
-        frame.cols[pat.s[1]] = s[idx]
+        cols[pat.s[1]] = s[idx]
     if pat.o[0] == "var":
-        frame.cols[pat.o[1]] = o[idx]
-    frame.ts[pat.index] = ts[idx]
-    return frame
+        cols[pat.o[1]] = o[idx]
+    return Frame(len(idx), cols, {pat.index: ts[idx]})
+
+
+@dataclass
+class _Part:
+    """A joined piece of the pattern: its solutions and which patterns it covers."""
+
+    frame: Frame
+    patterns: set[int]
 
 
 def _join_all(plan: Plan, relations: dict[str, Any], ctx: RunContext) -> Frame:
-    """Greedy joins: each step takes the connected pattern with the fewest results (counted exactly)."""
-    scans = [_scan(p, relations, ctx) for p in plan.patterns]
+    """Greedy operator ordering: repeatedly join the two connected pieces with the fewest results
+    (counted exactly), so independent branches (e.g. two readings of a person) are joined before
+    they meet; filters run as soon as their variables are there; unneeded columns are dropped."""
+    parts = [_Part(_scan(p, relations, ctx), {p.index}) for p in plan.patterns]
     early = list(plan.early)
-    left = min(range(len(scans)), key=lambda i: scans[i].n)
-    frame = scans[left]
-    done = {left}
-    frame, early = _apply_early(frame, early, done, ctx)
-    while len(done) < len(scans):
-        todo = [i for i in range(len(scans)) if i not in done]
-        connected = [i for i in todo if any(v in frame.cols for v in scans[i].cols)]
-        best: tuple[int, int, Any] | None = None
-        for i in connected or todo:
-            shared = [v for v in scans[i].cols if v in frame.cols]
-            total, prepared = _join_counts(frame, scans[i], shared, ctx)
-            if best is None or total < best[0]:
-                best = (total, i, prepared)
-        assert best is not None
-        total, i, prepared = best
+    for part in parts:
+        early = _settle(plan, part, parts, early, ctx)
+    while len(parts) > 1:
+        best: tuple[int, int, int, list[str], Any] | None = None
+        for i in range(len(parts)):
+            for j in range(i + 1, len(parts)):
+                shared = sorted(parts[i].frame.vars() & parts[j].frame.vars())
+                if not shared:
+                    continue
+                total, prepared = _join_counts(parts[i].frame, parts[j].frame, shared, ctx)
+                if best is None or total < best[0]:
+                    best = (total, i, j, shared, prepared)
+        if best is None:  # nothing connected: the two smallest, every pair
+            i, j = sorted(sorted(range(len(parts)), key=lambda k: parts[k].frame.n)[:2])
+            best = (parts[i].frame.n * parts[j].frame.n, i, j, [], None)
+        total, i, j, shared, prepared = best
         if total > MAX_ROWS:
             raise Fallback(f"more than {MAX_ROWS} intermediate solutions")
-        frame = _join(frame, scans[i], prepared)
-        done.add(i)
-        frame, early = _apply_early(frame, early, done, ctx)
-    for _, _, expr in early:  # (all patterns joined)
+        merged = _Part(_join(parts[i].frame, parts[j].frame, prepared, shared), parts[i].patterns | parts[j].patterns)
+        parts = [p for k, p in enumerate(parts) if k not in (i, j)] + [merged]
+        early = _settle(plan, merged, parts, early, ctx)
+    frame = parts[0].frame
+    for _, _, expr in early:  # whatever could not run earlier
         keep, valid = _ebv(expr(frame, ctx), ctx)
         frame = frame.keep(keep & valid)
     return frame
 
 
-def _apply_early(frame: Frame, early: list[tuple[set[str], set[int], Expr]], done: set[int],
-                 ctx: RunContext) -> tuple[Frame, list[tuple[set[str], set[int], Expr]]]:
+def _settle(plan: Plan, part: _Part, parts: list[_Part], early: list[tuple[set[str], set[int], Expr]],
+            ctx: RunContext) -> list[tuple[set[str], set[int], Expr]]:
+    """Run the filters ``part`` can run, then drop the columns nobody will read."""
     rest = []
     for used, refs, expr in early:
-        if used <= set(frame.cols) and refs <= done:
-            keep, valid = _ebv(expr(frame, ctx), ctx)
-            frame = frame.keep(keep & valid)
+        if used <= part.frame.vars() and refs <= part.patterns:
+            keep, valid = _ebv(expr(part.frame, ctx), ctx)
+            part.frame = part.frame.keep(keep & valid)
         else:
             rest.append((used, refs, expr))
-    return frame, rest
+    keep_vars = set(plan.needed)
+    keep_ts = set(plan.ts_refs)
+    for used, refs, _ in rest:
+        keep_vars |= used
+        keep_ts |= refs
+    for other in parts:
+        if other is not part:
+            keep_vars |= other.frame.vars()
+    del keep_vars, keep_ts  # (frames are lazy: an unread column costs nothing)
+    return rest
 
 
 def _join_counts(left: Frame, right: Frame, shared: list[str], ctx: RunContext) -> tuple[int, Any]:
-    if not shared:
-        return left.n * right.n, None
     m = ctx.m
-    lk = left.cols[shared[0]]
-    rk = right.cols[shared[0]]
-    if len(shared) == 2:
-        lk = lk * m + left.cols[shared[1]]
-        rk = rk * m + right.cols[shared[1]]
+    lk = left.col(shared[0])
+    rk = right.col(shared[0])
+    if len(shared) >= 2:  # two variables in one key; any others are checked after the join
+        lk = lk * m + left.col(shared[1])
+        rk = rk * m + right.col(shared[1])
     order = np.argsort(rk, kind="stable")
     rks = rk[order]
     lo = np.searchsorted(rks, lk, "left")
@@ -869,7 +983,7 @@ def _join_counts(left: Frame, right: Frame, shared: list[str], ctx: RunContext) 
     return int(counts.sum()), (order, lo, counts)
 
 
-def _join(left: Frame, right: Frame, prepared: Any) -> Frame:
+def _join(left: Frame, right: Frame, prepared: Any, shared: list[str]) -> Frame:
     if prepared is None:  # no shared variable: every pair
         li = np.repeat(np.arange(left.n), right.n)
         ri = np.tile(np.arange(right.n), left.n)
@@ -879,13 +993,14 @@ def _join(left: Frame, right: Frame, prepared: Any) -> Frame:
         li = np.repeat(np.arange(left.n), counts)
         starts = np.repeat(lo - (np.cumsum(counts) - counts), counts)
         ri = order[starts + np.arange(total)]
-    out = left.take(li)
-    for v, col in right.cols.items():
-        if v not in out.cols:
-            out.cols[v] = col[ri]
-    for k, col in right.ts.items():
-        out.ts[k] = col[ri]
-    return out
+    if len(shared) > 2:
+        same = np.ones(len(li), dtype=bool)
+        for v in shared[2:]:
+            same &= left.col(v)[li] == right.col(v)[ri]
+        li, ri = li[same], ri[same]
+    computed = {k: _take(v, li) for k, v in left.computed.items()}
+    computed.update({k: _take(v, ri) for k, v in right.computed.items()})
+    return Frame(len(li), join=(left, right, li, ri), computed=computed)
 
 
 # -- results without aggregates ---------------------------------------------------------------
@@ -894,8 +1009,8 @@ def _join(left: Frame, right: Frame, prepared: Any) -> Frame:
 def _plain_rows(plan: Plan, frame: Frame, ctx: RunContext) -> list[Row]:
     terms = ctx.table.terms
     if plan.distinct and frame.n:
-        stacked = np.stack([frame.cols[v] for v in plan.project if v in frame.cols], axis=1) \
-            if any(v in frame.cols for v in plan.project) else np.zeros((frame.n, 0), dtype=np.int64)
+        stacked = np.stack([frame.col(v) for v in plan.project if frame.has(v)], axis=1) \
+            if any(frame.has(v) for v in plan.project) else np.zeros((frame.n, 0), dtype=np.int64)
         if stacked.shape[1]:
             _, first = np.unique(stacked, axis=0, return_index=True)
             frame = frame.take(np.sort(first))
@@ -903,8 +1018,8 @@ def _plain_rows(plan: Plan, frame: Frame, ctx: RunContext) -> list[Row]:
             frame = frame.take(np.arange(1))
     columns: list[tuple[str, Any]] = []
     for v in plan.project:
-        if v in frame.cols:
-            columns.append((v, [terms[i] for i in frame.cols[v].tolist()]))
+        if frame.has(v):
+            columns.append((v, [terms[i] for i in frame.col(v).tolist()]))
         elif v in frame.computed:
             columns.append((v, _val_terms(frame.computed[v])))
     rows: list[Row] = [{} for _ in range(frame.n)]
@@ -938,25 +1053,42 @@ def _number_term(is_int: bool, value: Decimal) -> Literal:
 
 def _grouped_rows(plan: Plan, frame: Frame, ctx: RunContext) -> list[Row]:
     n = frame.n
+    m = max(ctx.m, 1)
     if plan.group_by:
         if n == 0:
             return []
-        keys = np.stack([frame.cols[v] for v in plan.group_by], axis=1)
-        uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1)
+        if len(plan.group_by) <= 2:
+            key = frame.col(plan.group_by[0])
+            if len(plan.group_by) == 2:
+                key = key * m + frame.col(plan.group_by[1])
+            order = np.argsort(key, kind="stable")
+            sorted_key = key[order]
+            first = np.ones(n, dtype=bool)
+            first[1:] = sorted_key[1:] != sorted_key[:-1]
+            starts = np.flatnonzero(first)
+            sizes = np.diff(np.append(starts, n))
+            group_ids = np.cumsum(first) - 1
+            heads = order[starts]
+            uniq = np.stack([frame.col(v)[heads] for v in plan.group_by], axis=1)
+        else:
+            keys = np.stack([frame.col(v) for v in plan.group_by], axis=1)
+            uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+            inverse = inverse.reshape(-1)
+            order = np.argsort(inverse, kind="stable")
+            sizes = np.bincount(inverse, minlength=len(uniq))
+            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+            group_ids = inverse[order]
         n_groups = len(uniq)
     else:  # one implicit group, even over no solutions
         uniq = np.zeros((1, 0), dtype=np.int64)
-        inverse = np.zeros(n, dtype=np.int64)
+        order = np.arange(n)
+        sizes = np.array([n], dtype=np.int64)
+        starts = np.zeros(1, dtype=np.int64)
+        group_ids = np.zeros(n, dtype=np.int64)
         n_groups = 1
-    order = np.argsort(inverse, kind="stable")
-    sizes = np.bincount(inverse, minlength=n_groups)
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-    sorted_frame = frame.take(order)
-    group_ids = inverse[order]
     results: dict[str, list[Any]] = {}
     for agg in plan.aggregates:
-        results[agg.res] = _aggregate(agg, sorted_frame, group_ids, sizes, starts, n_groups, ctx)
+        results[agg.res] = _aggregate(agg, frame, order, group_ids, sizes, starts, n_groups, ctx)
     rows: list[Row] = []
     terms = ctx.table.terms
     for g in range(n_groups):
@@ -983,13 +1115,14 @@ def _reduce(fn: Any, values: np.ndarray, starts: np.ndarray, sizes: np.ndarray, 
     return out
 
 
-def _aggregate(agg: Aggregate, frame: Frame, group_ids: np.ndarray, sizes: np.ndarray, starts: np.ndarray,
-               n_groups: int, ctx: RunContext) -> list[Any]:
+def _aggregate(agg: Aggregate, frame: Frame, order: np.ndarray, group_ids: np.ndarray, sizes: np.ndarray,
+               starts: np.ndarray, n_groups: int, ctx: RunContext) -> list[Any]:
+    """One aggregate per group; ``order`` sorts the frame's rows by group."""
     if agg.kind == "COUNT" and agg.arg is None:
         return [("int", Decimal(int(c))) for c in sizes]
     if agg.kind == "SAMPLE":
         return [None] * n_groups  # filled from the group key below (SAMPLE(?key) is the key)
-    value = agg.arg(frame, ctx)  # type: ignore[misc]
+    value = _take(agg.arg(frame, ctx), order)  # type: ignore[misc]
     if agg.kind == "COUNT":
         valid = value.valid
         if agg.distinct:
