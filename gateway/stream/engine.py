@@ -100,7 +100,7 @@ class QueryRuntime:
     param_version: int = -1
     last_rows: list[Row] | None = None
     cc_dirty: bool = False
-    cc_starts: tuple[int, ...] | None = None
+    cc_starts: tuple[int | None, ...] | None = None  # per window: the oldest timestamp last reported
     empty_cache: tuple[Any, Evaluation] | None = None
     static_cache: tuple[Any, frozenset[Triple]] | None = None
     seq: int = 0
@@ -255,7 +255,7 @@ class StreamEngine:
         for w in query.windows:
             chain = path_to(w.stream, query.name, set())
             if chain is not None:
-                names = " → ".join(f"<{s}>" for s in [query.output_stream] + list(reversed(chain)))
+                names = " → ".join(f"<{s}>" for s in list(reversed(chain)) + [query.output_stream])
                 raise QueryParseError(f"stream cycle: {names} (query {query.name!r} would read its own output)",
                                       w.line, w.column)
 
@@ -536,17 +536,17 @@ class StreamEngine:
         if step is None or runtime.next_close is None:
             return
         end = _window_end(instant, step)
-        starts = tuple(end - (w.range_ms or 0) for w in runtime.windows)
+        starts = tuple(end - (w.range_ms or 0) if w.is_time else None for w in runtime.windows)
         changed = runtime.cc_dirty or runtime.cc_starts is None
         if not changed and runtime.cc_starts is not None:
-            for w, old, new in zip(runtime.windows, runtime.cc_starts, starts):
-                if new > old and runtime.buffers[w.stream].has_content(old, new):
-                    changed = True  # something expired
-                    break
+            # something expired: the oldest triple last reported is before the window's new start
+            changed = any(first is not None and start is not None and first < start
+                          for first, start in zip(runtime.cc_starts, starts))
         if not changed:
             return
         runtime.cc_dirty = False
-        runtime.cc_starts = starts
+        runtime.cc_starts = tuple(runtime.buffers[w.stream].first_at_or_after(start, instant) if start is not None
+                                  else None for w, start in zip(runtime.windows, starts))
         self._instant(runtime, instant, runtime.closed_until, report, collected)
 
     def _evict(self, runtime: QueryRuntime) -> None:

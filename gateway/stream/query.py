@@ -61,6 +61,7 @@ class WindowSpec:
     range_param: str | None = None
     line: int = field(default=0, compare=False)
     column: int = field(default=0, compare=False)
+    range_at: tuple[int, int] = field(default=(0, 0), compare=False)  # where ``?param`` is written
 
     @property
     def is_time(self) -> bool:
@@ -354,7 +355,7 @@ def parse_query(text: str, extra_params: list[ParamSpec] | None = None,
     for w in windows:
         if w.range_param is not None and w.range_param not in seen:
             raise QueryParseError(f"RANGE ?{w.range_param}: no such parameter (declare it with PARAM)",
-                                  w.line, w.column)
+                                  *w.range_at)
     blanked = sorted(blank)
     var_spans: dict[str, list[tuple[int, int]]] = {}
     for tok in tokens[body_start:]:
@@ -544,8 +545,10 @@ def _parse_stream(cur: _Cursor, prefixes: dict[str, str], name: str | None) -> W
         _close_window(cur)
         return WindowSpec(stream=stream, triples=int(num.text), name=name, **where)
     range_param = None
+    range_at = (0, 0)
     if cur.peek() is not None and cur.peek().kind == "VAR":  # type: ignore[union-attr]
-        range_param = cur.next("a parameter").text[1:]
+        var_tok = cur.next("a parameter")
+        range_param, range_at = var_tok.text[1:], (var_tok.line, var_tok.column)
         range_ms = None
     else:
         range_ms = _duration(cur)
@@ -569,7 +572,7 @@ def _parse_stream(cur: _Cursor, prefixes: dict[str, str], name: str | None) -> W
                               "windows would be skipped", step_tok.line, step_tok.column)
     _close_window(cur)
     return WindowSpec(stream=stream, range_ms=range_ms, step_ms=step_ms, name=name, range_param=range_param,
-                      **where)
+                      range_at=range_at, **where)
 
 
 def _close_window(cur: _Cursor) -> None:
@@ -586,6 +589,9 @@ def _duration(cur: _Cursor) -> int:
             return duration_ms(num.text)
         except ValueError as exc:
             raise QueryParseError(str(exc), num.line, num.column) from None
+    if num.kind == "NAME" and re.fullmatch(r"P[0-9YMWDTHS.]+", num.text):
+        raise QueryParseError(f"{num.text} is not a day-time duration like PT10S (years and months have no fixed "
+                              "length)", num.line, num.column)
     if num.kind != "NUMBER":
         raise QueryParseError(f"expected a duration like 3s or PT3S, found {num.text!r}", num.line, num.column)
     unit = cur.next("a time unit (ms, s, m, h, d)")
