@@ -295,6 +295,8 @@ class Plan:
     needed: set[str] = field(default_factory=set)  # variables read after the joins
     ts_refs: set[int] = field(default_factory=set)  # patterns whose timestamps are read
     lookup_predicates: list[NamedNode] = field(default_factory=list)  # f:timestamp outside the patterns
+    # early filters of the form f:timestamp(pattern a) <op> f:timestamp(pattern b): (index in early, op, a, b)
+    bands: list[tuple[int, str, int, int]] = field(default_factory=list)
     table: TermTable = field(default_factory=TermTable)
     key: int = field(default_factory=lambda: next(_ids))
     _static: tuple[Any, ...] | None = None  # (static graph, table generation, its encoded columns)
@@ -320,6 +322,7 @@ class _Compiler:
         self.bnodes: dict[str, str] = {}
         self.needed: set[str] = set()
         self.ts_refs: set[int] = set()
+        self.bands: list[tuple[int, str, int, int]] = []
 
     def compile(self, algebra: Any) -> Plan:
         if algebra.name != "SelectQuery":
@@ -376,6 +379,9 @@ class _Compiler:
                     used = _vars_of(conjunct)
                     expr, refs = self._expr(conjunct)
                     if used <= self.bgp_vars and not (used & set(self.bound)):
+                        band = self._band(conjunct)
+                        if band is not None:
+                            self.bands.append((len(early),) + band)
                         early.append((used, refs, expr))
                     else:
                         self.needed |= used
@@ -404,7 +410,7 @@ class _Compiler:
         self.needed |= set(group_by) | (set() if grouped else set(project))
         return Plan(self.patterns, predicates, early, steps, grouped, group_by, aggregates, tail, project, distinct,
                     self.needed & self.bgp_vars, self.ts_refs,
-                    sorted(self.ts_predicates, key=lambda x: x.value))
+                    sorted(self.ts_predicates, key=lambda x: x.value), self.bands)
 
     # -- the graph pattern -----------------------------------------------------------------
     def _triples(self, node: Any) -> list[tuple[Any, Any, Any]]:
@@ -510,6 +516,24 @@ class _Compiler:
                 raise NotCompilable("f:timestamp of a variable outside the graph pattern")
         self.ts_predicates.add(p)
         return lambda f, ctx: _ts_lookup(f, ctx, s, p, o)
+
+    def _band(self, e: Any) -> tuple[str, int, int] | None:
+        """``f:timestamp(a) op f:timestamp(b)`` on two patterns' own timestamps (the C-SPARQL way to
+        order two readings): the join of a and b can produce only the pairs that satisfy it."""
+        if getattr(e, "name", None) != "RelationalExpression" or e.op not in ("<", "<=", ">", ">="):
+            return None
+        sides = []
+        for side in (e.expr, e.other):
+            if getattr(side, "name", None) != "Function" or str(side.iri) != TIMESTAMP_FN or len(side.expr or []) != 3:
+                return None
+            s, p, o = self._node(side.expr[0]), side.expr[1], self._node(side.expr[2])
+            match = [pat.index for pat in self.patterns if pat.s == s and str(pat.p.value) == str(p) and pat.o == o]
+            if not match:
+                return None
+            sides.append(match[0])
+        if sides[0] == sides[1]:
+            return None
+        return (e.op, sides[0], sides[1])
 
     def _aggregate(self, agg: Any, group_by: list[str]) -> Aggregate:
         kind = agg.name.replace("Aggregate_", "").upper()
@@ -918,6 +942,7 @@ def _join_all(plan: Plan, relations: dict[str, Any], ctx: RunContext) -> Frame:
     they meet; filters run as soon as their variables are there; unneeded columns are dropped."""
     parts = [_Part(_scan(p, relations, ctx), {p.index}) for p in plan.patterns]
     early = list(plan.early)
+    bands = {id(plan.early[k]): (op, a, b) for k, op, a, b in plan.bands}
     for part in parts:
         early = _settle(plan, part, parts, early, ctx)
     while len(parts) > 1:
@@ -927,7 +952,12 @@ def _join_all(plan: Plan, relations: dict[str, Any], ctx: RunContext) -> Frame:
                 shared = sorted(parts[i].frame.vars() & parts[j].frame.vars())
                 if not shared:
                     continue
-                total, prepared = _join_counts(parts[i].frame, parts[j].frame, shared, ctx)
+                band = _band_for(bands, early, parts[i], parts[j]) if len(shared) == 1 else None
+                if band is not None:
+                    total, prepared = _band_counts(parts[i].frame, parts[j].frame, shared[0], band[1], ctx)
+                    prepared = (prepared, band[0])
+                else:
+                    total, prepared = _join_counts(parts[i].frame, parts[j].frame, shared, ctx)
                 if best is None or total < best[0]:
                     best = (total, i, j, shared, prepared)
         if best is None:  # nothing connected: the two smallest, every pair
@@ -936,6 +966,9 @@ def _join_all(plan: Plan, relations: dict[str, Any], ctx: RunContext) -> Frame:
         total, i, j, shared, prepared = best
         if total > MAX_ROWS:
             raise Fallback(f"more than {MAX_ROWS} intermediate solutions")
+        if isinstance(prepared, tuple) and len(prepared) == 2 and isinstance(prepared[1], tuple):
+            prepared, done = prepared
+            early = [e for e in early if e is not done]  # the band join applied this filter
         merged = _Part(_join(parts[i].frame, parts[j].frame, prepared, shared), parts[i].patterns | parts[j].patterns)
         parts = [p for k, p in enumerate(parts) if k not in (i, j)] + [merged]
         early = _settle(plan, merged, parts, early, ctx)
@@ -946,16 +979,65 @@ def _join_all(plan: Plan, relations: dict[str, Any], ctx: RunContext) -> Frame:
     return frame
 
 
+def _band_for(bands: dict[int, tuple[str, int, int]], early: list[Any], left: _Part,
+              right: _Part) -> tuple[Any, tuple[str, int, int]] | None:
+    """A pending ``f:timestamp(a) op f:timestamp(b)`` filter with a on one side and b on the other."""
+    for entry in early:
+        band = bands.get(id(entry))
+        if band is None:
+            continue
+        op, a, b = band
+        if a in left.patterns and b in right.patterns:
+            return entry, (op, a, b)
+        if b in left.patterns and a in right.patterns:
+            return entry, ({"<": ">", ">": "<", "<=": ">=", ">=": "<="}[op], b, a)
+    return None
+
+
+def _band_counts(left: Frame, right: Frame, var: str, band: tuple[str, int, int], ctx: RunContext) -> tuple[int, Any]:
+    """An equi-join on ``var`` that keeps only the pairs with ``ts_left op ts_right``: the right side
+    is sorted by (key, rank of its timestamp), so each left row's partners are one contiguous range."""
+    op, a, b = band
+    lk, rk = left.col(var), right.col(var)
+    x, y = left.ts_col(a), right.ts_col(b)
+    l_ok = x != NO_TS if a in left.nullable_ts else None
+    r_rows = np.flatnonzero(y != NO_TS) if b in right.nullable_ts else np.arange(right.n)
+    values = np.unique(y[r_rows])
+    width = len(values) + 1
+    composite = rk[r_rows] * width + np.searchsorted(values, y[r_rows])
+    order_local = np.argsort(composite, kind="stable")
+    comp_sorted = composite[order_local]
+    order = r_rows[order_local]
+    base = lk * width
+    below = np.searchsorted(values, x, "left")   # how many right timestamps are < x
+    upto = np.searchsorted(values, x, "right")   # … are <= x
+    if op == ">":     # y < x
+        lo_key, hi_key = base, base + below
+    elif op == ">=":  # y <= x
+        lo_key, hi_key = base, base + upto
+    elif op == "<":   # y > x
+        lo_key, hi_key = base + upto, base + width
+    else:             # y >= x
+        lo_key, hi_key = base + below, base + width
+    lo = np.searchsorted(comp_sorted, lo_key, "left")
+    hi = np.searchsorted(comp_sorted, hi_key, "left")
+    counts = np.maximum(hi - lo, 0)
+    if l_ok is not None:
+        counts = np.where(l_ok, counts, 0)
+    return int(counts.sum()), (order, lo, counts)
+
+
 def _settle(plan: Plan, part: _Part, parts: list[_Part], early: list[tuple[set[str], set[int], Expr]],
             ctx: RunContext) -> list[tuple[set[str], set[int], Expr]]:
     """Run the filters ``part`` can run, then drop the columns nobody will read."""
     rest = []
-    for used, refs, expr in early:
+    for entry in early:
+        used, refs, expr = entry
         if used <= part.frame.vars() and refs <= part.patterns:
             keep, valid = _ebv(expr(part.frame, ctx), ctx)
             part.frame = part.frame.keep(keep & valid)
         else:
-            rest.append((used, refs, expr))
+            rest.append(entry)
     keep_vars = set(plan.needed)
     keep_ts = set(plan.ts_refs)
     for used, refs, _ in rest:

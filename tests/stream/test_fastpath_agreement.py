@@ -64,6 +64,10 @@ COMPILABLE = {
     "iri-compare": f"SELECT ?s (COUNT(*) AS ?n) WHERE {{ {ONE} ?s a ?k FILTER(?k != printeps:Staff) }} GROUP BY ?s ?k",
     "two-keys": f"SELECT ?s ?k (SUM(?d) AS ?sum) WHERE {{ {ONE} ?s a ?k }} GROUP BY ?s ?k",
     "having-div": f"SELECT ?s (SUM(?d) / COUNT(*) AS ?mean) WHERE {{ {ONE} }} GROUP BY ?s HAVING (SUM(?d) / 3 > 1)",
+    # f:timestamp(a) op f:timestamp(b) becomes a band join: every operator, ties included
+    "band-ge": f"SELECT ?s (COUNT(*) AS ?n) WHERE {{ {PAIR} FILTER({TS1} >= {TS2}) }} GROUP BY ?s",
+    "band-lt": f"SELECT ?s (COUNT(*) AS ?n) (SUM(?distance2) AS ?x) WHERE {{ {PAIR} FILTER({TS1} < {TS2}) }} GROUP BY ?s",
+    "band-le": f"SELECT ?s (COUNT(*) AS ?n) WHERE {{ {PAIR} FILTER({TS2} <= {TS1} && ?distance1 < 4) }} GROUP BY ?s",
     "ts-window": f"SELECT ?s (MAX(f:timestamp(?s, printeps:positionAtTime, ?t)) AS ?last) WHERE {{ {ONE} }} GROUP BY ?s",
 }
 
