@@ -142,6 +142,12 @@ class Val:
     valid: np.ndarray
     scale: int = SCALE
     num_only: bool = False  # every valid row is a number (lets comparisons skip the kind checks)
+    peak: int | None = None  # a bound on |units| of the valid rows (None: not known, measured when needed)
+
+    def bound(self) -> int:
+        if self.peak is None:
+            self.peak = int(np.abs(self.units[self.valid]).max()) if np.any(self.valid) else 0
+        return self.peak
 
     @property
     def n(self) -> int:
@@ -241,7 +247,8 @@ class Frame:
 
 
 def _take(v: Val, idx: np.ndarray) -> Val:
-    return Val(_pick(v.kind, idx), _pick(v.units, idx), _pick(v.ids, idx), _pick(v.valid, idx), v.scale, v.num_only)
+    return Val(_pick(v.kind, idx), _pick(v.units, idx), _pick(v.ids, idx), _pick(v.valid, idx), v.scale, v.num_only,
+               v.peak)
 
 
 Expr = Callable[[Frame, "RunContext"], Val]
@@ -656,14 +663,15 @@ def _unbound(n: int) -> Val:
 def _term_val(ids: np.ndarray, ctx: RunContext) -> Val:
     kind = ctx.table.kind[ids]
     return Val(kind, ctx.table.units[ids], ids, _const(len(ids), True, bool), SCALE,
-               bool(np.all(kind <= KIND_DEC)))
+               bool(np.all(kind <= KIND_DEC)), MAX_ABS_UNITS)
 
 
 def _const_val(term: Term, n: int, ctx: RunContext) -> Val:
     tid = ctx.table.id(term)
     kind = int(ctx.table.kind[tid])
-    return Val(_const(n, kind, np.int8), _const(n, int(ctx.table.units[tid]), np.int64), _const(n, tid, np.int64),
-               _const(n, True, bool), SCALE, kind <= KIND_DEC)
+    units = int(ctx.table.units[tid])
+    return Val(_const(n, kind, np.int8), _const(n, units, np.int64), _const(n, tid, np.int64),
+               _const(n, True, bool), SCALE, kind <= KIND_DEC, abs(units))
 
 
 def _ts_val(ts: np.ndarray, nullable: bool = True) -> Val:
@@ -671,6 +679,7 @@ def _ts_val(ts: np.ndarray, nullable: bool = True) -> Val:
     n = len(ts)
     if not nullable:
         return Val(_const(n, KIND_INT, np.int8), ts, _const(n, -1, np.int64), _const(n, True, bool), 0, True)
+
     valid = ts != NO_TS
     return Val(_const(n, KIND_INT, np.int8), np.where(valid, ts, 0), _const(n, -1, np.int64), valid, 0, True)
 
@@ -705,7 +714,7 @@ def _num(v: Val, ctx: RunContext) -> Val:
 
 
 def _negate(v: Val) -> Val:
-    return Val(v.kind, -v.units, _const(v.n, -1, np.int64), v.valid, v.scale, True)
+    return Val(v.kind, -v.units, _const(v.n, -1, np.int64), v.valid, v.scale, True, v.peak)
 
 
 def _align(a: Val, b: Val) -> tuple[np.ndarray, np.ndarray, int]:
@@ -717,8 +726,7 @@ def _rescale(v: Val, scale: int) -> np.ndarray:
     if v.scale == scale:
         return v.units
     factor = 10 ** (scale - v.scale)
-    peak = int(np.abs(v.units[v.valid]).max()) if np.any(v.valid) else 0
-    if peak * factor > LIMIT:
+    if v.bound() * factor > LIMIT:
         raise Fallback("numbers too large for exact fixed-point comparison")
     return v.units * factor
 
@@ -727,21 +735,20 @@ def _arith(op: str, a: Val, b: Val) -> Val:
     valid = a.valid & b.valid
     kind = np.where((a.kind == KIND_INT) & (b.kind == KIND_INT), KIND_INT, KIND_DEC).astype(np.int8)
     ids = _const(a.n, -1, np.int64)
-    peak_a = int(np.abs(a.units[valid]).max()) if np.any(valid) else 0
-    peak_b = int(np.abs(b.units[valid]).max()) if np.any(valid) else 0
     if op == "*":
         a, b = _shrink(a, valid), _shrink(b, valid)
-        peak_a = int(np.abs(a.units[valid]).max()) if np.any(valid) else 0
-        peak_b = int(np.abs(b.units[valid]).max()) if np.any(valid) else 0
-        if peak_a * peak_b > LIMIT:
+        peak = a.bound() * b.bound()
+        if peak > LIMIT:
             raise Fallback("product too large for exact fixed-point arithmetic")
         units = np.where(valid, a.units * b.units, 0)
-        return Val(kind, units, ids, valid, a.scale + b.scale, True)
-    ua, ub, scale = _align(a, b)
-    if (peak_a + peak_b) * 10 ** (scale - min(a.scale, b.scale)) > LIMIT:
+        return Val(kind, units, ids, valid, a.scale + b.scale, True, peak)
+    scale = max(a.scale, b.scale)
+    peak = a.bound() * 10 ** (scale - a.scale) + b.bound() * 10 ** (scale - b.scale)
+    if peak > LIMIT:
         raise Fallback("sum too large for exact fixed-point arithmetic")
+    ua, ub = _rescale(a, scale), _rescale(b, scale)
     units = np.where(valid, ua + ub if op == "+" else ua - ub, 0)
-    return Val(kind, units, ids, valid, scale, True)
+    return Val(kind, units, ids, valid, scale, True, peak)
 
 
 def _shrink(v: Val, valid: np.ndarray) -> Val:
@@ -754,7 +761,8 @@ def _shrink(v: Val, valid: np.ndarray) -> Val:
     if scale == v.scale:
         return v
     factor = 10 ** (v.scale - scale)
-    return Val(v.kind, np.where(valid, v.units // factor, 0), v.ids, v.valid, scale, v.num_only)
+    return Val(v.kind, np.where(valid, v.units // factor, 0), v.ids, v.valid, scale, v.num_only,
+               None if v.peak is None else v.peak // factor)
 
 
 def _compare(op: str, a: Val, b: Val, ctx: RunContext) -> Val:
