@@ -25,14 +25,16 @@ import random
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "stream"))
 
 from csparql_scenarios import CUSTOMER_QUERY, ENTRANCE  # noqa: E402
-from table_scenarios import LEAVING_SEAT_QUERY, TABLES, mapper as table_mapper  # noqa: E402
+from table_scenarios import LEAVING_SEAT_QUERY, TABLES  # noqa: E402
+from table_scenarios import mapper as table_mapper
 
 from gateway.config import StreamSettings  # noqa: E402
 from gateway.rdf import Mapper  # noqa: E402
@@ -151,7 +153,7 @@ def papers_query(say: Callable[[str], None], seconds: float, general_seconds: fl
     fast = run(CUSTOMER_QUERY, ENTRANCE, mapped, True)
     general = run(CUSTOMER_QUERY, ENTRANCE, mapped[: int(general_seconds * 30)], False)
     ratio = statistics.median(general["steps"]) / statistics.median(fast["steps"])
-    say(f"### The papers' query, 20 people × 30 Hz, RANGE 3s STEP 1s\n")
+    say("### The papers' query, 20 people × 30 Hz, RANGE 3s STEP 1s\n")
     say(f"- fast path: {fmt(fast)} over {seconds:.0f} s of stream ({len(mapped)} messages; "
         f"push without a window close p99 {pct(fast['pushes'], 0.99):.3f} ms; the whole stream in "
         f"{fast['total_s']:.2f} s, {seconds / fast['total_s']:.0f}× real time; fallbacks {fast['stats']['fallbacks']})")

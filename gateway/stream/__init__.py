@@ -3,7 +3,13 @@
 from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.params import OntologySource, ParamError
-from gateway.stream.query import ContinuousQuery, ParamSpec, ReportPolicy, WindowSpec, parse_query
+from gateway.stream.query import (
+    ContinuousQuery,
+    ParamSpec,
+    ReportPolicy,
+    WindowSpec,
+    parse_query,
+)
 from gateway.stream.results import ResultEvent, report_to_sparql_json, to_sparql_json
 from gateway.stream.rules import BindingError, RuleBinding
 

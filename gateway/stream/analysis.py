@@ -89,7 +89,13 @@ def _predicate(p: Any, found: set[str]) -> None:
 
 
 def _path(path: Any, found: set[str]) -> None:
-    from rdflib.paths import AlternativePath, InvPath, MulPath, NegatedPath, SequencePath
+    from rdflib.paths import (
+        AlternativePath,
+        InvPath,
+        MulPath,
+        NegatedPath,
+        SequencePath,
+    )
     from rdflib.term import URIRef
 
     if isinstance(path, URIRef):

@@ -28,19 +28,38 @@ import re
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from pyoxigraph import Literal, NamedNode
 
 from gateway.config import StreamSettings
 from gateway.rdf.terms import XSD, Term, Triple, canonical_term, canonical_triple
 from gateway.stream.analysis import construct_fields, relevant_predicates
-from gateway.stream.evaluate import Evaluation, WindowData, check_sparql, evaluate_oxigraph
-from gateway.stream.fastpath import Fallback, NotCompilable, Plan, compile_query, run_plan
+from gateway.stream.evaluate import (
+    Evaluation,
+    WindowData,
+    check_sparql,
+    evaluate_oxigraph,
+)
+from gateway.stream.fastpath import (
+    Fallback,
+    NotCompilable,
+    Plan,
+    compile_query,
+    run_plan,
+)
 from gateway.stream.lexer import QueryParseError, position
 from gateway.stream.params import OntologySource, ParamError
-from gateway.stream.query import ContinuousQuery, ParamSpec, ReportPolicy, WindowSpec, duration_ms, parse_query
+from gateway.stream.query import (
+    ContinuousQuery,
+    ParamSpec,
+    ReportPolicy,
+    WindowSpec,
+    duration_ms,
+    parse_query,
+)
 from gateway.stream.results import (
     ResultEvent,
     Row,

@@ -32,14 +32,23 @@ from __future__ import annotations
 
 import decimal
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from decimal import Decimal
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from pyoxigraph import BlankNode, Literal, NamedNode
 
-from gateway.rdf.terms import XSD, XSD_BOOLEAN, XSD_DECIMAL, XSD_INTEGER, Term, Triple, canonical_decimal
+from gateway.rdf.terms import (
+    XSD,
+    XSD_BOOLEAN,
+    XSD_DECIMAL,
+    XSD_INTEGER,
+    Term,
+    Triple,
+    canonical_decimal,
+)
 from gateway.stream.evaluate import TIMESTAMP_FN, Evaluation, Row, WindowData
 
 SCALE = 9  # fractional digits of the fixed-point numbers
@@ -184,7 +193,7 @@ class Frame:
     never copies columns nobody looks at."""
 
     def __init__(self, n: int, cols: dict[str, np.ndarray] | None = None, ts: dict[int, np.ndarray] | None = None,
-                 join: tuple["Frame", "Frame", np.ndarray, np.ndarray] | None = None,
+                 join: tuple[Frame, Frame, np.ndarray, np.ndarray] | None = None,
                  computed: dict[str, Val] | None = None) -> None:
         self.n = n
         self.cols = cols or {}
@@ -230,7 +239,7 @@ class Frame:
             self._cache[("ts", key)] = got
         return got
 
-    def take(self, idx: np.ndarray) -> "Frame":
+    def take(self, idx: np.ndarray) -> Frame:
         computed = {k: _take(v, idx) for k, v in self.computed.items()}
         if self.join is None:
             out = Frame(len(idx), {v: c[idx] for v, c in self.cols.items()}, {k: c[idx] for k, c in self.ts.items()},
@@ -240,7 +249,7 @@ class Frame:
         left, right, li, ri = self.join
         return Frame(len(idx), join=(left, right, li[idx], ri[idx]), computed=computed)
 
-    def keep(self, mask: np.ndarray) -> "Frame":
+    def keep(self, mask: np.ndarray) -> Frame:
         if mask.all():
             return self
         return self.take(np.flatnonzero(mask))

@@ -95,7 +95,7 @@ class ReportPolicy:
         return text + (" AND NON EMPTY" if self.non_empty else "")
 
     @classmethod
-    def parse(cls, text: str) -> "ReportPolicy":
+    def parse(cls, text: str) -> ReportPolicy:
         """A policy written as in the REPORT clause (``"content change"``, ``"periodic 5s"``,
         ``"window close and non empty"``); raises QueryParseError (line 1, column in ``text``)."""
         tokens = tokenize(text)

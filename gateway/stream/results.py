@@ -21,7 +21,8 @@ ASK gives ``"boolean"`` instead of ``"results"``; CONSTRUCT gives bindings of ``
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from pyoxigraph import BlankNode, Literal, NamedNode
 

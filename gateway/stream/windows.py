@@ -11,8 +11,9 @@ it). A window is then a few ``dict.update`` calls, whatever its range.
 from __future__ import annotations
 
 import bisect
+from collections.abc import Iterable
 from math import gcd
-from typing import Any, Iterable
+from typing import Any
 
 from gateway.rdf.terms import Triple
 

@@ -10,13 +10,12 @@ import time
 import httpx
 import pytest
 import uvicorn
+from csparql_scenarios import CUSTOMER_QUERY, ENTRANCE, approaching, messages
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 from gateway.api import streams
 from gateway.config import Settings
-
-from csparql_scenarios import CUSTOMER_QUERY, ENTRANCE, approaching, messages
 
 
 @pytest.fixture()

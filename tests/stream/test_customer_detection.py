@@ -11,10 +11,6 @@ from __future__ import annotations
 from decimal import Decimal
 
 import pytest
-
-from gateway.config import StreamSettings
-from gateway.stream import StreamEngine
-
 from csparql_scenarios import (
     CUSTOMER_QUERY,
     approaching,
@@ -25,6 +21,9 @@ from csparql_scenarios import (
     replay,
     walking_past,
 )
+
+from gateway.config import StreamSettings
+from gateway.stream import StreamEngine
 
 
 def _engine(settings: StreamSettings, fast: bool) -> StreamEngine:

@@ -8,10 +8,18 @@ from __future__ import annotations
 import os
 
 from pyoxigraph import Literal, NamedNode
+from table_scenarios import (
+    LEAVING_SEAT_QUERY,
+    TABLES,
+    P,
+    departures,
+    mapper,
+    messages,
+    replay,
+    teahouse_object,
+)
 
 from gateway.rdf.terms import RDF_TYPE, XSD_DECIMAL
-
-from table_scenarios import LEAVING_SEAT_QUERY, P, TABLES, departures, mapper, messages, replay, teahouse_object
 
 
 def _register(engine) -> dict:

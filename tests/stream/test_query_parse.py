@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from csparql_scenarios import CUSTOMER_QUERY
 
 from gateway.stream import QueryParseError, ReportPolicy, parse_query
-
-from csparql_scenarios import CUSTOMER_QUERY
 
 HEAD = "REGISTER QUERY q AS\nPREFIX ex: <http://ex/>\n"
 

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import pytest
+from csparql_scenarios import (
+    CUSTOMER_QUERY,
+    approaching,
+    messages,
+    replay,
+    walking_past,
+)
 
 from gateway.config import Settings
 from gateway.engine import Engine
 from gateway.stream import BindingError, RuleBinding, StreamEngine
-
-from csparql_scenarios import CUSTOMER_QUERY, approaching, messages, replay, walking_past
 
 DRL = """package org.printeps.detect;
 import org.printeps.gateway.Actions;
@@ -98,7 +103,9 @@ def test_bad_bindings_are_refused(settings, rules_engine):
 
 
 def test_leaving_seat_fires_the_clear_table_rules(settings, rules_engine):
-    from table_scenarios import LEAVING_SEAT_QUERY, messages as table_messages, replay as table_replay
+    from table_scenarios import LEAVING_SEAT_QUERY
+    from table_scenarios import messages as table_messages
+    from table_scenarios import replay as table_replay
 
     engine = StreamEngine(settings, rules_engine=rules_engine)
     engine.register(LEAVING_SEAT_QUERY,
