@@ -400,7 +400,7 @@ class StreamEngine:
                                   "queries": 0, "evaluated": 0, "reported": 0, "late_for": [],
                                   "overflow_for": [], "derived": 0}
         collected: list[ResultEvent] | None = [] if with_results else None
-        canonical = [canonical_triple(t) for t in triples]
+        canonical = [canonical_triple(t) if type(t[2]) is Literal else t for t in triples]
         with self._lock:
             self._ingest(stream, ts, canonical, report, collected, external=True)
         if collected is not None:

@@ -914,14 +914,17 @@ def _relations(plan: Plan, window: WindowData) -> dict[str, tuple[np.ndarray, np
 
 def _encode(items: Any, wanted: dict[NamedNode, int], table: TermTable) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     cols: list[tuple[list[int], list[int], list[int]]] = [([], [], []) for _ in wanted]
-    ident = table.id
+    known = table.ids
+    add = table.id
     for (s, p, o), ts in items:
         i = wanted.get(p)
         if i is None:
             continue
         c = cols[i]
-        c[0].append(ident(s))
-        c[1].append(ident(o))
+        sid = known.get(s)
+        oid = known.get(o)
+        c[0].append(add(s) if sid is None else sid)
+        c[1].append(add(o) if oid is None else oid)
         c[2].append(ts)
     return [(np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64), np.asarray(t, dtype=np.int64))
             for a, b, t in cols]
