@@ -741,8 +741,8 @@ def _rescale(v: Val, scale: int) -> np.ndarray:
 
 
 def _arith(op: str, a: Val, b: Val) -> Val:
-    valid = a.valid & b.valid
-    kind = np.where((a.kind == KIND_INT) & (b.kind == KIND_INT), KIND_INT, KIND_DEC).astype(np.int8)
+    valid = _and(a.valid, b.valid)
+    kind = _result_kind(a.kind, b.kind)
     ids = _const(a.n, -1, np.int64)
     if op == "*":
         a, b = _shrink(a, valid), _shrink(b, valid)
@@ -756,8 +756,33 @@ def _arith(op: str, a: Val, b: Val) -> Val:
     if peak > LIMIT:
         raise Fallback("sum too large for exact fixed-point arithmetic")
     ua, ub = _rescale(a, scale), _rescale(b, scale)
-    units = np.where(valid, ua + ub if op == "+" else ua - ub, 0)
+    units = ua + ub if op == "+" else ua - ub
+    if not _all_true(valid):
+        units = np.where(valid, units, 0)
     return Val(kind, units, ids, valid, scale, True, peak)
+
+
+def _all_true(mask: np.ndarray) -> bool:
+    return mask.ndim == 1 and mask.strides == (0,) and (len(mask) == 0 or bool(mask[0]))
+
+
+def _and(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a & b`` without a pass when one side is a constant True column."""
+    if _all_true(a):
+        return b
+    if _all_true(b):
+        return a
+    return a & b
+
+
+def _result_kind(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """integer op integer is integer, anything else decimal (one pass at most)."""
+    n = len(a)
+    if a.strides == (0,) and b.strides == (0,) and n:
+        return _const(n, KIND_INT if int(a[0]) == KIND_INT and int(b[0]) == KIND_INT else KIND_DEC, np.int8)
+    if a.strides == (0,) and n and int(a[0]) != KIND_INT or b.strides == (0,) and n and int(b[0]) != KIND_INT:
+        return _const(n, KIND_DEC, np.int8)
+    return np.where((a == KIND_INT) & (b == KIND_INT), KIND_INT, KIND_DEC).astype(np.int8)
 
 
 def _shrink(v: Val, valid: np.ndarray) -> Val:
@@ -775,7 +800,7 @@ def _shrink(v: Val, valid: np.ndarray) -> Val:
 
 
 def _compare(op: str, a: Val, b: Val, ctx: RunContext) -> Val:
-    valid = a.valid & b.valid
+    valid = _and(a.valid, b.valid)
     if a.num_only and b.num_only:  # the common case: numbers on both sides
         ua, ub, _ = _align(a, b)
         return _bool_val(_CMP[op](ua, ub), valid)
@@ -1224,21 +1249,26 @@ def _aggregate(agg: Aggregate, frame: Frame, order: np.ndarray, group_ids: np.nd
         return [("int", Decimal(int(c))) for c in sizes]
     if agg.kind == "SAMPLE":
         return [None] * n_groups  # filled from the group key below (SAMPLE(?key) is the key)
-    value = _take(agg.arg(frame, ctx), order)  # type: ignore[misc]
+    value = agg.arg(frame, ctx)  # type: ignore[misc]
     if agg.kind == "COUNT":
+        value = _take(value, order)
         valid = value.valid
         if agg.distinct:
             return _count_distinct(value, group_ids, n_groups)
         counts = np.bincount(group_ids[valid], minlength=n_groups)
         return [("int", Decimal(int(c))) for c in counts]
     num = _num(value, ctx)
-    if not np.all(num.valid):
+    if not _all_true(num.valid) and not np.all(num.valid):
         raise Fallback(f"{agg.kind} over a value that is unbound, an error or not a number")
+    num = Val(_pick(num.kind, order), num.units[order], num.ids, num.valid, num.scale, True, num.peak)
     is_int = (num.kind == KIND_INT)
     scale = num.scale
     if agg.kind in ("SUM", "AVG"):
-        peak = int(np.abs(num.units).max()) if frame.n else 0
-        if peak * (int(sizes.max()) if len(sizes) else 0) > LIMIT:
+        largest = int(sizes.max()) if len(sizes) else 0
+        peak = num.bound() if frame.n else 0
+        if peak * largest > LIMIT and frame.n:  # the static bound is too loose: measure
+            peak = int(np.abs(num.units).max())
+        if peak * largest > LIMIT:
             raise Fallback("sum too large for exact int64 arithmetic")
         sums = _reduce(np.add, num.units, starts, sizes, 0)
         all_int = _reduce(np.logical_and, is_int, starts, sizes, True)
