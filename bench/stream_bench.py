@@ -280,6 +280,9 @@ def write_docs(lines: list[str]) -> None:
     head = "## Stream reasoning (C-SPARQL)"
     body = (f"{head}\n\n`bench/stream_bench.py`, {time.strftime('%Y-%m-%d')}, 2 shared cores: compare the paths "
             "measured in the same run, not the absolute times.\n\n" + "\n".join(lines) + "\n")
+    notes = ROOT / "bench" / "stream_bench_notes.md"
+    if notes.exists():  # the hand-written reading of the numbers
+        body += "\n" + notes.read_text(encoding="utf-8")
     text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
     if head in text:
         start = text.index(head)
