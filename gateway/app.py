@@ -177,7 +177,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     mappings.load()
     queries.load()
     if store is not None:
-        streams.subscribe(_result_recorder(store))
+        streams.subscribe(_result_recorder(store), nonempty=True)
 
     run_ros = _want_ros(settings, ros)
     ros_gateway = None

@@ -220,7 +220,10 @@ class StreamSettings(BaseModel):
     max_window_triples: int = Field(default=1_000_000, description="Per query and stream; oldest dropped (counted).")
     max_message_triples: int = Field(default=100_000, description="Triples in one posted message.")
     max_queries: int = Field(default=100)
-    results_kept: int = Field(default=100, description="Recent non-empty results kept per query.")
+    results_kept: int = Field(default=100, description="Reported windows kept per query (and, apart, as many "
+                              "with at least one solution).")
+    max_catchup_windows: int = Field(default=100, description="Of a stretch of empty windows passed at once "
+                                     "(a gap in the stream), how many are reported: the first ones and the last.")
     max_pending_posts: int = Field(default=64, description="Concurrent POST /api/streams before 503.")
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 

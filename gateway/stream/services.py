@@ -60,16 +60,18 @@ class QueryService:
 
     # ---- changing -------------------------------------------------------------------------------
     def register(self, text: str, params: list[ParamSpec] | None = None, replace: bool = False,
-                 binding: RuleBinding | None = None, *, author: str = "anonymous", comment: str = "") -> dict[str, Any]:
-        """Check, store and serve a query (``replace``: a new version of an existing one)."""
+                 binding: RuleBinding | None = None, *, report: str | None = None, author: str = "anonymous",
+                 comment: str = "") -> dict[str, Any]:
+        """Check, store and serve a query (``replace``: a new version of an existing one;
+        ``report``: a report policy overriding the query's own)."""
         name = parse_query(text, params).name
         with self._lock:
             head = self.catalog.head(QUERY, name)
             if head is not None and head.live and not replace:
                 raise StreamError(f"a query named {name!r} is already registered")
-            self._check(text, params, binding)
+            self._check(text, params, binding, report)
             payload = {"text": text, "params": _params_payload(params),
-                       "binding": binding.to_dict() if binding else None}
+                       "binding": binding.to_dict() if binding else None, "report": report}
             info, seq = self.catalog.save(QUERY, name, payload, author=author, comment=comment, hash=_hash(payload))
             result = self._serve(name, payload, info.version, seq)
         return {**result, "version": info.version}
@@ -78,7 +80,7 @@ class QueryService:
         """A new version of the query with this binding (None: unbound)."""
         with self._lock:
             payload = dict(self._current_payload(name))
-            self._check(payload["text"], _params_from(payload.get("params")), binding)
+            self._check(payload["text"], _params_from(payload.get("params")), binding, payload.get("report"))
             payload["binding"] = binding.to_dict() if binding else None
             info, seq = self.catalog.save(QUERY, name, payload, author=author,
                                           comment="rules bound" if binding else "rules unbound", hash=_hash(payload))
@@ -96,7 +98,7 @@ class QueryService:
         with self._lock:
             stored = self.catalog.load(QUERY, name, int(version))
             self._check(stored.payload["text"], _params_from(stored.payload.get("params")),
-                        _binding(stored.payload.get("binding")))
+                        _binding(stored.payload.get("binding")), stored.payload.get("report"))
             info, seq = self.catalog.set_current(QUERY, name, int(version), author=author,
                                                  comment=f"rollback to version {version}")
             return {**self._serve(name, stored.payload, info.version, seq), "version": info.version}
@@ -113,13 +115,14 @@ class QueryService:
             raise QueryNotFound(f"no query named {name!r}")
         return self.catalog.load(QUERY, name, head.current).payload  # type: ignore[arg-type]
 
-    def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None) -> None:
+    def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None,
+               report: str | None = None) -> None:
         """Register on a scratch engine with the same rules, ontology and providers: the same checks
         as the real registration, nothing live touched."""
         scratch = StreamEngine(self.engine.settings, rules_engine=self.engine.rules_engine,
                                ontology=self.engine.ontology, providers=self.engine.providers)
         scratch.share_static_graphs(self.engine)
-        scratch.register(text, params, replace=True, binding=binding)
+        scratch.register(text, params, replace=True, binding=binding, report=report)
 
     # ---- serving --------------------------------------------------------------------------------
     def _serve(self, name: str, payload: dict[str, Any], version: int, seq: int) -> dict[str, Any]:
@@ -127,7 +130,7 @@ class QueryService:
         if served is not None and served[1] > seq:
             return self.engine.query_info(name)
         info = self.engine.register(payload["text"], _params_from(payload.get("params")), replace=True,
-                                    binding=_binding(payload.get("binding")))
+                                    binding=_binding(payload.get("binding")), report=payload.get("report"))
         self._served[name] = (version, seq)
         return info
 
