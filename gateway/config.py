@@ -61,6 +61,7 @@ class StoreSettings(BaseModel):
 
 
 ENTRANCE_STREAM = "http://printeps.org/cafe/entrance"
+TABLES_STREAM = "http://printeps.org/cafe/tables"
 
 
 class RosSubscription(BaseModel):
@@ -83,6 +84,8 @@ def _default_subscriptions() -> list[RosSubscription]:
                         mapping="entrance", check="entrance"),
         RosSubscription(topic="entrance_sensor", type="printeps_interfaces/msg/EntranceSensor", stream=ENTRANCE_STREAM,
                         mapping="entrance", select="entrance", check="entrance"),
+        RosSubscription(topic="teahouse_objects", type="printeps_interfaces/msg/TeahouseObject", stream=TABLES_STREAM,
+                        mapping="teahouse_object"),
     ]
 
 
@@ -94,6 +97,9 @@ class RosSettings(BaseModel):
     domain_id: int | None = Field(default=None, description="ROS_DOMAIN_ID (default: the environment's).")
     node_name: str = "printeps_gateway"
     subscriptions: list[RosSubscription] = Field(default_factory=_default_subscriptions)
+    heartbeats: list[str] = Field(
+        default_factory=lambda: [TABLES_STREAM],
+        description="Streams whose clock moves to now once a second, so their windows close while sensors are silent.")
     ruleset: str = Field(default="reception", description="fire_business_rules' rule set when a request names none.")
     robots: dict[str, str] = Field(
         default_factory=lambda: {"pepper": "/pepper"},
@@ -214,7 +220,7 @@ class StreamSettings(BaseModel):
         description="Message -> RDF mappings (*.yaml) that seed an empty Information State (None: none).",
     )
     stream_mappings: dict[str, str] = Field(
-        default_factory=lambda: {"http://printeps.org/cafe/entrance": "entrance"},
+        default_factory=lambda: {ENTRANCE_STREAM: "entrance", TABLES_STREAM: "teahouse_object"},
         description="Stream IRI -> message mapping used when a posted message names none.",
     )
     max_window_triples: int = Field(default=1_000_000, description="Per query and stream; oldest dropped (counted).")
