@@ -26,7 +26,7 @@ from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, Served, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ class QueryService:
     def __init__(self, engine: StreamEngine, catalog: Catalog | None = None) -> None:
         self.engine = engine
         self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
-        self._served: dict[str, tuple[int, int]] = {}  # name -> (version, seq)
+        self._served = Served()
         self._lock = threading.RLock()
 
     # ---- changing -------------------------------------------------------------------------------
@@ -126,19 +126,16 @@ class QueryService:
 
     # ---- serving --------------------------------------------------------------------------------
     def _serve(self, name: str, payload: dict[str, Any], version: int, seq: int) -> dict[str, Any]:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.accepts(name, seq):
             return self.engine.query_info(name)
         info = self.engine.register(payload["text"], _params_from(payload.get("params")), replace=True,
                                     binding=_binding(payload.get("binding")), report=payload.get("report"))
-        self._served[name] = (version, seq)
+        self._served.set(name, version, seq)
         return info
 
     def _drop(self, name: str, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, None, seq):
             return
-        self._served.pop(name, None)
         try:
             self.engine.unregister(name)
         except QueryNotFound:
@@ -150,14 +147,13 @@ class QueryService:
             if head is None or not head.live:
                 self._drop(name, head.seq if head else 1 << 62)
                 return
-            served = self._served.get(name)
-            if served is not None and served[0] == head.current and served[1] >= head.seq:
+            if self._served.is_current(name, head):
                 return
             stored = self.catalog.load(QUERY, name, head.current)  # type: ignore[arg-type]
             self._serve(name, stored.payload, head.current, head.seq)  # type: ignore[arg-type]
 
     def reconcile(self) -> None:
-        names = {h.name for h in self.catalog.heads(QUERY)} | set(self._served)
+        names = {h.name for h in self.catalog.heads(QUERY)} | set(self._served.names())
         for name in sorted(names):
             try:
                 self.sync(name)
@@ -212,7 +208,7 @@ class MappingService:
         self.mapper = mapper
         self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
         self.describe = describe  # message type -> its fields (rosidl), when ROS types are importable
-        self._served: dict[str, tuple[int, int]] = {}
+        self._served = Served()
         self._specs: dict[str, dict[str, Any]] = {}
         self._lock = threading.RLock()
 
@@ -259,18 +255,14 @@ class MappingService:
         return self.catalog.versions(MAPPING, name)
 
     def _serve(self, name: str, spec: dict[str, Any], node: NodeMap, version: int, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, version, seq):
             return
         self.mapper.mappings[name] = node
         self._specs[name] = spec
-        self._served[name] = (version, seq)
 
     def _drop(self, name: str, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, None, seq):
             return
-        self._served.pop(name, None)
         self._specs.pop(name, None)
         if name in BUILTIN_MAPPINGS:
             self.mapper.mappings[name] = BUILTIN_MAPPINGS[name]
@@ -283,15 +275,14 @@ class MappingService:
             if head is None or not head.live:
                 self._drop(name, head.seq if head else 1 << 62)
                 return
-            served = self._served.get(name)
-            if served is not None and served[0] == head.current and served[1] >= head.seq:
+            if self._served.is_current(name, head):
                 return
             spec = self.catalog.load(MAPPING, name, head.current).payload  # type: ignore[arg-type]
             node = node_map_from_spec(spec, "mapping", resolve=self.mapper.mappings, prefixes=self.mapper.prefixes)
             self._serve(name, spec, node, head.current, head.seq)  # type: ignore[arg-type]
 
     def reconcile(self) -> None:
-        for name in sorted({h.name for h in self.catalog.heads(MAPPING)} | set(self._served)):
+        for name in sorted({h.name for h in self.catalog.heads(MAPPING)} | set(self._served.names())):
             try:
                 self.sync(name)
             except MappingError as exc:
