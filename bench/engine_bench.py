@@ -148,7 +148,7 @@ def report(r: dict[str, Any], quick: bool, measured_at: str | None = None) -> st
         "",
         "### Throughput — the same 4 simple rules (classify visitors by age, greet groups), one match per event",
         "",
-        f"| engine | one event at a time | vs best peer | batched | vs best peer (batched) | RSS |",
+        "| engine | one event at a time | vs best peer | batched | vs best peer (batched) | RSS |",
         "|---|---|---|---|---|---|",
         f"| gateway (Drools in-process): `EventFeed.submit` (pipelined: each event inserted + fired on its own by the session's Java worker, its answer to a callback) / `insert_and_fire_count` ({10_000} per call) | {gw_one / 1000:.1f}k/s ({gw['feed_per_s']['median'] / 1000:.1f}k) | {ratio(gw_one, best_one)} | {gw_batch / 1000:.0f}k/s ({gw['batched_per_s']['median'] / 1000:.0f}k) | {ratio(gw_batch, batch_peers[best_batch_name])} | {gw['peak_rss_mb']:.0f} MB |",
         f"| gateway: synchronous `session.push` (insert + fire in one JVM call, the answer returned before the next event) | {gw_push / 1000:.1f}k/s ({gw['one_at_a_time_per_s']['median'] / 1000:.1f}k) | {ratio(gw_push, best_one)} | — | — | |",

@@ -131,7 +131,7 @@ def main() -> int:
             if k >= 10:  # the first trials warm the whole path up
                 latency.append((speak_at["t"] - t_last) * 1000)
             deadline = time.monotonic() + 5
-            while not gateway.ros.idle() and time.monotonic() < deadline:
+            while not gateway.idle() and time.monotonic() < deadline:
                 time.sleep(0.005)
             time.sleep(0.05)  # the rest of the trial's actions (gesture, move)
         print(line("reading -> Speak at robot (gateway)", latency))

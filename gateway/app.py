@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from gateway import jvm
+from gateway.actions import ActionRouter, workflow_handler
 from gateway.config import Settings
 from gateway.engine import Engine
 from gateway.follower import ChangeFollower
@@ -59,6 +60,7 @@ class Gateway:
     streams: StreamEngine
     queries: QueryService
     robots: RobotStates
+    actions: ActionRouter
     workflows: WorkflowService
     store: Any = None
     decisions: Any = None
@@ -76,6 +78,7 @@ class Gateway:
             "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()}},
             "store": self.store.health() if self.store is not None else {"status": "not configured"},
             "ros": self.ros.health() if self.ros is not None else {"status": "not configured"},
+            "actions": {"status": "ok", "handlers": sorted(self.actions.handlers), **self.actions.stats},
             "sync": self.follower.health() if self.follower is not None else {"status": "not configured"},
             "knowledge": {"status": "ok" if not self.knowledge.error else "degraded", "error": self.knowledge.error},
         }
@@ -87,6 +90,12 @@ class Gateway:
         if self.members is not None:
             advertised = self.settings.sessions.advertise_url
             self.members.register(url if not advertised or "{port}" in advertised else advertised)
+
+    def idle(self) -> bool:
+        """Nothing in hand: every received message handled, every action performed, no workflow
+        run going (tests, the demo and benchmarks wait for this)."""
+        return ((self.ros is None or self.ros.idle()) and self.actions.idle()
+                and self.workflows.running() == 0)
 
     def close(self) -> None:
         """Stop everything this gateway started, last started first; each step is best effort."""
@@ -185,6 +194,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         (log.error if status.startswith("failed") else log.info)("rule set %s: %s", ruleset, status)
 
     robots = RobotStates(settings.ros.robot_start)
+    actions = ActionRouter(store, queue_size=settings.ros.queue_size)
+    actions.add_listener(robots.on_outcome)
     mapper = Mapper()
     mappings = MappingService(mapper, catalog, describe=_describe_if_available())
     streams = StreamEngine(cfg, rules_engine=engine, ontology=knowledge.ontology, providers={"robots": robots.facts})
@@ -196,7 +207,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     mappings.load()
     queries.load()
     if store is not None:
-        streams.subscribe(_result_recorder(store))
+        streams.subscribe(_result_recorder(store), nonempty=True)
 
     run_ros = _want_ros(settings, ros)
     ros_gateway = None
@@ -206,13 +217,16 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         from gateway.workflow.ros import RosModules
 
         ros_gateway = RosGateway(settings, engine=engine, streams=streams, mappings=mappings, store=store,
-                                 robots=robots, domain_id=domain_id, on_event=on_ros_event)
+                                 actions=actions, domain_id=domain_id, on_event=on_ros_event)
         closers.append(("the ROS node", ros_gateway.close))
-        ros_modules = RosModules(ros_gateway.node, ros_gateway.caller)
+        ros_modules = RosModules(ros_gateway.node, ros_gateway.caller, on_move=robots.on_outcome)
 
+    closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
                               ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed)
     closers.append(("the workflow executor", workflows.close))
+    actions.register("workflow", workflow_handler(workflows))
+    streams.subscribe(actions.on_stream_event)
 
     follower = None
     if follow and use_store:
@@ -222,7 +236,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         closers.append(("the change follower", follower.stop))
 
     gateway = Gateway(settings=settings, catalog=catalog, engine=engine, knowledge=knowledge, mapper=mapper,
-                      mappings=mappings, streams=streams, queries=queries, robots=robots, workflows=workflows,
+                      mappings=mappings, streams=streams, queries=queries, robots=robots, actions=actions,
+                      workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
                       members=members, _closers=closers)
     if rest:

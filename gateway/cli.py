@@ -146,7 +146,8 @@ def _run_or_explain(start: Any) -> None:
 def demo(
     headless: bool = typer.Option(False, help="Play the scenario and exit (no browser-facing gateway left running)."),
     speed: float = typer.Option(1.0, help="Replay speed of the sensor scenario (2 = twice as fast)."),
-    scenario: Optional[Path] = typer.Option(None, help="Scenario file (default: scenarios/teahouse-reception.yaml)."),
+    scenario: Optional[Path] = typer.Option(None, help="Entrance scenario (default: scenarios/teahouse-reception.yaml)."),
+    tables: Optional[Path] = typer.Option(None, help="Tables scenario (default: scenarios/teahouse-tables.yaml)."),
     config: Optional[Path] = ConfigOption,
 ) -> None:
     """The teahouse reception end to end: the gateway (as `printeps serve` builds it, with its ROS
@@ -157,7 +158,7 @@ def demo(
     sys.setswitchinterval(0.001)  # short GIL hand-offs between the ROS executor and the workers
     summary: dict[str, Any] = {}
     _run_or_explain(lambda: summary.update(run_demo(_settings(config), headless=headless, scenario=scenario,
-                                                    speed=speed)))
+                                                    tables=tables, speed=speed)))
     if summary.get("failed"):
         raise typer.Exit(1)
 

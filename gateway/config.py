@@ -86,6 +86,7 @@ class StoreSettings(BaseModel):
 
 
 ENTRANCE_STREAM = "http://printeps.org/cafe/entrance"
+TABLES_STREAM = "http://printeps.org/cafe/tables"
 
 
 class RosSubscription(BaseModel):
@@ -108,6 +109,8 @@ def _default_subscriptions() -> list[RosSubscription]:
                         mapping="entrance", check="entrance"),
         RosSubscription(topic="entrance_sensor", type="printeps_interfaces/msg/EntranceSensor", stream=ENTRANCE_STREAM,
                         mapping="entrance", select="entrance", check="entrance"),
+        RosSubscription(topic="teahouse_objects", type="printeps_interfaces/msg/TeahouseObject", stream=TABLES_STREAM,
+                        mapping="teahouse_object"),
     ]
 
 
@@ -119,6 +122,9 @@ class RosSettings(BaseModel):
     domain_id: int | None = Field(default=None, description="ROS_DOMAIN_ID (default: the environment's).")
     node_name: str = "printeps_gateway"
     subscriptions: list[RosSubscription] = Field(default_factory=_default_subscriptions)
+    heartbeats: list[str] = Field(
+        default_factory=lambda: [TABLES_STREAM],
+        description="Streams whose clock moves to now once a second, so their windows close while sensors are silent.")
     ruleset: str = Field(default="reception", description="fire_business_rules' rule set when a request names none.")
     robots: dict[str, str] = Field(
         default_factory=lambda: {"pepper": "/pepper"},
@@ -239,13 +245,16 @@ class StreamSettings(BaseModel):
         description="Message -> RDF mappings (*.yaml) that seed an empty Information State (None: none).",
     )
     stream_mappings: dict[str, str] = Field(
-        default_factory=lambda: {"http://printeps.org/cafe/entrance": "entrance"},
+        default_factory=lambda: {ENTRANCE_STREAM: "entrance", TABLES_STREAM: "teahouse_object"},
         description="Stream IRI -> message mapping used when a posted message names none.",
     )
     max_window_triples: int = Field(default=1_000_000, description="Per query and stream; oldest dropped (counted).")
     max_message_triples: int = Field(default=100_000, description="Triples in one posted message.")
     max_queries: int = Field(default=100)
-    results_kept: int = Field(default=100, description="Recent non-empty results kept per query.")
+    results_kept: int = Field(default=100, description="Reported windows kept per query (and, apart, as many "
+                              "with at least one solution).")
+    max_catchup_windows: int = Field(default=100, description="Of a stretch of empty windows passed at once "
+                                     "(a gap in the stream), how many are reported: the first ones and the last.")
     max_pending_posts: int = Field(default=64, description="Concurrent POST /api/streams before 503.")
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 

@@ -26,6 +26,7 @@ from gateway.config import PROJECT_ROOT, Settings, load_settings
 log = logging.getLogger(__name__)
 
 DEFAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "teahouse-reception.yaml"
+DEFAULT_TABLES = PROJECT_ROOT / "scenarios" / "teahouse-tables.yaml"
 
 
 class Printer:
@@ -47,13 +48,18 @@ class Narrator:
     def __init__(self, say: Printer) -> None:
         self.say = say
         self.detections = 0
+        self.tables_left: list[str] = []
 
     def on_stream_event(self, event: dict[str, Any]) -> None:
         if event.get("kind") == "actions":
-            self.detections += 1
             people = [f.get("id") for f in event.get("facts", []) if f.get("type") == "Customer"]
+            tables = [f.get("table") for f in event.get("facts", []) if f.get("type") == "TableLeft"]
             if people:
+                self.detections += 1
                 self.say(f"detected entering customers: {', '.join(str(p) for p in people)}")
+            for table in tables:
+                self.tables_left.append(str(table))
+                self.say(f"the party at {table} has left (leaving-seat detection)")
             self.say(f"rules {event.get('ruleset')} v{event.get('version')} fired: "
                      f"{', '.join(f.get('rule', '?') for f in event.get('fired', []))} "
                      f"(decision {event.get('decision_id')})")
@@ -67,7 +73,8 @@ class Narrator:
     def on_outcome(self, o: dict[str, Any]) -> None:
         p = o["action"].get("params", {})
         what = p.get("text") or p.get("location") or p.get("name") or ""
-        self.say(f"  -> {p.get('robot', '?')} {o['action'].get('module')} {what!r}: {o['status']}"
+        who = p.get("robot") or ("gateway" if o["action"].get("module") == "workflow" else "?")
+        self.say(f"  -> {who} {o['action'].get('module')} {what!r}: {o['status']}"
                  + ("" if o["status"] == "ok" else f" ({o['message']})"))
 
 
@@ -112,12 +119,13 @@ def _read_calls(path: Path) -> list[dict[str, Any]]:
 
 
 def run_demo(settings: Settings | None = None, headless: bool = True, *, scenario: str | Path | None = None,
-             speed: float = 1.0, domain_id: int | None = None, out: Callable[[str], None] = print,
-             stop_event: threading.Event | None = None) -> dict[str, Any]:
-    """Play the teahouse reception end to end; returns the summary (also printed)."""
+             tables: str | Path | None = None, speed: float = 1.0, domain_id: int | None = None,
+             out: Callable[[str], None] = print, stop_event: threading.Event | None = None) -> dict[str, Any]:
+    """Play the teahouse reception (entrance) and the tables (a party leaves, its table is
+    cleared) end to end; returns the summary (also printed)."""
     from gateway.app import build_gateway
     from gateway.ros.runtime import ros_env_defaults
-    from gateway.ros.scenario import load_scenario
+    from gateway.ros.scenario import TableScenario, load_scenario
     from gateway.serve import free_port, serve_in_thread
 
     settings = settings or load_settings()
@@ -125,6 +133,8 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
     narrator = Narrator(say)
     scenario_path = Path(scenario or DEFAULT_SCENARIO)
     plan = load_scenario(scenario_path)  # bad files fail here, before anything starts
+    tables_path = Path(tables or DEFAULT_TABLES)
+    table_plan = load_scenario(tables_path, TableScenario)
     ros_env_defaults()
     domain = domain_id if domain_id is not None else int(os.environ.get("ROS_DOMAIN_ID", "0"))
     work = Path(settings.data_dir) / "demo" / time.strftime("%Y%m%d-%H%M%S")
@@ -134,16 +144,16 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
     stop_event = stop_event or threading.Event()
     started = time.monotonic()
 
-    say(f"scenario: {plan.name} ({plan.duration:.0f} s of sensor data, replay speed x{speed:g}); "
-        f"ROS_DOMAIN_ID={domain}")
+    say(f"scenarios: {plan.name} ({plan.duration:.0f} s of entrance data) and {table_plan.name} "
+        f"({table_plan.duration:.0f} s of table data), replay speed x{speed:g}; ROS_DOMAIN_ID={domain}")
     gateway = build_gateway(settings, rest=True, ros=True, domain_id=domain, on_ros_event=narrator.on_ros_event)
-    server = robot = sensor = None
+    server = robot = sensor = table_sensors = None
     try:
         health = gateway.store.health()
         say(f"Information State: {health['backend']} MongoDB at {health['uri']}")
         say("rules engine: " + ", ".join(f"{i.name} v{i.version}" for i in gateway.engine.live_versions()))
         gateway.streams.subscribe(narrator.on_stream_event)
-        gateway.ros.dispatcher.add_listener(narrator.on_outcome)
+        gateway.actions.add_listener(narrator.on_outcome)
         port = settings.api.port if not headless and _port_is_free(settings.api.port) else free_port()
         server, _ = serve_in_thread(gateway.app, port)
         url = f"http://127.0.0.1:{port}"
@@ -152,16 +162,21 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         client = gateway.ros.caller.client("/pepper/speak", "printeps_interfaces/srv/Speak")
         if not client.wait_for_service(timeout_sec=30):
             raise RuntimeError(f"the robot simulator did not come up; see {work / 'robot.log'}")
-        say("robot simulator (pepper) ready; starting the entrance sensor")
+        say("robot simulator (pepper) ready; starting the entrance sensor and the table sensors")
         sensor = _sim("gateway.ros.sim_sensor", [str(scenario_path), "--speed", str(speed)], env, work / "sensor.log")
-        deadline = time.monotonic() + plan.duration / speed + 60
-        while sensor.poll() is None and time.monotonic() < deadline and not stop_event.is_set():
+        table_sensors = _sim("gateway.ros.sim_tables", [str(tables_path), "--speed", str(speed)], env,
+                             work / "tables.log")
+        deadline = time.monotonic() + max(plan.duration, table_plan.duration) / speed + 60
+        while (sensor.poll() is None or table_sensors.poll() is None) and time.monotonic() < deadline \
+                and not stop_event.is_set():
             time.sleep(0.1)
-        settle = time.monotonic() + 15  # let the last readings and robot calls finish
-        while time.monotonic() < settle and not gateway.ros.idle():
+        settle = time.monotonic() + 20  # let the last readings, robot calls and workflow runs finish
+
+        while time.monotonic() < settle and not gateway.idle():
             time.sleep(0.05)
         time.sleep(0.5)
-        stats = {**gateway.ros.stats, "detections": narrator.detections, "firings": narrator.detections}
+        stats = {**gateway.ros.stats, **gateway.actions.stats, "detections": narrator.detections,
+                 "firings": narrator.detections, "tables_cleared": list(narrator.tables_left)}
         gateway.store.flush(timeout_s=10)
         say("scenario over")
         if not headless and not stop_event.is_set():
@@ -172,6 +187,7 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
                 pass
     finally:
         _stop_proc(sensor)
+        _stop_proc(table_sensors)
         _stop_proc(robot)
         if server:
             server.should_exit = True
@@ -179,15 +195,16 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
         gateway.close()
     calls = _read_calls(calls_log)
     summary = {
-        "scenario": plan.name, "domain_id": domain, "duration_s": round(time.monotonic() - started, 1),
+        "scenario": plan.name, "tables_scenario": table_plan.name, "domain_id": domain, "duration_s": round(time.monotonic() - started, 1),
         **stats, "robot_calls": [{k: v for k, v in c.items() if k not in ("x", "y")} for c in calls],
         "greetings": [c["text"] for c in calls if c["service"] == "speak"],
         "store": store_health, "work_dir": str(work),
     }
     out("")
     out("Summary")
-    out(f"  sensor readings: {stats['readings']} (rejected {stats['rejected']}); detections: {stats['detections']}; "
-        f"robot actions: {stats['actions']} (failed {stats['failed']})")
+    out(f"  sensor readings: {stats['readings']} (rejected {stats['rejected']}); parties detected: "
+        f"{stats['detections']}; tables cleared: {', '.join(stats['tables_cleared']) or 'none'}; "
+        f"actions: {stats['actions']} (failed {stats['failed']})")
     for c in calls:
         what = c.get("text") or c.get("location") or c.get("name")
         out(f"  pepper {c['service']:<8} {what}")

@@ -151,6 +151,47 @@ class Catalog(Protocol):
         ...
 
 
+class Served:
+    """What one process serves of one kind: ``name -> (version, seq)`` of the catalog change it
+    follows, with the one rule every service needs — only a newer change replaces what is served
+    (a deploy answered here and the follower's sync of it may race; the later change wins)."""
+
+    def __init__(self) -> None:
+        self._items: dict[str, tuple[int, int]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, name: str) -> tuple[int, int] | None:
+        with self._lock:
+            return self._items.get(name)
+
+    def names(self) -> list[str]:
+        with self._lock:
+            return sorted(self._items)
+
+    def accepts(self, name: str, seq: int) -> bool:
+        """No newer change than ``seq`` is served for ``name``."""
+        with self._lock:
+            served = self._items.get(name)
+            return served is None or served[1] <= seq
+
+    def set(self, name: str, version: int | None, seq: int) -> bool:
+        """Serve ``version`` (None: nothing) from change ``seq``; False when a newer one is served."""
+        with self._lock:
+            served = self._items.get(name)
+            if served is not None and served[1] > seq:
+                return False
+            if version is None:
+                self._items.pop(name, None)
+            else:
+                self._items[name] = (version, seq)
+            return True
+
+    def is_current(self, name: str, head: Head) -> bool:
+        """Already serving what ``head`` points at."""
+        served = self.get(name)
+        return served is not None and served[0] == head.current and served[1] >= head.seq
+
+
 # --------------------------------------------------------------------------- in memory
 
 

@@ -8,6 +8,7 @@ a sync dependency costs a threadpool hop per request.
 
 from __future__ import annotations
 
+from datetime import datetime, timezone
 from typing import Annotated, Any
 
 from fastapi import Depends, Request
@@ -91,6 +92,18 @@ MetricsDep = Annotated[Any, Depends(_metrics)]
 Caller = Annotated[Principal, Depends(caller)]
 Author = Annotated[Principal, Depends(author)]
 KieCaller = Annotated[Principal, Depends(kie_caller)]
+
+
+def iso_datetime(name: str, value: str | None) -> datetime | None:
+    """A query parameter in ISO-8601 (naive = UTC), or ApiError 422 naming the parameter."""
+    if value is None:
+        return None
+    try:
+        t = datetime.fromisoformat(value.replace("Z", "+00:00"))
+    except ValueError:
+        raise ApiError(422, f"query parameter {name}={value!r}: not an ISO-8601 date-time",
+                       errors=[{"field": name, "message": "not an ISO-8601 date-time"}]) from None
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
 
 
 def correlation_id(request: Request) -> str | None:

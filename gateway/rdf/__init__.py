@@ -7,11 +7,15 @@ from gateway.rdf.terms import (
     Term,
     TermError,
     Triple,
+    canonical_term,
     parse_triple,
+    term_from_sparql_json,
     term_to_json,
+    term_to_sparql_json,
 )
 
 __all__ = [
     "BUILTIN_MAPPINGS", "DEFAULT_PREFIXES", "Mapper", "MappingError", "NodeMap", "PRINTEPS", "Term",
-    "TermError", "Triple", "message_to_dict", "parse_triple", "term_to_json",
+    "TermError", "Triple", "canonical_term", "message_to_dict", "parse_triple", "term_from_sparql_json",
+    "term_to_json", "term_to_sparql_json",
 ]

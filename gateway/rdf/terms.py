@@ -4,6 +4,14 @@ Why pyoxigraph terms everywhere: the stream engine loads window contents into py
 the fast path reads literal values directly, so one term type avoids conversions on the hot path.
 Numbers become ``xsd:decimal`` (exact: ``2.6 - 2.5 > 0.1`` is false, as a sensor threshold means),
 never ``xsd:double``; integers stay ``xsd:integer``.
+
+Lexical forms: :func:`canonical_term` applies the XSD 1.1 canonical mappings (``"03"`` → ``"3"``,
+``"3.10"``/``"3.0"`` decimal → ``"3.1"``/``"3"``, ``"1"`` boolean → ``"true"``, ``"10"`` double →
+``"1.0E1"``) and, as RDF stores do (pyoxigraph, Jena TDB1, Stardog), writes the integer-derived
+datatypes (``xsd:int``, ``xsd:long`` …) as ``xsd:integer``. The stream engine applies it to every
+literal it ingests and every term it returns, on both evaluation paths, so two paths (or two
+runs) can be compared term by term. :func:`term_to_sparql_json` is the SPARQL 1.1 Query Results
+JSON form of a term.
 """
 
 from __future__ import annotations
@@ -31,6 +39,8 @@ XSD_INTEGER = NamedNode(XSD + "integer")
 XSD_DOUBLE = NamedNode(XSD + "double")
 XSD_BOOLEAN = NamedNode(XSD + "boolean")
 XSD_STRING = NamedNode(XSD + "string")
+XSD_FLOAT = NamedNode(XSD + "float")
+RDF_LANG_STRING = RDF + "langString"
 
 # Prefixes understood in REST triples ("printeps:Customer") and in query results shortening.
 DEFAULT_PREFIXES = {
@@ -193,3 +203,156 @@ def local_name(iri: str) -> str:
     """The part after the last ``#`` or ``/`` (``…/entrance/c1`` → ``c1``)."""
     cut = max(iri.rfind("#"), iri.rfind("/"))
     return iri[cut + 1:] if cut >= 0 and cut < len(iri) - 1 else iri
+
+
+# -- XSD 1.1 canonical lexical forms -------------------------------------------------------------
+
+INTEGER_DERIVED = {
+    XSD + name for name in (
+        "int", "long", "short", "byte", "nonNegativeInteger", "positiveInteger", "negativeInteger",
+        "nonPositiveInteger", "unsignedInt", "unsignedLong", "unsignedShort", "unsignedByte",
+    )
+}
+_INTEGER_RE = re.compile(r"^[+-]?[0-9]+$")
+_DECIMAL_RE = re.compile(r"^[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)$")
+_DOUBLE_RE = re.compile(r"^(?:[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?INF|NaN)$")
+_CANONICAL_CACHE: dict[Literal, Literal] = {}
+_CANONICAL_CACHE_MAX = 100_000
+
+
+def canonical_integer(value: int) -> str:
+    return str(value)
+
+
+def canonical_decimal(value: Decimal) -> str:
+    """XSD 1.1 decimalCanonicalMap: no '+', no leading/trailing zeros, no point for integers."""
+    if value == value.to_integral_value():
+        return str(int(value))
+    text = format(value, "f").rstrip("0")
+    sign = "-" if text.startswith("-") else ""
+    text = text.lstrip("-")
+    if text.startswith("."):
+        text = "0" + text
+    return sign + text
+
+
+def canonical_double(value: float) -> str:
+    """XSD 1.1 doubleCanonicalMap: ``1.0E1``, ``1.25E-3``, ``0.0E0``, ``-0.0E0``, ``INF``, ``NaN``."""
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        return "INF" if value > 0 else "-INF"
+    if value == 0:
+        return "-0.0E0" if math.copysign(1.0, value) < 0 else "0.0E0"
+    sign, digits, exponent = Decimal(repr(value)).normalize().as_tuple()
+    text = "".join(map(str, digits))
+    exp = exponent + len(text) - 1  # type: ignore[operator]
+    mantissa = text[0] + "." + (text[1:] or "0")
+    return ("-" if sign else "") + mantissa + "E" + str(exp)
+
+
+def _canonical_float(lexical: str) -> str:
+    import numpy as np
+
+    value = np.float32(float(lexical.replace("INF", "inf")))
+    if not np.isfinite(value) or value == 0:
+        return canonical_double(float(value))
+    # the shortest decimal that reads back as the same float32
+    text = np.format_float_scientific(value, unique=True, trim="0", exp_digits=1)
+    mantissa, exp = text.split("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return f"{mantissa}E{int(exp)}"
+
+
+def canonical_term(term: Term) -> Term:
+    """The XSD 1.1 canonical form of a literal (other terms unchanged); ill-typed literals unchanged.
+
+    Why one function: the general path (pyoxigraph rewrites numbers to its own forms when it
+    stores them) and the fast path must hand back identical terms, and f:timestamp must find a
+    triple whatever the lexical form it was posted with."""
+    if not isinstance(term, Literal):
+        return term
+    cached = _CANONICAL_CACHE.get(term)
+    if cached is not None:
+        return cached
+    result = _canonical(term)
+    if len(_CANONICAL_CACHE) >= _CANONICAL_CACHE_MAX:
+        _CANONICAL_CACHE.clear()
+    _CANONICAL_CACHE[term] = result
+    return result
+
+
+def _canonical(term: Literal) -> Literal:
+    if term.language:
+        return term
+    datatype = term.datatype.value
+    lexical = term.value.strip() if datatype != XSD + "string" else term.value
+    try:
+        if datatype == XSD + "integer" or datatype in INTEGER_DERIVED:
+            if not _INTEGER_RE.match(lexical):
+                return term
+            return Literal(canonical_integer(int(lexical)), datatype=XSD_INTEGER)
+        if datatype == XSD + "decimal":
+            if not _DECIMAL_RE.match(lexical):
+                return term
+            return Literal(canonical_decimal(Decimal(lexical)), datatype=XSD_DECIMAL)
+        if datatype == XSD + "boolean":
+            if lexical in ("true", "1"):
+                return Literal("true", datatype=XSD_BOOLEAN)
+            if lexical in ("false", "0"):
+                return Literal("false", datatype=XSD_BOOLEAN)
+            return term
+        if datatype == XSD + "double":
+            if not _DOUBLE_RE.match(lexical):
+                return term
+            return Literal(canonical_double(float(lexical.replace("INF", "inf"))), datatype=XSD_DOUBLE)
+        if datatype == XSD + "float":
+            if not _DOUBLE_RE.match(lexical):
+                return term
+            return Literal(_canonical_float(lexical), datatype=XSD_FLOAT)
+    except (ValueError, InvalidOperation, OverflowError):
+        return term
+    return term
+
+
+def canonical_triple(triple: Triple) -> Triple:
+    """The triple with a canonical object (subjects and predicates are never literals)."""
+    o = triple[2]
+    if isinstance(o, Literal):
+        c = canonical_term(o)
+        if c is not o:
+            return (triple[0], triple[1], c)
+    return triple
+
+
+def term_to_sparql_json(term: Term) -> dict[str, str]:
+    """A term in the SPARQL 1.1 Query Results JSON format (``type``, ``value``, ``datatype``,
+    ``xml:lang``). Simple literals (``xsd:string``) carry no datatype, language-tagged ones only
+    ``xml:lang`` (RDF 1.1: their datatype is always rdf:langString)."""
+    if isinstance(term, NamedNode):
+        return {"type": "uri", "value": term.value}
+    if isinstance(term, BlankNode):
+        return {"type": "bnode", "value": term.value}
+    out = {"type": "literal", "value": term.value}
+    if term.language:
+        out["xml:lang"] = term.language
+    elif term.datatype is not None and term.datatype.value != XSD + "string":
+        out["datatype"] = term.datatype.value
+    return out
+
+
+def term_from_sparql_json(data: dict[str, str]) -> Term:
+    """The inverse of :func:`term_to_sparql_json` (for clients and tests)."""
+    kind = data.get("type")
+    if kind == "uri":
+        return NamedNode(data["value"])
+    if kind == "bnode":
+        return BlankNode(data["value"])
+    if kind in ("literal", "typed-literal"):
+        if data.get("xml:lang"):
+            return Literal(data["value"], language=data["xml:lang"])
+        if data.get("datatype"):
+            return Literal(data["value"], datatype=NamedNode(data["datatype"]))
+        return Literal(data["value"])
+    raise ValueError(f"not a SPARQL JSON term: {data!r}")

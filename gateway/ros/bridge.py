@@ -7,22 +7,25 @@ builds none of them itself (cf. ros2/examples ``composed.py``: several nodes, on
 main). Workflows reach robot services through the same node (:attr:`caller`).
 
 The data path: topic → message dict → mapping → RDF on the subscription's stream → windows →
-rule binding → decision → ``actions`` event → :class:`DispatchWorker` → robot services → outcome
-recorded with its decision.
+rule binding → decision → ``actions`` event → the action router (:mod:`gateway.actions`) → for
+robot modules this side's :class:`ActionDispatcher` → robot services → outcome recorded with its
+decision. The bridge also moves the clock of the streams named in ``ros.heartbeats`` once a
+second, so windows close (and, e.g., an empty table is noticed) while every sensor is silent.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from typing import Any, Callable
 
 from gateway.config import RosSubscription, Settings
 from gateway.rdf.mapping import MappingError, check_against, element_type, introspected_spec, node_map_from_spec
 from gateway.ros.convert import describe
-from gateway.ros.dispatcher import ActionDispatcher, DispatchWorker
+from gateway.ros.dispatcher import ActionDispatcher
 from gateway.ros.ingress import Ingress, checks, topic_mapping
 from gateway.ros.node import GatewayNode
-from gateway.ros.robots import RobotStates
 from gateway.ros.runtime import RosRuntime
 
 log = logging.getLogger(__name__)
@@ -42,7 +45,7 @@ class RosGateway:
     """Runs the gateway node until :meth:`close`; see the module docstring."""
 
     def __init__(self, settings: Settings, *, engine: Any, streams: Any, mappings: Any, store: Any,
-                 robots: RobotStates, domain_id: int | None = None,
+                 actions: Any, domain_id: int | None = None,
                  on_event: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         cfg = settings.ros
         self.settings = settings
@@ -59,20 +62,34 @@ class RosGateway:
         self.node = self.runtime.make(GatewayNode, cfg, enqueue=self.ingress.enqueue, fire=fire)
         self.caller = self.node.caller
         self.dispatcher = ActionDispatcher(self.caller, dict(cfg.robots), timeout_s=cfg.call_timeout_s,
-                                           retries=cfg.call_retries, store=store)
+                                           retries=cfg.call_retries)
         self.node.dispatcher = self.dispatcher
-        self.dispatcher.add_listener(robots.on_outcome)
-        self.worker = DispatchWorker(self.dispatcher, queue_size=cfg.queue_size)
-        self._token = streams.subscribe(self.worker.on_stream_event)
+        for module in self.dispatcher.modules:
+            actions.register(module, self.dispatcher.dispatch)
         self.ingress.start()
+        self._stop = threading.Event()
+        self._heartbeat = threading.Thread(target=self._beat, args=(list(cfg.heartbeats),), name="ros-heartbeat",
+                                           daemon=True)
+        self._heartbeat.start()
+
+    def _beat(self, streams: list[str]) -> None:
+        """Move the clock of ``streams`` to now, once a second (sensors stamp readings with the wall
+        clock): a window closes even when no reading comes."""
+        while streams and not self._stop.wait(1.0):
+            now_ms = int(time.time() * 1000)
+            for stream in streams:
+                try:
+                    self.streams.advance(now_ms, stream)
+                except Exception:  # a heartbeat must never stop: the next one tries again
+                    log.exception("heartbeat of %s failed", stream)
 
     @property
     def stats(self) -> dict[str, int]:
-        return {**self.ingress.stats, **self.worker.stats}
+        return dict(self.ingress.stats)
 
     def idle(self) -> bool:
-        """Nothing queued: every received message was handled and every action dispatched."""
-        return self.ingress.idle() and self.worker.idle()
+        """Nothing queued: every received message was handled."""
+        return self.ingress.idle()
 
     def health(self) -> dict[str, Any]:
         return {"status": "ok", "node": self.node.get_name(), "domain_id": self.runtime.context.get_domain_id(),
@@ -81,9 +98,8 @@ class RosGateway:
 
     def close(self) -> None:
         """Stop taking messages, finish the one in hand, stop the executor, destroy the node."""
-        self.streams.unsubscribe(self._token)
+        self._stop.set()
         self.ingress.stop()
-        self.worker.stop()
         self.runtime.shutdown()
 
 

@@ -97,6 +97,57 @@ class Scenario(BaseModel):
                    "stamp": start + t, "t": t, "location": self.location}
 
 
+class Party(BaseModel):
+    """People seated at a table from ``from`` s to ``to`` s of scenario time."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    label: str = ""
+    table: str = Field(min_length=1)
+    people: list[str] = Field(min_length=1, max_length=20)
+    from_: float = Field(alias="from", ge=0)
+    to: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _in_order(self) -> "Party":
+        if self.to <= self.from_:
+            raise ValueError(f"'to' ({self.to}) must be after 'from' ({self.from_})")
+        return self
+
+
+class TableScenario(BaseModel):
+    """What the table sensors see: every table (each sensor reports its own table) and the parties
+    seated at them (see scenarios/teahouse-tables.yaml)."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    description: str = ""
+    rate_hz: float = Field(default=2.0, gt=0, le=100)
+    duration: float = Field(gt=0, le=3600)
+    tables: list[str] = Field(min_length=1)
+    parties: list[Party] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _known_tables(self) -> "TableScenario":
+        for i, party in enumerate(self.parties):
+            if party.table not in self.tables:
+                raise ValueError(f"parties.{i}.table: {party.table!r} is not one of the tables {self.tables}")
+        return self
+
+    def readings(self, start: float = 0.0, rate_hz: float | None = None) -> Iterator[dict[str, Any]]:
+        """TeahouseObject readings at ``rate_hz``: each table, then everyone seated; stamps = start + t."""
+        rate = rate_hz or self.rate_hz
+        for i in range(int(self.duration * rate) + 1):
+            t = i / rate
+            for table in self.tables:
+                yield {"id": table, "type": "Table", "location": table, "x": 0.0, "y": 0.0, "distance": 0.0,
+                       "stamp": start + t, "t": t}
+                for party in self.parties:
+                    if party.table == table and party.from_ <= t < party.to:
+                        for j, person in enumerate(party.people):
+                            yield {"id": person, "type": "Customer", "location": table, "x": 0.5 * j, "y": 0.5,
+                                   "distance": 0.6, "stamp": start + t, "t": t}
+
+
 def _node_at(root: yaml.Node, loc: tuple[Any, ...]) -> yaml.Node:
     node = root
     for key in loc:
@@ -112,8 +163,9 @@ def _node_at(root: yaml.Node, loc: tuple[Any, ...]) -> yaml.Node:
     return node
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file; errors name file, line, column and field."""
+def load_scenario(path: str | Path, model: type[BaseModel] = Scenario) -> Any:
+    """Read and validate a scenario file (an entrance ``Scenario`` or a ``TableScenario``); errors
+    name file, line, column and field."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -127,9 +179,10 @@ def load_scenario(path: str | Path) -> Scenario:
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
         raise ScenarioError(f"{where}: YAML syntax error: {exc.problem}") from None
     if not isinstance(data, dict) or root is None:
-        raise ScenarioError(f"{path}:1:1: a scenario must be a mapping with 'name' and 'events'")
+        raise ScenarioError(f"{path}:1:1: a scenario must be a mapping with 'name' and "
+                            f"{'events' if model is Scenario else 'tables'}")
     try:
-        return Scenario.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as exc:
         lines = []
         for err in exc.errors():

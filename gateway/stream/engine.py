@@ -1,43 +1,77 @@
-"""The continuous query engine: registered C-SPARQL queries over timestamped RDF streams.
+"""The continuous query engine: registered C-SPARQL / RSP-QL queries over timestamped RDF streams.
 
-Window semantics (event time; deterministic on replay — no wall clock is ever read):
+Semantics (event time; deterministic on replay — no wall clock is ever read; docs/streams.md has
+the full text):
 
 - A time window ``[RANGE r STEP s]`` closes at every multiple of ``s`` ms (epoch-aligned); the
-  window closing at ``t`` holds the stream's triples with ``t - r <= timestamp < t``.
-- A window is evaluated when the query's clock reaches its close: when a message with
-  ``timestamp >= t`` arrives on any of the query's streams (or a heartbeat via :meth:`advance`).
-  Windows that would hold no triple at all are skipped, not evaluated.
-- Out-of-order messages are fine as long as their window is still open. A message older than the
-  last closed window of a query (``timestamp < closed_until``) is *late*: dropped for that query and
-  counted (``late_dropped``); results already emitted are never revised.
-- ``[RANGE TRIPLES n]`` keeps the last ``n`` triples. A query with only count windows is evaluated
-  after every message; mixed with time windows, at the time windows' closes.
-- Memory is bounded: per query and stream at most ``max_window_triples`` triples are buffered; the
-  oldest message is dropped beyond that and counted (``overflow_dropped``), with a warning.
-
-Results (non-empty ones) go to subscribers — ``callback(event: dict)`` — and to a short history per
-query; a query bound to a rule set turns rows into facts and fires the rules (see ``rules.py``).
+  window closing at ``c`` holds the triples with ``c - r <= timestamp < c``. ``[RANGE TRIPLES n]``
+  holds the last ``n`` triples. The query's clock is the latest timestamp seen on any of its
+  streams (or given by a heartbeat, :meth:`StreamEngine.advance`).
+- Every window is evaluated, empty or not, according to the query's report policy (on window
+  close — the default —, on content change, periodic; optionally only non-empty content). A long
+  gap stays cheap: a run of empty windows is evaluated once and at most ``max_catchup_windows``
+  of them are reported (the rest counted as ``skipped_windows``, the last one says how many).
+- Late data (older than the end of the last closed window) is dropped and counted; results
+  already reported are never revised, and no window ever sees a late triple.
+- Every reported window is kept (the last ``results_kept``) and published to subscribers as a
+  :class:`~gateway.stream.results.ResultEvent`: plain JSON rows plus the RDF terms.
+- ``REGISTER STREAM s AS CONSTRUCT …`` feeds its triples, stamped with the evaluation instant, to
+  the stream ``s`` (other queries read it ``FROM STREAM <s>``; rules can be bound to it). Cycles
+  are refused at registration.
 """
 
 from __future__ import annotations
 
-import bisect
 import itertools
 import logging
+import re
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
+
+from pyoxigraph import Literal, NamedNode
 
 from gateway.config import StreamSettings
-from gateway.rdf.terms import Triple, term_to_json
-from gateway.stream.evaluate import Evaluation, WindowData, check_sparql, evaluate_oxigraph
-from gateway.stream.fastpath import Fallback, NotCompilable, Plan, compile_query, run_plan
+from gateway.rdf.terms import XSD, Term, Triple, canonical_term, canonical_triple
+from gateway.stream.analysis import construct_fields, relevant_predicates
+from gateway.stream.evaluate import (
+    Evaluation,
+    WindowData,
+    check_sparql,
+    evaluate_oxigraph,
+)
+from gateway.stream.fastpath import (
+    Fallback,
+    NotCompilable,
+    Plan,
+    compile_query,
+    run_plan,
+)
 from gateway.stream.lexer import QueryParseError, position
 from gateway.stream.params import OntologySource, ParamError
-from gateway.stream.query import ContinuousQuery, ParamSpec, WindowSpec, parse_query
+from gateway.stream.query import (
+    ContinuousQuery,
+    ParamSpec,
+    ReportPolicy,
+    WindowSpec,
+    duration_ms,
+    parse_query,
+)
+from gateway.stream.results import (
+    ResultEvent,
+    Row,
+    plain_rows,
+    rows_to_triples,
+    sort_rows,
+    stream_diff,
+    to_sparql_json,
+    triples_as_facts,
+)
 from gateway.stream.rules import BindingError, RuleBinding, binding_facts, check_binding
+from gateway.stream.windows import StreamBuffer, merge, merge_latest, pane_size
 
 log = logging.getLogger(__name__)
 
@@ -52,64 +86,12 @@ class QueryNotFound(StreamError):
     pass
 
 
-@dataclass
-class _Buffer:
-    """The timestamp-ordered messages of one stream kept for one query's window."""
-
-    spec: WindowSpec
-    stamps: list[int] = field(default_factory=list)
-    items: list[list[Triple]] = field(default_factory=list)
-    n_triples: int = 0
-
-    def add(self, ts: int, triples: list[Triple]) -> None:
-        if not self.stamps or ts >= self.stamps[-1]:
-            self.stamps.append(ts)
-            self.items.append(triples)
-        else:
-            i = bisect.bisect_right(self.stamps, ts)
-            self.stamps.insert(i, ts)
-            self.items.insert(i, triples)
-        self.n_triples += len(triples)
-
-    def drop_first(self, count: int) -> None:
-        if count <= 0:
-            return
-        self.n_triples -= sum(len(x) for x in self.items[:count])
-        del self.stamps[:count]
-        del self.items[:count]
-
-    def evict_before(self, ts: int) -> None:
-        self.drop_first(bisect.bisect_left(self.stamps, ts))
-
-    def keep_last_triples(self, n: int) -> None:
-        drop, remaining = 0, self.n_triples
-        while drop < len(self.items) - 1 and remaining - len(self.items[drop]) >= n:
-            remaining -= len(self.items[drop])
-            drop += 1
-        self.drop_first(drop)
-
-    def window(self, end: int, out: dict[Triple, int]) -> None:
-        """Add this window's triples (ts < end) to ``out``, keeping each triple's latest timestamp."""
-        stop = bisect.bisect_left(self.stamps, end)
-        if self.spec.is_time:
-            first = bisect.bisect_left(self.stamps, end - self.spec.range_ms)  # type: ignore[operator]
-            for i in range(first, stop):
-                ts = self.stamps[i]
-                for t in self.items[i]:
-                    if out.get(t, -1) <= ts:
-                        out[t] = ts
-            return
-        remaining = self.spec.triples or 0
-        picked: list[tuple[Triple, int]] = []
-        for i in range(stop - 1, -1, -1):
-            for t in reversed(self.items[i]):
-                if remaining == 0:
-                    break
-                picked.append((t, self.stamps[i]))
-                remaining -= 1
-        for t, ts in picked:
-            if out.get(t, -1) <= ts:
-                out[t] = ts
+def _new_stats() -> dict[str, int]:
+    return {
+        "windows": 0, "reported": 0, "empty_windows": 0, "skipped_windows": 0, "fast": 0, "general": 0,
+        "fallbacks": 0, "results": 0, "late_dropped": 0, "overflow_dropped": 0, "errors": 0, "rule_fires": 0,
+        "rule_errors": 0, "derived_triples": 0,
+    }
 
 
 @dataclass
@@ -117,10 +99,15 @@ class QueryRuntime:
     """A registered query and its evaluation state."""
 
     query: ContinuousQuery
-    buffers: dict[str, _Buffer]
-    results: deque[dict[str, Any]]
+    buffers: dict[str, StreamBuffer]
+    results: deque[ResultEvent]
+    nonempty: deque[ResultEvent]
+    windows: list[WindowSpec] = field(default_factory=list)  # with parameter ranges bound
+    relevant: frozenset[NamedNode] | None = None
     next_close: int | None = None
+    next_periodic: int | None = None
     closed_until: int | None = None
+    clock: int | None = None
     plan: Plan | None = None
     plan_text: str | None = None
     not_compilable: str | None = None
@@ -131,12 +118,22 @@ class QueryRuntime:
     param_values: dict[str, str] = field(default_factory=dict)
     param_error: str | None = None
     param_version: int = -1
-    stats: dict[str, int] = field(default_factory=lambda: {
-        "windows": 0, "fast": 0, "general": 0, "fallbacks": 0, "results": 0, "late_dropped": 0,
-        "overflow_dropped": 0, "errors": 0, "rule_fires": 0, "rule_errors": 0, "skipped_windows": 0,
-    })
+    last_rows: list[Row] | None = None
+    cc_dirty: bool = False
+    cc_starts: tuple[int | None, ...] | None = None  # per window: the oldest timestamp last reported
+    empty_cache: tuple[Any, Evaluation] | None = None
+    static_cache: tuple[Any, frozenset[Triple]] | None = None
+    seq: int = 0
+    stats: dict[str, int] = field(default_factory=_new_stats)
     eval_ms: deque[float] = field(default_factory=lambda: deque(maxlen=512))
     last_error: str | None = None
+
+    @property
+    def step(self) -> int | None:
+        return self.query.step_ms
+
+    def max_range(self) -> int:
+        return max((w.range_ms or 0 for w in self.windows if w.is_time), default=0)
 
     def info(self) -> dict[str, Any]:
         q = self.query
@@ -146,7 +143,11 @@ class QueryRuntime:
             "kind": q.kind,
             "form": q.form,
             "text": q.text,
-            "windows": [w.to_dict() for w in q.windows],
+            "windows": [w.to_dict() for w in self.windows],
+            "report": q.report.to_dict(),
+            "operator": q.r2s,
+            "output_stream": q.output_stream,
+            "input_streams": q.streams,
             "static_graphs": q.static_graphs,
             "params": [p.to_dict() for p in q.params],
             "param_values": dict(self.param_values),
@@ -154,6 +155,8 @@ class QueryRuntime:
             "fast_path": self.plan is not None,
             "not_compilable": self.not_compilable,
             "binding": self.binding.to_dict() if self.binding else None,
+            "relevant_predicates": sorted(p.value for p in self.relevant) if self.relevant is not None else None,
+            "clock": self.clock,
             "closed_until": self.closed_until,
             "stats": dict(self.stats),
             "eval_ms_p50": ms[len(ms) // 2] if ms else None,
@@ -174,8 +177,11 @@ class StreamEngine:
         self.providers = dict(providers or {})  # context facts a binding can ask for (e.g. "robots")
         self.ontology = ontology if ontology is not None else OntologySource(self.settings.ontology_file)
         self._queries: dict[str, QueryRuntime] = {}
+        self._order: list[QueryRuntime] = []  # producers of derived streams before their consumers
         self._static: dict[str, frozenset[Triple]] = {}
-        self._subscribers: dict[int, tuple[Subscriber, str | None]] = {}
+        self._static_version = 0
+        self._ontology_canonical: tuple[int, frozenset[Triple]] | None = None
+        self._subscribers: dict[int, tuple[Subscriber, str | None, bool]] = {}
         self._ids = itertools.count(1)
         self._lock = threading.RLock()
         self.stream_stats: dict[str, dict[str, int]] = {}
@@ -185,7 +191,8 @@ class StreamEngine:
     def add_static_graph(self, iri: str, triples: set[Triple] | frozenset[Triple]) -> None:
         """Make ``triples`` available as ``FROM <iri>`` / ``FROM NAMED <iri>`` to queries."""
         with self._lock:
-            self._static[iri] = frozenset(triples)
+            self._static[iri] = frozenset(canonical_triple(t) for t in triples)
+            self._static_version += 1
 
     def share_static_graphs(self, other: "StreamEngine") -> None:
         """Use ``other``'s static graphs (a scratch engine that checks queries for it)."""
@@ -193,7 +200,11 @@ class StreamEngine:
 
     def _graph(self, iri: str) -> frozenset[Triple]:
         if iri == self.settings.ontology_graph:
-            return self.ontology.triples
+            triples = self.ontology.triples
+            version = self.ontology.version
+            if self._ontology_canonical is None or self._ontology_canonical[0] != version:
+                self._ontology_canonical = (version, frozenset(canonical_triple(t) for t in triples))
+            return self._ontology_canonical[1]
         return self._static[iri]
 
     def _known_graphs(self) -> list[str]:
@@ -201,9 +212,14 @@ class StreamEngine:
 
     # -- queries -----------------------------------------------------------------------------------
     def register(self, text: str, params: list[ParamSpec] | None = None, replace: bool = False,
-                 binding: RuleBinding | None = None) -> dict[str, Any]:
-        """Parse, check and register a C-SPARQL query; raises QueryParseError / StreamError."""
-        query = parse_query(text, params)
+                 binding: RuleBinding | None = None, report: ReportPolicy | str | None = None) -> dict[str, Any]:
+        """Parse, check and register a continuous query; raises QueryParseError / StreamError.
+
+        ``report`` (a :class:`ReportPolicy` or its text, e.g. ``"content change"``) overrides the
+        query's REPORT clause."""
+        if isinstance(report, str):
+            report = ReportPolicy.parse(report)
+        query = parse_query(text, params, report)
         try:
             check_sparql(query.sparql)
         except SyntaxError as exc:
@@ -212,15 +228,22 @@ class StreamEngine:
             if iri not in self._known_graphs():
                 line, col = position(text, text.find(iri)) if iri in text else (0, 0)
                 raise QueryParseError(f"unknown static graph <{iri}>; known: {self._known_graphs()}", line, col)
+        for w in query.windows:
+            if w.name is not None and w.name in query.named_graphs:
+                raise QueryParseError(f"<{w.name}> is both a named window and a FROM NAMED graph", w.line, w.column)
         with self._lock:
             if query.name in self._queries and not replace:
                 raise StreamError(f"a query named {query.name!r} is already registered")
             if query.name not in self._queries and len(self._queries) >= self.settings.max_queries:
                 raise StreamError(f"at most {self.settings.max_queries} queries may be registered")
+            self._check_cycles(query)
             runtime = QueryRuntime(
                 query=query,
-                buffers={w.stream: _Buffer(w) for w in query.windows},
+                buffers={s: StreamBuffer(s) for s in query.streams},
                 results=deque(maxlen=self.settings.results_kept),
+                nonempty=deque(maxlen=self.settings.results_kept),
+                windows=list(query.windows),
+                relevant=relevant_predicates(query.sparql),
             )
             self._bind_params(runtime)
             if binding is not None:
@@ -229,16 +252,69 @@ class StreamEngine:
             if old is not None and old.session is not None:
                 self._close_session(old.session)
             self._queries[query.name] = runtime
+            self._reorder()
             return runtime.info()
 
+    def _check_cycles(self, query: ContinuousQuery) -> None:
+        """Refuse a query whose output would, through other queries, reach its own inputs."""
+        producers = {q.query.output_stream: q.query for q in self._queries.values()
+                     if q.query.output_stream and q.query.name != query.name}
+        if query.output_stream:
+            producers[query.output_stream] = query
+
+        def path_to(stream: str, target: str, seen: set[str]) -> list[str] | None:
+            """The chain of streams from ``stream`` back to the producer of ``target``."""
+            producer = producers.get(stream)
+            if producer is None or stream in seen:
+                return None
+            if producer.name == target:
+                return [stream]
+            seen.add(stream)
+            for upstream in producer.streams:
+                chain = path_to(upstream, target, seen)
+                if chain is not None:
+                    return [stream] + chain
+            return None
+
+        if not query.output_stream:
+            return
+        for w in query.windows:
+            chain = path_to(w.stream, query.name, set())
+            if chain is not None:
+                names = " → ".join(f"<{s}>" for s in list(reversed(chain)) + [query.output_stream])
+                raise QueryParseError(f"stream cycle: {names} (query {query.name!r} would read its own output)",
+                                      w.line, w.column)
+
+    def _reorder(self) -> None:
+        """Producers first: a derived stream's triples reach its readers before the readers move on."""
+        runtimes = list(self._queries.values())
+        by_output = {r.query.output_stream: r for r in runtimes if r.query.output_stream}
+        order: list[QueryRuntime] = []
+        placed: set[str] = set()
+
+        def place(r: QueryRuntime) -> None:
+            if r.query.name in placed:
+                return
+            placed.add(r.query.name)
+            for s in r.query.streams:
+                producer = by_output.get(s)
+                if producer is not None and producer is not r:
+                    place(producer)
+            order.append(r)
+
+        for r in runtimes:
+            place(r)
+        self._order = order
+
     def bind_rules(self, name: str, binding: RuleBinding | None) -> dict[str, Any]:
-        """Bind (or with None, unbind) a query's results to a rule set."""
+        """Bind (or with None, unbind) a query's (or a stream's) results to a rule set."""
         with self._lock:
             runtime = self._get(name)
             if runtime.session is not None:
                 self._close_session(runtime.session)
                 runtime.session = None
             runtime.binding = None
+            runtime.relevant = relevant_predicates(runtime.query.sparql)
             if binding is not None:
                 self._check_binding(runtime, binding)
             return runtime.info()
@@ -246,12 +322,16 @@ class StreamEngine:
     def _check_binding(self, runtime: QueryRuntime, binding: RuleBinding) -> None:
         if self.rules_engine is None:
             raise BindingError("no rules engine is configured")
-        if runtime.query.form != "SELECT":
-            raise BindingError("only SELECT queries can feed rules")
-        variables = _select_variables(runtime.query)
+        if runtime.query.form == "SELECT":
+            variables = _select_variables(runtime.query)
+        elif runtime.query.form == "CONSTRUCT":
+            variables = construct_fields(runtime.query.sparql)
+        else:
+            raise BindingError(f"only SELECT queries and CONSTRUCT streams can feed rules, not {runtime.query.form}")
         runtime.field_types = check_binding(binding, variables, self.rules_engine, self.providers)
         runtime.handled = {}
         runtime.binding = binding
+        runtime.relevant = _with_attributes(relevant_predicates(runtime.query.sparql), binding)
 
     def unregister(self, name: str) -> None:
         with self._lock:
@@ -260,6 +340,7 @@ class StreamEngine:
                 raise QueryNotFound(f"no query named {name!r}")
             if runtime.session is not None:
                 self._close_session(runtime.session)
+            self._reorder()
 
     def queries(self) -> list[dict[str, Any]]:
         with self._lock:
@@ -269,9 +350,18 @@ class StreamEngine:
         with self._lock:
             return self._get(name).info()
 
-    def results(self, name: str, limit: int = 20) -> list[dict[str, Any]]:
+    def results(self, name: str, limit: int = 20, nonempty: bool = False) -> list[dict[str, Any]]:
+        """The last ``limit`` reported windows of a query, oldest first (empty ones included unless
+        ``nonempty``: then the last windows that had at least one solution)."""
         with self._lock:
-            return list(self._get(name).results)[-limit:]
+            runtime = self._get(name)
+            kept = runtime.nonempty if nonempty else runtime.results
+            return list(kept)[-limit:] if limit > 0 else []
+
+    @staticmethod
+    def sparql_json(event: dict[str, Any]) -> dict[str, Any]:
+        """An event in the SPARQL 1.1 Query Results JSON format (see ``results.to_sparql_json``)."""
+        return to_sparql_json(event)
 
     def _get(self, name: str) -> QueryRuntime:
         runtime = self._queries.get(name)
@@ -280,11 +370,12 @@ class StreamEngine:
         return runtime
 
     # -- subscribers -------------------------------------------------------------------------------
-    def subscribe(self, callback: Subscriber, query: str | None = None) -> int:
-        """``callback(event)`` for every result/actions/error event (of one query, or all)."""
+    def subscribe(self, callback: Subscriber, query: str | None = None, nonempty: bool = False) -> int:
+        """``callback(event)`` for every result/actions/error event (of one query, or all);
+        ``nonempty``: result events only for windows with at least one solution."""
         with self._lock:
             token = next(self._ids)
-            self._subscribers[token] = (callback, query)
+            self._subscribers[token] = (callback, query, nonempty)
             return token
 
     def unsubscribe(self, token: int) -> None:
@@ -292,8 +383,11 @@ class StreamEngine:
             self._subscribers.pop(token, None)
 
     def _publish(self, event: dict[str, Any]) -> None:
-        for callback, query in list(self._subscribers.values()):
+        solutions = event.get("solutions", 1)
+        for callback, query, nonempty in list(self._subscribers.values()):
             if query is not None and query != event.get("query"):
+                continue
+            if nonempty and event.get("kind") == "result" and not solutions:
                 continue
             try:
                 callback(event)
@@ -302,46 +396,77 @@ class StreamEngine:
                 log.exception("stream subscriber failed on a %s event", event.get("kind"))
 
     # -- input -------------------------------------------------------------------------------------
-    def push(self, stream: str, timestamp_ms: int, triples: list[Triple]) -> dict[str, Any]:
+    def push(self, stream: str, timestamp_ms: int, triples: list[Triple],
+             with_results: bool = False) -> dict[str, Any]:
         """Add one timestamped message to ``stream``; evaluates every window it closes.
 
-        Returns what happened: windows evaluated, and for which queries the message was late or
-        did not fit (never silent).
-        """
+        Returns what happened: windows evaluated and reported, and for which queries the message
+        was late or did not fit (never silent). ``with_results``: the report also holds the result
+        events this message caused (``results``; see ``results.report_to_sparql_json``)."""
         ts = int(timestamp_ms)
         if len(triples) > self.settings.max_message_triples:
             raise StreamError(f"a message may hold at most {self.settings.max_message_triples} triples")
         report: dict[str, Any] = {"stream": stream, "timestamp": ts, "triples": len(triples),
-                                  "queries": 0, "evaluated": 0, "late_for": [], "overflow_for": []}
+                                  "queries": 0, "evaluated": 0, "reported": 0, "late_for": [],
+                                  "overflow_for": [], "derived": 0}
+        collected: list[ResultEvent] | None = [] if with_results else None
+        canonical = [canonical_triple(t) if type(t[2]) is Literal else t for t in triples]
         with self._lock:
-            stats = self.stream_stats.setdefault(stream, {"messages": 0, "triples": 0})
-            stats["messages"] += 1
-            stats["triples"] += len(triples)
-            for runtime in list(self._queries.values()):
-                buffer = runtime.buffers.get(stream)
-                if buffer is None:
-                    continue
-                report["queries"] += 1
-                if runtime.closed_until is not None and ts < runtime.closed_until:
-                    runtime.stats["late_dropped"] += 1
-                    report["late_for"].append(runtime.query.name)
-                    continue
-                report["evaluated"] += self._advance(runtime, ts)
-                if triples:
-                    buffer.add(ts, list(triples))
-                    if self._enforce_bound(runtime, buffer):
-                        report["overflow_for"].append(runtime.query.name)
-                if runtime.query.step_ms is None and triples:
-                    report["evaluated"] += self._evaluate(runtime, ts + 1)
+            self._ingest(stream, ts, canonical, report, collected, external=True)
+        if collected is not None:
+            report["results"] = collected
         return report
 
     def advance(self, timestamp_ms: int, stream: str | None = None) -> int:
-        """Move the clock of the queries (on ``stream``, or all) to ``timestamp_ms`` (a heartbeat)."""
+        """Move the clock of the queries (reading ``stream``, or all) to ``timestamp_ms`` (a heartbeat);
+        returns the number of windows evaluated."""
+        ts = int(timestamp_ms)
+        report: dict[str, Any] = {"evaluated": 0, "reported": 0, "derived": 0}
         with self._lock:
-            return sum(self._advance(r, int(timestamp_ms)) for r in list(self._queries.values())
-                       if stream is None or stream in r.buffers)
+            for runtime in list(self._order):
+                if stream is not None and stream not in runtime.buffers:
+                    continue
+                if runtime.closed_until is not None and ts < runtime.closed_until:
+                    continue
+                self._advance(runtime, ts, report, None)
+                if runtime.query.report.trigger == "content_change":
+                    self._tick(runtime, ts, report, None)
+        return report["evaluated"]
 
-    def _enforce_bound(self, runtime: QueryRuntime, buffer: _Buffer) -> bool:
+    def _ingest(self, stream: str, ts: int, triples: list[Triple], report: dict[str, Any],
+                collected: list[ResultEvent] | None, external: bool = False) -> None:
+        if triples or external:
+            stats = self.stream_stats.setdefault(stream, {"messages": 0, "triples": 0})
+            stats["messages"] += 1
+            stats["triples"] += len(triples)
+        for runtime in list(self._order):
+            buffer = runtime.buffers.get(stream)
+            if buffer is None or runtime.query.name not in self._queries:
+                continue
+            if external:
+                report["queries"] += 1
+            if runtime.closed_until is not None and ts < runtime.closed_until:
+                runtime.stats["late_dropped"] += 1
+                if "late_for" in report:
+                    report["late_for"].append(runtime.query.name)
+                continue
+            self._advance(runtime, ts, report, collected)
+            kept = triples if runtime.relevant is None else [t for t in triples if t[1] in runtime.relevant]
+            if kept:
+                buffer.add(ts, kept)
+                runtime.cc_dirty = True
+                if self._enforce_bound(runtime, buffer) and "overflow_for" in report:
+                    report["overflow_for"].append(runtime.query.name)
+            if runtime.step is None:  # only count windows: every message is an evaluation instant
+                runtime.clock = ts if runtime.clock is None else max(runtime.clock, ts)
+                if kept:
+                    self._instant(runtime, ts + 1, ts + 1, report, collected)
+                runtime.closed_until = ts
+                self._evict(runtime)
+            elif runtime.query.report.trigger == "content_change":
+                self._tick(runtime, ts + 1, report, collected)
+
+    def _enforce_bound(self, runtime: QueryRuntime, buffer: StreamBuffer) -> bool:
         limit = self.settings.max_window_triples
         dropped = 0
         while buffer.n_triples > limit and len(buffer.items) > 1:
@@ -354,39 +479,128 @@ class StreamEngine:
             runtime.stats["overflow_dropped"] += dropped
         return dropped > 0
 
-    def _advance(self, runtime: QueryRuntime, ts: int) -> int:
-        """Evaluate every window of ``runtime`` that closes at or before ``ts``."""
-        step = runtime.query.step_ms
+    # -- the clock -----------------------------------------------------------------------------------
+    def _advance(self, runtime: QueryRuntime, ts: int, report: dict[str, Any],
+                 collected: list[ResultEvent] | None) -> None:
+        """Process every evaluation instant of ``runtime`` up to ``ts``: window closes (and reports
+        under ON WINDOW CLOSE), periodic reports; bounded catch-up over empty stretches."""
+        runtime.clock = ts if runtime.clock is None else max(runtime.clock, ts)
+        step = runtime.step
         if step is None:
-            return 0
+            return
+        policy = runtime.query.report
+        period = policy.period_ms if policy.trigger == "periodic" else None
         if runtime.next_close is None:
             runtime.next_close = (ts // step + 1) * step
-            return 0
-        evaluated = 0
-        max_range = max(w.range_ms or 0 for w in runtime.query.windows)
-        while runtime.next_close <= ts:
-            end = runtime.next_close
-            for b in runtime.buffers.values():
-                if b.spec.is_time:
-                    b.evict_before(end - b.spec.range_ms)  # type: ignore[operator]
-            if all(not b.stamps or b.stamps[0] >= end for b in runtime.buffers.values()):
-                # nothing in this window: jump to the last close <= ts without evaluating
-                last = (ts // step) * step
-                runtime.stats["skipped_windows"] += (last - end) // step + 1
-                runtime.closed_until = last
-                runtime.next_close = last + step
-                break
-            evaluated += self._evaluate(runtime, end)
-            runtime.closed_until = end
-            runtime.next_close = end + step
-        for b in runtime.buffers.values():
-            if b.spec.is_time:
-                b.evict_before(runtime.next_close - max_range)
+            if period:
+                runtime.next_periodic = (ts // period + 1) * period
+            return
+        while True:
+            close = runtime.next_close
+            if policy.trigger == "window_close":
+                report_at: int | None = close
+            elif period:
+                report_at = runtime.next_periodic
             else:
-                b.keep_last_triples(b.spec.triples or 0)
-        return evaluated
+                report_at = None  # ON CONTENT CHANGE reports at messages and heartbeats (_tick)
+            # closes before the next report only move the watermark: pass them in one go
+            quiet_until = ts if report_at is None else min(ts, report_at - 1)
+            if close <= quiet_until:
+                runtime.closed_until = (quiet_until // step) * step
+                runtime.next_close = runtime.closed_until + step
+                self._evict(runtime)
+                continue
+            if report_at is None or report_at > ts:
+                break
+            if not self._catch_up(runtime, report_at, ts, period or step, report, collected):
+                self._instant(runtime, report_at, (report_at // step) * step, report, collected)
+                if report_at == close:
+                    runtime.closed_until = close
+                    runtime.next_close = close + step
+                    self._evict(runtime)
+                if period and report_at == runtime.next_periodic:
+                    runtime.next_periodic = report_at + period
 
-    # -- evaluation --------------------------------------------------------------------------------
+    def _catch_up(self, runtime: QueryRuntime, instant: int, ts: int, every: int, report: dict[str, Any],
+                  collected: list[ResultEvent] | None) -> bool:
+        """Over a long empty stretch, report its first ``max_catchup_windows - 1`` windows and its
+        last one (which carries ``skipped``); True when it did (and moved the clock past it)."""
+        limit = max(2, self.settings.max_catchup_windows)
+        last = instant + ((ts - instant) // every) * every
+        remaining = (last - instant) // every + 1
+        if remaining <= limit or not self._empty_from(runtime, instant):
+            return False
+        step = runtime.step
+        assert step is not None
+        for k in range(limit - 1):
+            t = instant + k * every
+            self._instant(runtime, t, (t // step) * step, report, collected)
+        skipped = remaining - limit
+        runtime.stats["skipped_windows"] += skipped
+        self._instant(runtime, last, (last // step) * step, report, collected, skipped=skipped)
+        runtime.closed_until = (last // step) * step
+        runtime.next_close = runtime.closed_until + step
+        if runtime.next_periodic is not None:
+            runtime.next_periodic = last + every
+        self._evict(runtime)
+        return True
+
+    def _empty_from(self, runtime: QueryRuntime, instant: int) -> bool:
+        """Is the window at ``instant`` empty, and so every later one up to the clock?"""
+        end = _window_end(instant, runtime.step)
+        for w in runtime.windows:
+            buffer = runtime.buffers[w.stream]
+            if not buffer.stamps:
+                continue
+            if not w.is_time or w.range_ms is None:
+                return False
+            if buffer.stamps[-1] >= end - w.range_ms:
+                return False
+        return True
+
+    def _tick(self, runtime: QueryRuntime, instant: int, report: dict[str, Any],
+              collected: list[ResultEvent] | None) -> None:
+        """ON CONTENT CHANGE: report the current window if its content changed since the last report."""
+        step = runtime.step
+        if step is None or runtime.next_close is None:
+            return
+        end = _window_end(instant, step)
+        starts = tuple(end - (w.range_ms or 0) if w.is_time else None for w in runtime.windows)
+        changed = runtime.cc_dirty or runtime.cc_starts is None
+        if not changed and runtime.cc_starts is not None:
+            # something expired: the oldest triple last reported is before the window's new start
+            changed = any(first is not None and start is not None and first < start
+                          for first, start in zip(runtime.cc_starts, starts))
+        if not changed:
+            return
+        runtime.cc_dirty = False
+        runtime.cc_starts = tuple(runtime.buffers[w.stream].first_at_or_after(start, instant) if start is not None
+                                  else None for w, start in zip(runtime.windows, starts))
+        self._instant(runtime, instant, runtime.closed_until, report, collected)
+
+    def _evict(self, runtime: QueryRuntime) -> None:
+        """Keep what the next windows need (time ranges from the next close, the last n triples)."""
+        for stream, buffer in runtime.buffers.items():
+            before: int | None = None
+            keep = 0
+            has_time = False
+            for w in runtime.windows:
+                if w.stream != stream:
+                    continue
+                if w.is_time:
+                    has_time = True
+                    if w.range_ms is None or runtime.next_close is None:
+                        before = None
+                        break
+                    start = runtime.next_close - w.range_ms
+                    before = start if before is None else min(before, start)
+                else:
+                    keep = max(keep, w.triples or 0)
+            if has_time and before is None:
+                continue  # a range is unknown (unbound parameter): keep everything (bounded anyway)
+            buffer.evict(before if has_time else None, keep)
+
+    # -- evaluation ----------------------------------------------------------------------------------
     def _bind_params(self, runtime: QueryRuntime) -> bool:
         """(Re)bind parameters; recompile the fast path when a value changed. False if unbound."""
         if runtime.plan_text is not None and runtime.param_version == self.ontology.version \
@@ -396,6 +610,7 @@ class StreamEngine:
         try:
             for spec in runtime.query.params:
                 values[spec.name] = self.ontology.bind(spec)
+            windows = _bind_ranges(runtime.query.windows, values)
         except ParamError as exc:
             runtime.param_error = str(exc)
             return bool(runtime.param_values) or not runtime.query.params
@@ -403,37 +618,87 @@ class StreamEngine:
         runtime.param_version = self.ontology.version
         if values != runtime.param_values or runtime.plan_text is None:
             runtime.param_values = values
+            if windows != runtime.windows or runtime.plan_text is None:
+                runtime.windows = windows
+                for stream, buffer in runtime.buffers.items():
+                    mine = [w for w in windows if w.stream == stream and w.is_time]
+                    ranges = [w.range_ms for w in mine if w.range_ms]
+                    buffer.set_pane(pane_size(runtime.step, ranges) if mine and len(ranges) == len(mine) else None)
             text = runtime.query.executable(values)
             runtime.plan_text = text
             runtime.plan, runtime.not_compilable = None, None
+            runtime.empty_cache = None
             if self.settings.fast_path:
-                try:
-                    runtime.plan = compile_query(text)
-                except NotCompilable as exc:
-                    runtime.not_compilable = str(exc)
+                if any(w.name is not None for w in runtime.windows):
+                    runtime.not_compilable = "named windows (WINDOW/GRAPH patterns) go the general way"
+                else:
+                    try:
+                        runtime.plan = compile_query(text)
+                    except NotCompilable as exc:
+                        runtime.not_compilable = str(exc)
         return True
 
-    def window_data(self, runtime: QueryRuntime, end: int) -> WindowData:
-        step = runtime.query.step_ms
-        max_range = max((w.range_ms or 0 for w in runtime.query.windows), default=0)
-        data = WindowData(start_ms=end - max_range if step else end, end_ms=end)
-        for buffer in runtime.buffers.values():
-            buffer.window(end, data.stamped)
-        static: set[Triple] = set()
-        for iri in runtime.query.static_graphs:
-            static |= self._graph(iri)
-        data.static = frozenset(static)
+    def window_data(self, runtime: QueryRuntime, end: int, at: int | None = None,
+                    sealed_until: int | None = None) -> WindowData:
+        """The content the query sees for the window ending at ``end`` (up to instant ``at``)."""
+        at = end if at is None else at
+        step = runtime.step
+        start = end - runtime.max_range() if step else end
+        data = WindowData(start_ms=start, end_ms=end, at_ms=None if at == end else at)
+        default_parts: list[dict[Triple, int]] = []
+        default_segments: list[Any] | None = None
+        n_default = sum(1 for w in runtime.windows if w.name is None)
+        for w in runtime.windows:
+            buffer = runtime.buffers[w.stream]
+            if w.is_time:
+                segments = buffer.time_segments(end - (w.range_ms or 0), at, sealed_until)
+            else:
+                segments = [buffer.last_triples(w.triples or 0, at)]
+            content = merge(segments)
+            if w.name is None:
+                default_parts.append(content)
+                if n_default == 1:
+                    default_segments = segments
+            else:
+                data.windows[w.name] = content
+        data.stamped = merge_latest(default_parts)
+        data.segments = default_segments
+        if not step:
+            stamps = [ts for part in [data.stamped, *data.windows.values()] for ts in part.values()]
+            data.start_ms = min(stamps) if stamps else end
+        data.static = self._static_for(runtime)
         data.named = {iri: self._graph(iri) for iri in runtime.query.named_graphs}
         return data
 
-    def _evaluate(self, runtime: QueryRuntime, end: int) -> int:
+    def _static_for(self, runtime: QueryRuntime) -> frozenset[Triple]:
+        graphs = runtime.query.static_graphs
+        if not graphs:
+            return frozenset()
+        key = (self.ontology.version, self._static_version)
+        if runtime.static_cache is None or runtime.static_cache[0] != key:
+            static: set[Triple] = set()
+            for iri in graphs:
+                static |= self._graph(iri)
+            if runtime.relevant is not None:
+                static = {t for t in static if t[1] in runtime.relevant}
+            runtime.static_cache = (key, frozenset(static))
+        return runtime.static_cache[1]
+
+    def _instant(self, runtime: QueryRuntime, instant: int, sealed_until: int | None, report: dict[str, Any],
+                 collected: list[ResultEvent] | None, skipped: int = 0) -> None:
+        """Evaluate and report the query's current window at ``instant`` (content: timestamps < it)."""
         self.ontology.refresh()
         if not self._bind_params(runtime):
             runtime.stats["errors"] += 1
             runtime.last_error = runtime.param_error
             self._publish({"kind": "error", "query": runtime.query.name, "error": runtime.param_error})
-            return 0
-        data = self.window_data(runtime, end)
+            return
+        end = _window_end(instant, runtime.step)
+        data = self.window_data(runtime, end, instant, sealed_until)
+        if runtime.query.report.non_empty and data.empty:
+            runtime.stats["empty_windows"] += 1
+            self._emit(runtime, instant, [], report, collected)
+            return
         started = time.perf_counter()
         try:
             evaluation = self._run(runtime, data)
@@ -442,21 +707,58 @@ class StreamEngine:
             runtime.last_error = f"window ending {end}: {exc}"
             log.warning("query %s failed on the window ending at %d: %s", runtime.query.name, end, exc)
             self._publish({"kind": "error", "query": runtime.query.name, "error": runtime.last_error})
-            return 1
+            report["evaluated"] += 1
+            return
         elapsed = (time.perf_counter() - started) * 1000
         runtime.eval_ms.append(elapsed)
         runtime.stats["windows"] += 1
+        report["evaluated"] += 1
         runtime.stats["fast" if evaluation.path == "fast" else "general"] += 1
-        if evaluation.rows:
-            event = _result_event(runtime.query.name, data, evaluation, elapsed)
+        if data.empty:
+            runtime.stats["empty_windows"] += 1
+        rows = [{k: canonical_term(v) for k, v in row.items()} for row in evaluation.rows]
+        if not runtime.query.ordered:
+            rows = sort_rows(rows, evaluation.variables)
+        reported = stream_diff(rows, runtime.last_rows, runtime.query.r2s)
+        runtime.last_rows = rows
+        event = self._result_event(runtime, data, evaluation, reported, elapsed, skipped)
+        runtime.stats["reported"] += 1
+        report["reported"] = report.get("reported", 0) + 1
+        runtime.results.append(event)
+        if event["solutions"]:
             runtime.stats["results"] += 1
-            runtime.results.append(event)
-            self._publish(event)
-            if runtime.binding is not None:
-                self._feed_rules(runtime, evaluation, data)
-        return 1
+            runtime.nonempty.append(event)
+        if collected is not None:
+            collected.append(event)
+        self._publish(event)
+        if runtime.binding is not None and event["solutions"] and runtime.query.form in ("SELECT", "CONSTRUCT"):
+            self._feed_rules(runtime, reported, data, instant)
+        if runtime.query.output_stream:
+            self._emit(runtime, instant, rows_to_triples(reported), report, collected)
+
+    def _emit(self, runtime: QueryRuntime, instant: int, triples: list[Triple], report: dict[str, Any],
+              collected: list[ResultEvent] | None) -> None:
+        """A REGISTER STREAM query's output at ``instant`` (empty: the derived stream's clock moves)."""
+        stream = runtime.query.output_stream
+        if not stream:
+            return
+        runtime.stats["derived_triples"] += len(triples)
+        if triples:
+            report["derived"] = report.get("derived", 0) + 1
+        self._ingest(stream, instant, [canonical_triple(t) for t in triples], report, collected)
 
     def _run(self, runtime: QueryRuntime, data: WindowData) -> Evaluation:
+        if data.empty:  # an empty window's answer depends only on the static graphs and parameters
+            key = (self.ontology.version, self._static_version, runtime.plan_text)
+            if runtime.empty_cache is not None and runtime.empty_cache[0] == key:
+                cached = runtime.empty_cache[1]
+                return Evaluation(list(cached.variables), list(cached.rows), cached.path)
+            evaluation = self._run_uncached(runtime, data)
+            runtime.empty_cache = (key, evaluation)
+            return evaluation
+        return self._run_uncached(runtime, data)
+
+    def _run_uncached(self, runtime: QueryRuntime, data: WindowData) -> Evaluation:
         if runtime.plan is not None:
             try:
                 return run_plan(runtime.plan, data)
@@ -464,12 +766,42 @@ class StreamEngine:
                 runtime.stats["fallbacks"] += 1
         return evaluate_oxigraph(runtime.plan_text or runtime.query.sparql, data)
 
-    def _feed_rules(self, runtime: QueryRuntime, evaluation: Evaluation, data: WindowData) -> None:
+    def _result_event(self, runtime: QueryRuntime, data: WindowData, evaluation: Evaluation, rows: list[Row],
+                      elapsed_ms: float, skipped: int) -> ResultEvent:
+        query = runtime.query
+        runtime.seq += 1
+        window: dict[str, Any] = {"start": data.start_ms, "end": data.end_ms, "triples": data.size}
+        if data.at_ms is not None:
+            window["at"] = data.at_ms
+        if query.form == "ASK":
+            solutions = int(bool(rows) and rows[0].get("ask") is not None and rows[0]["ask"].value == "true")
+        else:
+            solutions = len(rows)
+        payload: dict[str, Any] = {
+            "kind": "result",
+            "query": query.name,
+            "seq": runtime.seq,
+            "window": window,
+            "variables": evaluation.variables,
+            "rows": plain_rows(rows),
+            "solutions": solutions,
+            "path": evaluation.path,
+            "eval_ms": round(elapsed_ms, 3),
+        }
+        if query.r2s != "RSTREAM":
+            payload["operator"] = query.r2s
+        if skipped:
+            payload["skipped"] = skipped
+        return ResultEvent(payload, rows, query.form)
+
+    def _feed_rules(self, runtime: QueryRuntime, rows: list[Row], data: WindowData, instant: int) -> None:
         binding = runtime.binding
         assert binding is not None
         name = runtime.query.name
+        if runtime.query.form == "CONSTRUCT":
+            rows = triples_as_facts(rows)
         try:
-            facts = binding_facts(binding, evaluation.rows, runtime.field_types, data, self.providers, runtime.handled)
+            facts = binding_facts(binding, rows, runtime.field_types, data, self.providers, runtime.handled)
             if not facts:
                 return  # every row was a repeat: nothing new to decide
             window = {"start": data.start_ms, "end": data.end_ms}
@@ -477,8 +809,8 @@ class StreamEngine:
             if binding.mode == "stateful":
                 if runtime.session is None:
                     runtime.session = self.rules_engine.open_session(binding.ruleset)
-                # insert stamped with the window's end (the clock moves there first) and fire: one JVM call
-                result = runtime.session.push(facts, data.end_ms)
+                # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
+                result = runtime.session.push(facts, instant)
                 result.decision_id = self.rules_engine.record_decision(
                     result, facts, origin="stream", correlation_id=correlation, context={"query": name, "window": window})
             else:
@@ -513,16 +845,59 @@ class StreamEngine:
                     runtime.session = None
 
 
-def _result_event(name: str, data: WindowData, evaluation: Evaluation, elapsed_ms: float) -> dict[str, Any]:
-    return {
-        "kind": "result",
-        "query": name,
-        "window": {"start": data.start_ms, "end": data.end_ms, "triples": data.size},
-        "variables": evaluation.variables,
-        "rows": [{k: term_to_json(v) for k, v in row.items()} for row in evaluation.rows],
-        "path": evaluation.path,
-        "eval_ms": round(elapsed_ms, 3),
-    }
+def _with_attributes(relevant: frozenset[NamedNode] | None, binding: RuleBinding) -> frozenset[NamedNode] | None:
+    """What a query keeps of its streams, plus the properties its binding reads from the window
+    (``attributes``: a detected customer's age is not in the query, but the rules need it)."""
+    if relevant is None or not binding.attributes:
+        return relevant
+    from gateway.rdf.terms import DEFAULT_PREFIXES, parse_node
+
+    return relevant | {parse_node(p, "attributes", DEFAULT_PREFIXES) for p in binding.attributes.values()}
+
+
+def _window_end(instant: int, step: int | None) -> int:
+    """The end of the window current at ``instant``: the first close at or after it."""
+    if not step:
+        return instant
+    return -(-instant // step) * step
+
+
+_TYPED = re.compile(r'^"((?:[^"\\]|\\.)*)"\^\^<([^>]*)>$')
+
+
+def _bind_ranges(windows: list[WindowSpec], values: dict[str, str]) -> list[WindowSpec]:
+    """Windows with ``[RANGE ?param …]`` resolved from the parameter values (seconds, or an xsd:duration)."""
+    out = []
+    for w in windows:
+        if w.range_param is None:
+            out.append(w)
+            continue
+        text = values.get(w.range_param)
+        if text is None:
+            raise ParamError(f"?{w.range_param}: no value for the window range")
+        ms = _range_ms(w.range_param, text)
+        if w.step_ms is not None and ms < w.step_ms:
+            raise ParamError(f"?{w.range_param} = {ms} ms is shorter than the window's STEP ({w.step_ms} ms)")
+        out.append(WindowSpec(w.stream, ms, w.step_ms, w.triples, w.name, w.range_param, w.line, w.column))
+    return out
+
+
+def _range_ms(name: str, text: str) -> int:
+    match = _TYPED.match(text)
+    lexical, datatype = (match.group(1), match.group(2)) if match else (text.strip('"'), None)
+    try:
+        if datatype in (XSD + "duration", XSD + "dayTimeDuration") or lexical.startswith("P"):
+            return duration_ms(lexical)
+        seconds = canonical_term(Literal(lexical, datatype=NamedNode(datatype or XSD + "decimal")))
+        from decimal import Decimal
+
+        ms = Decimal(seconds.value) * 1000  # type: ignore[union-attr]
+    except Exception:
+        raise ParamError(f"?{name} = {text}: a window range must be a number of seconds or a duration like "
+                         "\"PT10S\"^^xsd:dayTimeDuration") from None
+    if ms <= 0 or ms != ms.to_integral_value():
+        raise ParamError(f"?{name} = {text}: a window range must be a positive whole number of milliseconds")
+    return int(ms)
 
 
 def _select_variables(query: ContinuousQuery) -> list[str]:
@@ -532,9 +907,10 @@ def _select_variables(query: ContinuousQuery) -> list[str]:
 
 def _positioned(message: str) -> QueryParseError:
     """pyoxigraph's "error at L:C: …" as a QueryParseError with line and column."""
-    import re
-
     match = re.match(r"error at (\d+):(\d+): (.*)", message, re.S)
     if match:
         return QueryParseError(match.group(3).strip(), int(match.group(1)), int(match.group(2)))
     return QueryParseError(message, 0, 0)
+
+
+__all__ = ["QueryNotFound", "QueryRuntime", "StreamEngine", "StreamError", "Term"]

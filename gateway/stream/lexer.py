@@ -27,7 +27,7 @@ class QueryParseError(ValueError):
 
 @dataclass(frozen=True)
 class Token:
-    kind: str  # IRI, PNAME, VAR, STRING, NUMBER, NAME, PUNCT
+    kind: str  # IRI, PNAME, VAR, STRING, NUMBER, DURATION (ISO 8601, e.g. PT10S), NAME, PUNCT
     text: str
     start: int  # offset in the source
     end: int
@@ -53,6 +53,8 @@ _TOKEN_RE = re.compile(
                  (?:(?:[A-Za-z0-9_:.\u00B7\u00C0-\uFFFF-]|%[0-9A-Fa-f]{2}|\\[-_~.!$&'()*+,;=/?\#@%])*
                   (?:[A-Za-z0-9_:\u00B7\u00C0-\uFFFF-]|%[0-9A-Fa-f]{2}))?)?)
   | (?P<BNODE>_:[A-Za-z0-9_\u00C0-\uFFFF][A-Za-z0-9_.\u00B7\u00C0-\uFFFF-]*)
+  | (?P<DURATION>P(?=[0-9]|T[0-9])(?:[0-9]+D)?(?:T(?=[0-9])(?:[0-9]+H)?(?:[0-9]+M)?(?:[0-9]+(?:\.[0-9]+)?S)?)?
+                (?![A-Za-z0-9_]))
   | (?P<NAME>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<PUNCT>\^\^|&&|\|\||<=|>=|!=|[{}()\[\].,;*+\-/=<>!^|@a])
     """,

@@ -30,8 +30,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
-from gateway.rdf.terms import Term, local_name, term_to_json
 from pyoxigraph import BlankNode, NamedNode
+
+from gateway.rdf.terms import Term, local_name, term_to_json
 
 _INT_TYPES = {"int", "integer", "long", "short", "byte", "java.lang.integer", "java.lang.long"}
 _FLOAT_TYPES = {"double", "float", "java.lang.double", "java.lang.float", "bigdecimal", "java.math.bigdecimal"}

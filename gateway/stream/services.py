@@ -26,7 +26,7 @@ from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, Served, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
@@ -55,21 +55,23 @@ class QueryService:
     def __init__(self, engine: StreamEngine, catalog: Catalog | None = None) -> None:
         self.engine = engine
         self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
-        self._served: dict[str, tuple[int, int]] = {}  # name -> (version, seq)
+        self._served = Served()
         self._lock = threading.RLock()
 
     # ---- changing -------------------------------------------------------------------------------
     def register(self, text: str, params: list[ParamSpec] | None = None, replace: bool = False,
-                 binding: RuleBinding | None = None, *, author: str = "anonymous", comment: str = "") -> dict[str, Any]:
-        """Check, store and serve a query (``replace``: a new version of an existing one)."""
+                 binding: RuleBinding | None = None, *, report: str | None = None, author: str = "anonymous",
+                 comment: str = "") -> dict[str, Any]:
+        """Check, store and serve a query (``replace``: a new version of an existing one;
+        ``report``: a report policy overriding the query's own)."""
         name = parse_query(text, params).name
         with self._lock:
             head = self.catalog.head(QUERY, name)
             if head is not None and head.live and not replace:
                 raise StreamError(f"a query named {name!r} is already registered")
-            self._check(text, params, binding)
+            self._check(text, params, binding, report)
             payload = {"text": text, "params": _params_payload(params),
-                       "binding": binding.to_dict() if binding else None}
+                       "binding": binding.to_dict() if binding else None, "report": report}
             info, seq = self.catalog.save(QUERY, name, payload, author=author, comment=comment, hash=_hash(payload))
             result = self._serve(name, payload, info.version, seq)
         return {**result, "version": info.version}
@@ -78,7 +80,7 @@ class QueryService:
         """A new version of the query with this binding (None: unbound)."""
         with self._lock:
             payload = dict(self._current_payload(name))
-            self._check(payload["text"], _params_from(payload.get("params")), binding)
+            self._check(payload["text"], _params_from(payload.get("params")), binding, payload.get("report"))
             payload["binding"] = binding.to_dict() if binding else None
             info, seq = self.catalog.save(QUERY, name, payload, author=author,
                                           comment="rules bound" if binding else "rules unbound", hash=_hash(payload))
@@ -96,7 +98,7 @@ class QueryService:
         with self._lock:
             stored = self.catalog.load(QUERY, name, int(version))
             self._check(stored.payload["text"], _params_from(stored.payload.get("params")),
-                        _binding(stored.payload.get("binding")))
+                        _binding(stored.payload.get("binding")), stored.payload.get("report"))
             info, seq = self.catalog.set_current(QUERY, name, int(version), author=author,
                                                  comment=f"rollback to version {version}")
             return {**self._serve(name, stored.payload, info.version, seq), "version": info.version}
@@ -113,29 +115,27 @@ class QueryService:
             raise QueryNotFound(f"no query named {name!r}")
         return self.catalog.load(QUERY, name, head.current).payload  # type: ignore[arg-type]
 
-    def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None) -> None:
+    def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None,
+               report: str | None = None) -> None:
         """Register on a scratch engine with the same rules, ontology and providers: the same checks
         as the real registration, nothing live touched."""
         scratch = StreamEngine(self.engine.settings, rules_engine=self.engine.rules_engine,
                                ontology=self.engine.ontology, providers=self.engine.providers)
         scratch.share_static_graphs(self.engine)
-        scratch.register(text, params, replace=True, binding=binding)
+        scratch.register(text, params, replace=True, binding=binding, report=report)
 
     # ---- serving --------------------------------------------------------------------------------
     def _serve(self, name: str, payload: dict[str, Any], version: int, seq: int) -> dict[str, Any]:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.accepts(name, seq):
             return self.engine.query_info(name)
         info = self.engine.register(payload["text"], _params_from(payload.get("params")), replace=True,
-                                    binding=_binding(payload.get("binding")))
-        self._served[name] = (version, seq)
+                                    binding=_binding(payload.get("binding")), report=payload.get("report"))
+        self._served.set(name, version, seq)
         return info
 
     def _drop(self, name: str, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, None, seq):
             return
-        self._served.pop(name, None)
         try:
             self.engine.unregister(name)
         except QueryNotFound:
@@ -147,14 +147,13 @@ class QueryService:
             if head is None or not head.live:
                 self._drop(name, head.seq if head else 1 << 62)
                 return
-            served = self._served.get(name)
-            if served is not None and served[0] == head.current and served[1] >= head.seq:
+            if self._served.is_current(name, head):
                 return
             stored = self.catalog.load(QUERY, name, head.current)  # type: ignore[arg-type]
             self._serve(name, stored.payload, head.current, head.seq)  # type: ignore[arg-type]
 
     def reconcile(self) -> None:
-        names = {h.name for h in self.catalog.heads(QUERY)} | set(self._served)
+        names = {h.name for h in self.catalog.heads(QUERY)} | set(self._served.names())
         for name in sorted(names):
             try:
                 self.sync(name)
@@ -209,7 +208,7 @@ class MappingService:
         self.mapper = mapper
         self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
         self.describe = describe  # message type -> its fields (rosidl), when ROS types are importable
-        self._served: dict[str, tuple[int, int]] = {}
+        self._served = Served()
         self._specs: dict[str, dict[str, Any]] = {}
         self._lock = threading.RLock()
 
@@ -256,18 +255,14 @@ class MappingService:
         return self.catalog.versions(MAPPING, name)
 
     def _serve(self, name: str, spec: dict[str, Any], node: NodeMap, version: int, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, version, seq):
             return
         self.mapper.mappings[name] = node
         self._specs[name] = spec
-        self._served[name] = (version, seq)
 
     def _drop(self, name: str, seq: int) -> None:
-        served = self._served.get(name)
-        if served is not None and served[1] > seq:
+        if not self._served.set(name, None, seq):
             return
-        self._served.pop(name, None)
         self._specs.pop(name, None)
         if name in BUILTIN_MAPPINGS:
             self.mapper.mappings[name] = BUILTIN_MAPPINGS[name]
@@ -280,15 +275,14 @@ class MappingService:
             if head is None or not head.live:
                 self._drop(name, head.seq if head else 1 << 62)
                 return
-            served = self._served.get(name)
-            if served is not None and served[0] == head.current and served[1] >= head.seq:
+            if self._served.is_current(name, head):
                 return
             spec = self.catalog.load(MAPPING, name, head.current).payload  # type: ignore[arg-type]
             node = node_map_from_spec(spec, "mapping", resolve=self.mapper.mappings, prefixes=self.mapper.prefixes)
             self._serve(name, spec, node, head.current, head.seq)  # type: ignore[arg-type]
 
     def reconcile(self) -> None:
-        for name in sorted({h.name for h in self.catalog.heads(MAPPING)} | set(self._served)):
+        for name in sorted({h.name for h in self.catalog.heads(MAPPING)} | set(self._served.names())):
             try:
                 self.sync(name)
             except MappingError as exc:

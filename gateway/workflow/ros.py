@@ -19,9 +19,10 @@ from gateway.workflow.adapters import Call, ModuleFailed
 class RosModules:
     """Calls ROS 2 services and publishes to topics for workflow modules, on a given node."""
 
-    def __init__(self, node: Any, caller: Any) -> None:
+    def __init__(self, node: Any, caller: Any, on_move: Any = None) -> None:
         self.node = node
         self.caller = caller
+        self.on_move = on_move  # robot positions follow a workflow's moves too
         self._publishers: dict[tuple[str, str], Any] = {}
         self._lock = threading.Lock()
 
@@ -41,6 +42,8 @@ class RosModules:
             if response.get("success") is False:
                 raise ModuleFailed(f"service {name} answered success=false: {message}")
             raise ModuleFailed(message)
+        if self.on_move is not None and type_name.endswith("/MoveTo"):
+            self.on_move({"status": "ok", "action": {"module": "move", "params": dict(call.params)}})
         return response
 
     def _publish(self, call: Call) -> dict[str, Any]:

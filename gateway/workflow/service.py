@@ -79,6 +79,11 @@ class WorkflowService:
         except Exception:  # a background run has nobody to raise to: log it
             log.exception("workflow run %s of %s crashed", run_id, name)
 
+    def running(self) -> int:
+        """How many runs have not finished yet."""
+        with self._lock:
+            return sum(1 for r in self._runs.values() if r is None)
+
     def get_run(self, run_id: str) -> RunResult | None:
         """The result, or None while it is running; KeyError when unknown."""
         with self._lock:

@@ -52,7 +52,7 @@ def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_i
         sensor = rt.make(EntranceSensorSim, load_scenario(SCENARIO), speed=4.0)
         sensor.start()
         assert sensor.done.wait(30)
-        assert wait_for(lambda: gateway.ros.idle() and len(robot.calls) >= 8, 20), robot.calls
+        assert wait_for(lambda: gateway.idle() and len(robot.calls) >= 8, 20), robot.calls
         wait_for(lambda: False, 0.5)
         store = gateway.store
         assert store.flush()
@@ -114,7 +114,7 @@ def test_missing_robot_service_is_retried_then_recorded(domain_id, settings, mon
     with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway:
         for reading in _one_group():
             handle(gateway, reading)
-        assert wait_for(gateway.ros.idle, 30)
+        assert wait_for(gateway.idle, 30)
         assert gateway.store.flush()
         outcomes = gateway.store.query("actions")
         assert outcomes and {o["status"] for o in outcomes} == {"no_service"}
@@ -130,7 +130,7 @@ def test_hanging_robot_times_out_then_recorded(domain_id, settings, mongo, tmp_p
         assert wait_for(client.service_is_ready, 15)
         for reading in _one_group():
             handle(gateway, reading)
-        assert wait_for(gateway.ros.idle, 60)
+        assert wait_for(gateway.idle, 60)
         assert gateway.store.flush()
         outcomes = gateway.store.query("actions", newest_first=False)
     assert outcomes and outcomes[0]["status"] == "timeout" and outcomes[0]["attempts"] == 2
@@ -180,7 +180,7 @@ def test_gateway_restart_mid_scenario_loses_nothing(domain_id, settings, mongo, 
                     assert wait_for(client.service_is_ready, 15)
                     for r in part:
                         handle(gateway, dict(r))
-                    assert wait_for(gateway.ros.idle, 30)
+                    assert wait_for(gateway.idle, 30)
                 finally:
                     gateway.close()
         assert store.flush()
@@ -213,3 +213,31 @@ def test_a_rest_deploy_changes_what_the_robot_says_next(domain_id, settings, mon
         assert wait_for(lambda: any(c["service"] == "speak" for c in robot.calls), 30), robot.calls
         said = [c["text"] for c in robot.calls if c["service"] == "speak"]
         assert said == ["Hello, you two! A table?"]
+
+
+def test_leaving_seat_over_ros_clears_the_table(domain_id, settings, mongo, tmp_path) -> None:
+    """Table sensors (TeahouseObject on ROS) → the tables RDF stream → LeavingSeatQuery (empty for
+    the ontology's tableEmptyTime after a party sat there) → the table_service rules → the
+    clear_table workflow → Pepper goes to the table, the staff clear it, Pepper returns."""
+    from gateway.ros.scenario import TableScenario
+    from gateway.ros.sim_tables import TableSensorSim
+
+    plan = TableScenario.model_validate({
+        "name": "one party leaves", "rate_hz": 2, "duration": 32, "tables": ["table1", "table2"],
+        "parties": [{"table": "table2", "people": ["a", "b"], "from": 0, "to": 6}]})
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway, RosRuntime(domain_id=domain_id) as rt:
+        robot = rt.make(RobotSim, "pepper")
+        assert wait_for(gateway.ros.caller.client("/pepper/move_to", "printeps_interfaces/srv/MoveTo").service_is_ready, 15)
+        sensors = rt.make(TableSensorSim, plan, speed=4.0)
+        sensors.start()
+        assert sensors.done.wait(30)
+        assert wait_for(lambda: gateway.idle() and len(robot.calls) >= 2, 30), robot.calls
+        moves = [c["location"] for c in robot.calls if c["service"] == "move_to"]
+        assert moves == ["table2", "counter"], robot.calls
+        assert gateway.store.flush()
+        decisions, _ = gateway.decisions.find(ruleset="table_service")
+        assert len(decisions) == 1 and decisions[0]["origin"] == "stream"
+        assert decisions[0]["facts"][0]["type"] == "TableLeft" and decisions[0]["facts"][0]["table"] == "table2"
+        outcome = gateway.decisions.get(decisions[0]["decision_id"])["outcomes"][0]
+        assert outcome["status"] == "ok" and outcome["run_id"]
+        assert gateway.robots.position("pepper") == "counter"

@@ -8,6 +8,7 @@ from fastapi.testclient import TestClient
 from types import SimpleNamespace
 
 from gateway.api.auth import Authenticator
+from gateway.api.errors import install_error_handlers
 from gateway.api.routes.state import router
 from gateway.config import ApiSettings
 
@@ -15,6 +16,7 @@ from gateway.config import ApiSettings
 def make_client(store) -> TestClient:
     app = FastAPI()
     app.include_router(router)
+    install_error_handlers(app)
     app.state.gateway = SimpleNamespace(store=store)
     app.state.auth = Authenticator(ApiSettings())
     return TestClient(app)

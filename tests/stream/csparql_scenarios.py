@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from gateway.rdf import Mapper
 
@@ -61,5 +61,11 @@ def replay(engine, msgs: list[tuple[int, dict]], stream: str = ENTRANCE, flush_m
 
 
 def detections(events: list[dict]) -> dict[int, set[str]]:
-    """Window end (ms) -> customer ids detected in that window."""
-    return {e["window"]["end"]: {r["s"].rsplit("/", 1)[-1] for r in e["rows"]} for e in events}
+    """Window end (ms) -> customer ids detected in that window (windows without a detection left out:
+    every window is reported, empty ones included)."""
+    return {e["window"]["end"]: {r["s"].rsplit("/", 1)[-1] for r in e["rows"]} for e in events if e["rows"]}
+
+
+def nonempty(events: list[dict]) -> list[dict]:
+    """The result events with at least one solution."""
+    return [e for e in events if e["kind"] == "result" and e["rows"]]

@@ -45,8 +45,11 @@ def test_register_list_results_delete(client):
     assert client.post("/api/queries", json={"query": CUSTOMER_QUERY}).status_code == 409
     _post_scenario(client)
     results = client.get("/api/queries/CustomerDetectionQuery/results").json()["results"]
-    assert [r["window"]["end"] for r in results] == [4000, 5000]
-    assert results[0]["rows"] == [{"s": "http://printeps.org/cafe/entrance/c1", "cnt": 3, "distance": 3.2}]
+    # every evaluated window is listed, those without a detection too (rows [])
+    assert [r["window"]["end"] for r in results] == [1000, 2000, 3000, 4000, 5000]
+    detected = [r for r in results if r["rows"]]
+    assert [r["window"]["end"] for r in detected] == [4000, 5000]
+    assert detected[0]["rows"] == [{"s": "http://printeps.org/cafe/entrance/c1", "cnt": 3, "distance": 3.2}]
     assert client.delete("/api/queries/CustomerDetectionQuery").status_code == 204
     assert client.get("/api/queries/CustomerDetectionQuery").status_code == 404
     assert client.delete("/api/queries/CustomerDetectionQuery").status_code == 404
@@ -73,7 +76,7 @@ def test_params_and_triples_over_rest(client):
         triples = [[p + "c1", "rdf:type", p + "Customer"], [p + "c1", p + "positionAtTime", f"{p}r{i}"],
                    [f"{p}r{i}", p + "distance", d]]
         assert client.post("/api/streams", json={"stream": ENTRANCE, "timestamp": ts, "triples": triples}).status_code == 200
-    results = client.get("/api/queries/CustomerDetectionQuery/results").json()["results"]
+    results = [r for r in client.get("/api/queries/CustomerDetectionQuery/results").json()["results"] if r["rows"]]
     assert results[0]["window"]["end"] == 3000 and results[0]["rows"][0]["distance"] == 3.4  # (3.6+3.3+3.3)/3
 
 
@@ -129,7 +132,7 @@ def test_live_feed_over_sse(gateway):
             received: list[dict] = []
 
             def listen() -> None:
-                with http.stream("GET", "/api/queries/CustomerDetectionQuery/live?max_events=2") as r:
+                with http.stream("GET", "/api/queries/CustomerDetectionQuery/live?max_events=5") as r:
                     for line in r.iter_lines():
                         if line.startswith("data: "):
                             received.append(json.loads(line[6:]))
@@ -144,7 +147,9 @@ def test_live_feed_over_sse(gateway):
                     poster.post("/api/streams", json={"stream": ENTRANCE, "timestamp": ts, "message": msg})
             listener.join(timeout=10)
             assert not listener.is_alive()
-            assert [e["window"]["end"] for e in received] == [4000, 5000]
+            # every window is published, empty ones included
+            assert [e["window"]["end"] for e in received] == [1000, 2000, 3000, 4000, 5000]
+            assert [e["window"]["end"] for e in received if e["rows"]] == [4000, 5000]
             assert all(e["kind"] == "result" for e in received)
     finally:
         server.should_exit = True

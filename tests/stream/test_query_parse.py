@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import pytest
-
-from gateway.stream import QueryParseError, parse_query
-
 from csparql_scenarios import CUSTOMER_QUERY
+
+from gateway.stream import QueryParseError, ReportPolicy, parse_query
 
 HEAD = "REGISTER QUERY q AS\nPREFIX ex: <http://ex/>\n"
 
@@ -72,3 +71,76 @@ def test_errors_have_positions(text, line, column, words):
     err = info.value
     assert words in err.message
     assert (err.line, err.column) == (line, column)
+
+
+# -- RSP-QL additions ---------------------------------------------------------------------------
+
+
+def test_report_clause_and_stream_operator():
+    q = parse_query("REGISTER QUERY q REPORT ON CONTENT CHANGE AND NON EMPTY AS\nPREFIX ex: <http://ex/>\n"
+                    "SELECT ISTREAM ?a FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE { ?a ?b ?c }")
+    assert q.report == ReportPolicy("content_change", True, None)
+    assert q.r2s == "ISTREAM" and "ISTREAM" not in q.sparql and len(q.sparql) == len(q.text)
+    assert parse_query(HEAD + "SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE {}").report == ReportPolicy()
+    assert ReportPolicy.parse("periodic PT2S") == ReportPolicy("periodic", False, 2000)
+
+
+def test_named_windows_and_window_patterns():
+    q = parse_query("REGISTER QUERY q AS PREFIX w: <http://ex/w/>\nSELECT * FROM NAMED WINDOW w:a ON <http://s> "
+                    "[RANGE 5s STEP 1s]\nFROM NAMED STREAM <http://t> [RANGE TRIPLES 4]\n"
+                    "WHERE { WINDOW w:a { ?x ?y ?z } GRAPH <http://t> { ?x ?y ?z } }")
+    assert [(w.name, w.stream) for w in q.windows] == [("http://ex/w/a", "http://s"), ("http://t", "http://t")]
+    assert "GRAPH  w:a {" in q.sparql and "WINDOW" not in q.sparql  # same length: positions are kept
+
+
+def test_register_stream_names_its_output():
+    q = parse_query("REGISTER STREAM ex:out AS PREFIX ex: <http://ex/>\nCONSTRUCT { ?a ?b ?c } "
+                    "FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE { ?a ?b ?c }")
+    assert (q.kind, q.name, q.output_stream) == ("STREAM", "ex:out", "http://ex/out")
+    assert parse_query("REGISTER STREAM s AS CONSTRUCT { ?a ?b ?c } FROM STREAM <t> [RANGE 1s STEP 1s] "
+                       "WHERE { ?a ?b ?c }").output_stream == "s"
+
+
+def test_parameter_range():
+    q = parse_query('PARAM ?r = 3\n' + HEAD + "SELECT * FROM STREAM <http://s> [RANGE ?r STEP 1s] WHERE { ?a ?b ?c }")
+    (w,) = q.windows
+    assert (w.range_param, w.range_ms, w.step_ms) == ("r", None, 1000)
+    assert "?r" not in q.var_spans  # the FROM clause is not SPARQL: nothing to substitute there
+
+
+W = "FROM STREAM <http://s> [RANGE 1s STEP 1s]"
+
+
+@pytest.mark.parametrize("text, line, column, words", [
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s] WHERE { SERVICE <http://x> { ?a ?b ?c } }",
+     1, 80, "SERVICE (federated query) is not supported"),
+    ("REGISTER QUERY q AS SELECT * WHERE { STREAM <http://s> [RANGE 1s] { ?a ?b ?c } }", 1, 38, "CQELS"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE 1s SLIDE 1s] WHERE {}", 1, 63, "SLIDE"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [NOW] WHERE {}", 1, 54, "[NOW …] is not supported"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE TRIPLES 5 STEP 1] WHERE {}", 1, 70,
+     "STEP on a count window is not supported"),
+    ("REGISTER QUERY q AS PREFIX f: <http://larkc.eu/csparql/sparql/jena/ext#>\nSELECT (f:count(?a) AS ?n) " + W
+     + " WHERE { ?a ?b ?c }", 2, 9, "f:count is not supported"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE 2s STEP 1s]\nFROM STREAM <http://t> [RANGE 4s STEP 2s] "
+     "WHERE {}", 2, 13, "different STEPs in one query are not supported"),
+    ("REGISTER QUERY q AS SELECT * " + W + " WHERE { WINDOW <http://w> { ?a ?b ?c } }", 1, 87, "no such window"),
+    ("REGISTER QUERY q AS SELECT * FROM NAMED WINDOW <w> ON <http://s> [RANGE 1s STEP 1s] WHERE {}", 1, 48,
+     "absolute IRI"),
+    ("REGISTER ISTREAM q AS SELECT * " + W + " WHERE {}", 1, 10, "REGISTER ISTREAM is not supported"),
+    ("REGISTER STREAM q AS SELECT * " + W + " WHERE {}", 1, 22, "REGISTER STREAM needs CONSTRUCT"),
+    ("REGISTER QUERY q REPORT SOMETIMES AS SELECT * " + W + " WHERE {}", 1, 25, "unknown report policy"),
+    ("REGISTER QUERY q REPORT ON WINDOW CLOSE AND PERIODIC 1s AS SELECT * " + W + " WHERE {}", 1, 45,
+     "only one of WINDOW CLOSE"),
+    ("REGISTER QUERY q REPORT PERIODIC 1s AS SELECT * FROM STREAM <http://s> [RANGE TRIPLES 3] WHERE {}", 1, 16,
+     "REPORT PERIODIC (COMPUTED EVERY) needs a time window"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE P1M STEP 1s] WHERE {}", 1, 60, "day-time duration"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE ?r STEP 1s] WHERE {}", 1, 60, "no such parameter"),
+    ("REGISTER QUERY q AS SELECT * FROM STREAM <http://s> [RANGE 1s STEP 1s] FROM STREAM <http://s> "
+     "[RANGE 2s STEP 1s] WHERE {}", 1, 84, "name them"),
+])
+def test_unsupported_features_are_named_with_their_position(text, line, column, words):
+    with pytest.raises(QueryParseError) as info:
+        parse_query(text)
+    err = info.value
+    assert words in err.message, err.message
+    assert (err.line, err.column) == (line, column), err.message

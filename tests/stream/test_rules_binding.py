@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import pytest
+from csparql_scenarios import (
+    CUSTOMER_QUERY,
+    approaching,
+    messages,
+    replay,
+    walking_past,
+)
 
 from gateway.config import Settings
 from gateway.engine import Engine
 from gateway.stream import BindingError, RuleBinding, StreamEngine
-
-from csparql_scenarios import CUSTOMER_QUERY, approaching, messages, replay, walking_past
 
 DRL = """package org.printeps.detect;
 import org.printeps.gateway.Actions;
@@ -26,6 +31,30 @@ when
     $c : CustomerEntered(distance < 3.3)
 then
     actions.say("pepper", "Welcome, " + $c.getId());
+end
+
+declare TableLeft
+    table : String
+    lastSeen : long
+end
+
+rule "clear a table its customers left"
+when
+    $t : TableLeft()
+then
+    actions.call("workflow", "name", "clear_table", "table", $t.getTable());
+end
+
+declare HotThing
+    id : String
+    hot : int
+end
+
+rule "report a hot thing"
+when
+    $h : HotThing(hot > 30)
+then
+    actions.say("pepper", $h.getId() + " is hot");
 end
 """
 
@@ -71,3 +100,47 @@ def test_bad_bindings_are_refused(settings, rules_engine):
     # default fields: variables named like fields (only "distance" here)
     info = engine.bind_rules(name, RuleBinding("detect", "CustomerEntered"))
     assert info["binding"]["fields"] == {"distance": "distance"}
+
+
+def test_leaving_seat_fires_the_clear_table_rules(settings, rules_engine):
+    from table_scenarios import LEAVING_SEAT_QUERY
+    from table_scenarios import messages as table_messages
+    from table_scenarios import replay as table_replay
+
+    engine = StreamEngine(settings, rules_engine=rules_engine)
+    engine.register(LEAVING_SEAT_QUERY,
+                    binding=RuleBinding("detect", "TableLeft", {"table": "table", "lastSeen": "last_seen"}))
+    events: list[dict] = []
+    engine.subscribe(events.append)
+    table_replay(engine, table_messages({"table2": [("c1", "Customer", 0, 10)]}, ["table2"], hz=2, seconds=40))
+    (fired,) = [e for e in events if e["kind"] == "actions"]
+    assert fired["window"]["end"] == 30_000
+    assert fired["facts"] == [{"type": "TableLeft", "table": "table2", "lastSeen": 9_500}]
+    assert [(a["module"], a["params"]) for a in fired["actions"]] == [
+        ("workflow", {"name": "clear_table", "table": "table2"})]
+    engine.close()
+
+
+def test_rules_bound_to_a_derived_stream(settings, rules_engine):
+    from pyoxigraph import Literal, NamedNode
+
+    from gateway.rdf.terms import XSD_INTEGER
+
+    engine = StreamEngine(settings, rules_engine=rules_engine)
+    engine.register("REGISTER STREAM ex:hot AS PREFIX ex: <http://ex/>\nCONSTRUCT { ?s ex:hot ?v } "
+                    "FROM STREAM <http://ex/raw> [RANGE 1s STEP 1s] WHERE { ?s ex:temp ?v FILTER(?v > 30) }")
+    # a stream's facts: one per subject, its predicates' local names as fields (here: subject, hot)
+    info = engine.bind_rules("ex:hot", RuleBinding("detect", "HotThing", {"id": "subject", "hot": "hot"}))
+    assert info["binding"]["fields"] == {"id": "subject", "hot": "hot"}
+    with pytest.raises(BindingError, match="no variable \\?temp"):
+        engine.bind_rules("ex:hot", RuleBinding("detect", "HotThing", {"hot": "temp"}))
+    engine.bind_rules("ex:hot", RuleBinding("detect", "HotThing", {"id": "subject", "hot": "hot"}))
+    events: list[dict] = []
+    engine.subscribe(events.append)
+    engine.push("http://ex/raw", 100, [(NamedNode("http://ex/a"), NamedNode("http://ex/temp"),
+                                        Literal("35", datatype=XSD_INTEGER))])
+    engine.advance(1000)
+    (fired,) = [e for e in events if e["kind"] == "actions"]
+    assert fired["facts"] == [{"type": "HotThing", "id": "a", "hot": 35}]
+    assert [a["params"] for a in fired["actions"]] == [{"robot": "pepper", "text": "a is hot"}]
+    engine.close()

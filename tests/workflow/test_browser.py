@@ -41,7 +41,7 @@ def test_views_edit_and_run(page, base_url):
     page.goto(f"{base_url}/workbench/workflows#thanking")
     page.wait_for_selector("#list button[data-name=thanking]")
     page.wait_for_selector("#workflow-view g.box[data-step=thank]")
-    assert page.locator("#list button").count() == 7
+    assert page.locator("#list button").count() == 8
     assert "Thank you very much" in page.locator("#workflow-view g.box[data-step=thank] title").text_content()
     page.click("[data-tab=scenario]")
     lanes = page.locator("#scenario-view text.heading").all_text_contents()

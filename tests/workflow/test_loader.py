@@ -17,7 +17,7 @@ def problems(text: str) -> list[tuple[int, int, str, str]]:
 
 def test_the_seven_teahouse_business_processes_load(teahouse_dir):
     workflows = [load(path) for path in sorted(teahouse_dir.glob("*.yaml"))]
-    assert sorted(wf.business_process for wf in workflows) == [1, 2, 3, 4, 5, 6, 7]
+    assert sorted(wf.business_process for wf in workflows) == [1, 2, 3, 4, 5, 6, 7, 8]  # + clearing a table
     actors = {wf.business_process: {a.name for a in wf.actors.values() if a.kind in ("robot", "human")}
               for wf in workflows}
     assert "pepper" in actors[1] and "pepper" in actors[2] and "pepper" in actors[3] and "pepper" in actors[7]
@@ -94,16 +94,22 @@ def test_not_a_mapping():
     assert problems("- a\n- b\n")[0][3].startswith("a workflow must be a mapping")
 
 
-def test_command_line_validate_and_generate(teahouse_dir, tmp_path, capsys):
-    from gateway.workflow.__main__ import main
+def test_command_line_validate_and_generate(teahouse_dir, tmp_path):
+    """``printeps workflow validate|generate`` (the workflows' part of the one CLI)."""
+    from typer.testing import CliRunner
 
-    assert main(["validate", *map(str, sorted(teahouse_dir.glob("*.yaml")))]) == 0
+    from gateway.cli import app
+
+    runner = CliRunner()
+    ok = runner.invoke(app, ["workflow", "validate", *map(str, sorted(teahouse_dir.glob("*.yaml")))])
+    assert ok.exit_code == 0, ok.output
     bad = tmp_path / "bad.yaml"
     bad.write_text("workflow: bad\nmodules: {}\nprocesses: {}\nservices: {}\nroute: {services: []}\n")
-    assert main(["validate", str(bad)]) == 1
-    assert f"{bad}:2:10: modules:" in capsys.readouterr().err
+    refused = runner.invoke(app, ["workflow", "validate", str(bad)])
+    assert refused.exit_code == 1
+    assert f"{bad}:2:10: modules:" in refused.output
     out = tmp_path / "node.py"
-    assert main(["generate", str(teahouse_dir / "7_thanking.yaml"), "-o", str(out)]) == 0
+    assert runner.invoke(app, ["workflow", "generate", str(teahouse_dir / "7_thanking.yaml"), "-o", str(out)]).exit_code == 0
     compile(out.read_text(), str(out), "exec")
 
 

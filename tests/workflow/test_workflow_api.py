@@ -28,7 +28,7 @@ def client(tmp_path_factory, mongo):
 
 def test_list_and_read(client):
     listed = client.get("/api/workflows").json()
-    assert [w["business_process"] for w in sorted(listed, key=lambda w: w["business_process"])] == [1, 2, 3, 4, 5, 6, 7]
+    assert [w["business_process"] for w in sorted(listed, key=lambda w: w["business_process"])] == [1, 2, 3, 4, 5, 6, 7, 8]
     body = client.get("/api/workflows/thanking").json()
     assert body["version"] >= 1 and body["text"].startswith("# Business process (7)")
     assert body["workflow_view"]["services"] == [{"name": "farewell", "processes": ["see_off"]}]

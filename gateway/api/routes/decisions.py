@@ -11,11 +11,9 @@ any decision, also after restarts. Newest first, paged with an opaque cursor.
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
-
 from fastapi import APIRouter, Query
 
-from gateway.api.deps import Caller, DecisionsDep
+from gateway.api.deps import Caller, DecisionsDep, iso_datetime
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON
 from gateway.store.store import StoreError, StoreUnavailable
@@ -23,17 +21,6 @@ from gateway.store.store import StoreError, StoreUnavailable
 router = APIRouter(tags=["decisions"])
 
 ORIGINS = ("rest", "kie", "stream", "ros", "workflow", "api")
-
-
-def _time(name: str, value: str | None) -> datetime | None:
-    if value is None:
-        return None
-    try:
-        t = datetime.fromisoformat(value.replace("Z", "+00:00"))
-    except ValueError:
-        raise ApiError(422, f"query parameter {name}={value!r}: not an ISO-8601 date-time",
-                       errors=[{"field": name, "message": "not an ISO-8601 date-time"}]) from None
-    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
 
 
 @router.get("/api/decisions")
@@ -51,7 +38,7 @@ def list_decisions(
 ) -> JSON:
     """Decisions newest first: decision_id, origin, correlation_id, ruleset, version, facts, fired,
     actions, at, process."""
-    start, end = _time("since", since), _time("until", until)
+    start, end = iso_datetime("since", since), iso_datetime("until", until)
     if start and end and start >= end:
         raise ApiError(422, "since must be before until", errors=[{"field": "since", "message": "after until"}])
     try:

@@ -11,28 +11,17 @@ Every other parameter is an equality filter on a (dotted) field; "2" matches 2 o
 from __future__ import annotations
 
 import json
-from datetime import datetime, timezone
 from typing import Any
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.encoders import jsonable_encoder
 
-from gateway.api.deps import Caller, StoreDep
+from gateway.api.deps import Caller, StoreDep, iso_datetime
 from gateway.store.store import MAX_LIMIT, StoreError, StoreUnavailable
 
 router = APIRouter(prefix="/api/state", tags=["information-state"])
 
 RESERVED = {"type", "since", "until", "limit", "order"}
-
-
-def _time(name: str, value: str | None) -> datetime | None:
-    if value is None:
-        return None
-    try:
-        t = datetime.fromisoformat(value.replace("Z", "+00:00"))
-    except ValueError:
-        raise HTTPException(422, f"query parameter {name}={value!r}: not an ISO-8601 date-time") from None
-    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
 
 
 def _filter_value(raw: str) -> Any:
@@ -53,7 +42,7 @@ def read_state(request: Request, collection: str, store: StoreDep, _: Caller, ty
     """Documents of one collection, newest first by default, with ``_meta`` and ``_id`` as a string."""
     filters = {k: _filter_value(v) for k, v in request.query_params.items() if k not in RESERVED}
     try:
-        docs = store.query(collection, type=type, since=_time("since", since), until=_time("until", until),
+        docs = store.query(collection, type=type, since=iso_datetime("since", since), until=iso_datetime("until", until),
                            filters=filters, limit=limit, newest_first=order == "newest")
     except StoreError as exc:
         raise HTTPException(422, str(exc)) from None

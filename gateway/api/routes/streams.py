@@ -37,11 +37,13 @@ from gateway.api.jsonio import JSON, read_json
 from gateway.rdf.mapping import MappingError
 from gateway.rdf.terms import parse_triple
 from gateway.stream.query import ParamSpec
+from gateway.stream.results import report_to_sparql_json, to_sparql_json
 from gateway.stream.rules import RuleBinding
 
 router = APIRouter(tags=["streams"])
 MAX_BATCH = 10_000
 SSE_QUEUE = 1000
+SPARQL_JSON = "application/sparql-results+json"
 
 
 def _is_json(request: Request) -> bool:
@@ -70,7 +72,7 @@ def _params(raw: Any) -> list[ParamSpec] | None:
 @router.post("/api/queries", status_code=201)
 async def register_query(request: Request, queries: QueriesDep, who: Author) -> JSON:
     """Register a C-SPARQL query (text, or JSON with params/replace/rules); 422 with line/column."""
-    replace, binding, params = False, None, None
+    replace, binding, params, report = False, None, None, None
     if _is_json(request):
         body = await read_json(request)
         if not isinstance(body, dict) or not isinstance(body.get("query"), str):
@@ -80,9 +82,14 @@ async def register_query(request: Request, queries: QueriesDep, who: Author) -> 
         params = _params(body.get("params"))
         if body.get("rules") is not None:
             binding = RuleBinding.from_dict(body["rules"])
+        if body.get("report") is not None:
+            if not isinstance(body["report"], str):
+                raise ApiError(422, "report must be a policy such as \"content change\"", field="report")
+            report = body["report"]
     else:
         text = (await request.body()).decode("utf-8", errors="replace")
-    info = await run_in_threadpool(lambda: queries.register(text, params, replace, binding, author=who.name))
+    info = await run_in_threadpool(lambda: queries.register(text, params, replace, binding, report=report,
+                                                            author=who.name))
     return JSON(info, status_code=201)
 
 
@@ -126,25 +133,38 @@ async def unbind_rules(name: str, queries: QueriesDep, who: Author) -> JSON:
     return JSON(await run_in_threadpool(lambda: queries.bind_rules(name, None, author=who.name)))
 
 
+def wants_sparql_json(request: Request) -> bool:
+    return SPARQL_JSON in request.headers.get("accept", "")
+
+
 @router.get("/api/queries/{name}/results")
-async def query_results(name: str, streams: StreamsDep, _: Caller, limit: int = Query(20, ge=1, le=1000)) -> JSON:
-    return JSON({"query": name, "results": streams.results(name, limit)})
+async def query_results(request: Request, name: str, streams: StreamsDep, _: Caller,
+                        limit: int = Query(20, ge=1, le=1000), nonempty: bool = False) -> JSON:
+    """Every reported window (empty ones too, unless ``nonempty``), oldest first; with ``Accept:
+    application/sparql-results+json`` the bindings are RDF terms (SPARQL 1.1 Query Results JSON)."""
+    results = streams.results(name, limit, nonempty)
+    if wants_sparql_json(request):
+        return JSON({"query": name, "results": [to_sparql_json(e) for e in results]}, media_type=SPARQL_JSON)
+    return JSON({"query": name, "results": results})
 
 
 @router.get("/api/queries/{name}/live")
 async def query_live(request: Request, name: str, streams: StreamsDep, _: Caller,
-                     max_events: int | None = Query(None, ge=1)) -> StreamingResponse:
+                     max_events: int | None = Query(None, ge=1), nonempty: bool = False,
+                     format: str = Query("json", pattern="^(json|sparql-json)$")) -> StreamingResponse:
     streams.query_info(name)  # 404 for an unknown query
-    return _sse(request, streams, name, max_events)
+    return _sse(request, streams, name, max_events, nonempty, format == "sparql-json")
 
 
 @router.get("/api/streams/live")
-async def all_live(request: Request, streams: StreamsDep, _: Caller,
-                   max_events: int | None = Query(None, ge=1)) -> StreamingResponse:
-    return _sse(request, streams, None, max_events)
+async def all_live(request: Request, streams: StreamsDep, _: Caller, max_events: int | None = Query(None, ge=1),
+                   nonempty: bool = False,
+                   format: str = Query("json", pattern="^(json|sparql-json)$")) -> StreamingResponse:
+    return _sse(request, streams, None, max_events, nonempty, format == "sparql-json")
 
 
-def _sse(request: Request, streams: Any, query: str | None, max_events: int | None) -> StreamingResponse:
+def _sse(request: Request, streams: Any, query: str | None, max_events: int | None, nonempty: bool = False,
+         sparql_json: bool = False) -> StreamingResponse:
     """A live feed: each engine event as ``event: <kind>`` + JSON data; bounded queue, drops counted."""
     loop = asyncio.get_running_loop()
     queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=SSE_QUEUE)
@@ -159,7 +179,7 @@ def _sse(request: Request, streams: Any, query: str | None, max_events: int | No
     def on_event(event: dict[str, Any]) -> None:
         loop.call_soon_threadsafe(put, event)
 
-    token = streams.subscribe(on_event, query)
+    token = streams.subscribe(on_event, query, nonempty=nonempty)
 
     async def events() -> AsyncIterator[bytes]:
         sent = 0
@@ -176,6 +196,8 @@ def _sse(request: Request, streams: Any, query: str | None, max_events: int | No
                 if dropped[0]:
                     yield f"event: dropped\ndata: {json.dumps({'dropped': dropped[0]})}\n\n".encode()
                     dropped[0] = 0
+                if sparql_json:
+                    event = to_sparql_json(event)
                 yield f"event: {event.get('kind', 'message')}\ndata: {json.dumps(event, default=str)}\n\n".encode()
                 sent += 1
         finally:
@@ -201,10 +223,13 @@ async def post_stream(request: Request, gateway: GatewayDep, _: Caller) -> JSON:
         request.app.state.rejected_stream_posts += 1
         raise ApiError(503, "too many stream posts in progress; retry later",
                        rejected_total=request.app.state.rejected_stream_posts)
+    sparql = wants_sparql_json(request) or request.query_params.get("results") == "true"
     try:
-        reports = await run_in_threadpool(lambda: [gateway.streams.push(*m) for m in prepared])
+        reports = await run_in_threadpool(lambda: [gateway.streams.push(*m, with_results=sparql) for m in prepared])
     finally:
         pending.release()
+    if sparql:
+        reports = [report_to_sparql_json(r) for r in reports]
     return JSON(reports if isinstance(body, list) else reports[0])
 
 
