@@ -18,6 +18,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from gateway.api.jsonio import JSON, BadBody
 from gateway.engine import (
     CompileFailed,
+    CompileResourceError,
     EngineError,
     FactError,
     InvalidRuleSet,
@@ -56,6 +57,8 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
         return 409, body
     if isinstance(exc, (RuleSetNotFound, VersionNotFound)):
         return 404, body
+    if isinstance(exc, CompileResourceError):  # a server limit (memory, time), not the author's text
+        return 503, body
     if isinstance(exc, (CompileFailed, InvalidRuleSet, FactError, RunawayRules, RuleRuntimeError)):
         return 422, body
     return 500, body

@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler
+from gateway.engine import compiler, warmup
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
@@ -66,14 +66,23 @@ class Engine:
 
     # ------------------------------------------------------------------ compile
 
-    def _compile(self, files: dict[str, str], label: str) -> CompiledRuleSet:
-        return compiler.compile_cached(files, label)
+    def _compile(self, files: dict[str, str], label: str, on_progress: Callable[[int, int, str], None] | None = None,
+                 warm: bool = True) -> CompiledRuleSet:
+        """Incremental build (see gateway.engine.incremental), warmed before anyone fires it."""
+        options = compiler.CompileOptions.from_settings(self.settings.engine)
+        compiled = compiler.compile_cached(files, label, options, on_progress)
+        if warm:
+            warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s)
+        return compiled
 
-    def validate(self, name: str, files: dict[str, str]) -> list[CompileError]:
-        """All compile errors of ``files`` ([] when they compile). Deploys nothing."""
+    def validate(self, name: str, files: dict[str, str],
+                 on_progress: Callable[[int, int, str], None] | None = None) -> list[CompileError]:
+        """All compile errors of ``files`` ([] when they compile). Deploys nothing.
+
+        ``on_progress(done, total, stage)`` follows the build (see compiler.compile_files)."""
         check_name(name)
         try:
-            self._compile(files, name)
+            self._compile(files, name, on_progress, warm=False)
         except CompileFailed as failed:
             return failed.errors
         return []
