@@ -110,10 +110,15 @@ def rule_drl(i: int, variant: int = 0) -> str:
     return f'rule "{name}"\nwhen\n{when}\nthen\n    actions.say("bot", "{name}");\nend\n'
 
 
-def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
-    """A rule set of ``n`` rules: ``types.drl`` and ``rules_NNN.drl`` files of 500 rules each."""
+def drl_files(n: int, variants: dict[int, int] | None = None, examples: bool = False) -> dict[str, str]:
+    """A rule set of ``n`` rules: ``types.drl`` and ``rules_NNN.drl`` files of 500 rules each, and
+    with ``examples`` an ``examples.json`` of five requests (not the ones the bench measures)."""
     variants = variants or {}
     files = {"types.drl": TYPES_DRL}
+    if examples:
+        import json
+
+        files["examples.json"] = json.dumps([{"name": f"example {k}", "facts": sample_facts(1000 + k)} for k in range(5)])
     for start in range(0, n, RULES_PER_FILE):
         body = "\n".join(rule_drl(i, variants.get(i, 0)) for i in range(start, min(n, start + RULES_PER_FILE)))
         files[f"rules_{start // RULES_PER_FILE:03d}.drl"] = f"package {PACKAGE};\n\n{body}"

@@ -36,14 +36,15 @@ class IncompatibleArtifact(EngineError):
 
 
 def export_compiled(compiled: "CompiledRuleSet", options: "CompileOptions | None" = None) -> bytes:
-    """``compiled`` as one archive (see the module docstring); its units come from the unit cache."""
+    """``compiled`` as one archive (see the module docstring); its units come from the unit cache
+    that built it (or the one of ``options``)."""
     from gateway.engine import compiler, incremental
 
-    options = options or compiler.DEFAULT_OPTIONS
     plan = compiled.plan
     if not plan:
         raise IncompatibleArtifact("this compiled rule set has no assembly plan to export")
-    cache = incremental.unit_cache(options)
+    cache = compiled.unit_cache if options is None and compiled.unit_cache is not None else \
+        incremental.unit_cache(options or compiler.DEFAULT_OPTIONS)
     unit_ids = [plan["declarations"]] + [u for u in dict.fromkeys(r[0] for r in plan["rules"]) if u != plan["declarations"]]
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:  # unit zips are compressed already

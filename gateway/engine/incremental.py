@@ -217,7 +217,9 @@ def _compile_whole(sources, items, env, cache, deadline, stats, on_progress, opt
     unit = cache.get(unit_id) if options.incremental else None
     if unit is None:
         _progress(on_progress, 0, max(len(order), 1), "compile")
+        started = time.perf_counter()
         built = _run_with_deadline(lambda: compiler.build_unit(sources, unit_id, deadline), deadline)
+        stats.compile_s = time.perf_counter() - started
         unit = UnitArtifact(unit_id, "whole", built.model_classes, {}, built.data)
         cache.put(unit, persist=options.incremental and options.disk_cache)
         stats.units_compiled, stats.rules_compiled = 1, len(order)
@@ -505,6 +507,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         kbase=kbase,
         plan=_plan_to_json(plan, expanded),
         stats=stats,
+        unit_cache=cache,
     )
 
 

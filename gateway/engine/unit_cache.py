@@ -32,6 +32,7 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 FORMAT = 1
+MAX_PLANS = 500
 
 
 @dataclass
@@ -262,6 +263,23 @@ class UnitCache:
             _atomic_write(self.dir / "sets" / f"{content_hash}.json", json.dumps({**plan, "format": FORMAT}).encode("utf-8"))
         except OSError as exc:
             log.warning("could not write the plan of rule set %s: %s", content_hash[:12], exc)
+            return
+        self._evict_plans()
+
+    def _evict_plans(self) -> None:
+        """Keep the newest MAX_PLANS plans (an edit session leaves one per version)."""
+        assert self.dir is not None
+        try:
+            plans = [(e.stat().st_mtime, e.path) for e in os.scandir(self.dir / "sets") if e.name.endswith(".json")]
+        except OSError:
+            return
+        if len(plans) <= MAX_PLANS:
+            return
+        for _, path in sorted(plans)[: len(plans) - MAX_PLANS]:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
