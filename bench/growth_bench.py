@@ -53,7 +53,7 @@ TARGETS = {"redeploy_1000_s": 1.0, "compile_10000_s": 60.0, "rss_10000_mb": 2048
            "first_fire_ms": 5.0}
 
 
-def run(python: str | Path, script: str, *args: str, env: dict[str, str] | None = None, timeout: float = 3600
+def run(python: str | Path, script: str, *args: str, env: dict[str, str] | None = None, timeout: float = 5400
         ) -> dict[str, Any]:
     """One peer process; its BENCH-RESULT line, or {"error": ...} when it failed or crashed."""
     cmd = [str(python), str(PEERS / script), *args]
@@ -75,27 +75,52 @@ def run(python: str | Path, script: str, *args: str, env: dict[str, str] | None 
     return {"error": f"exit {proc.returncode}: {tail[:300]}", "load_before": load}
 
 
-def measure(sizes: list[int], whole_up_to: int) -> dict[str, Any]:
+def run_peer(python: str | Path, script: str, *args: str, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """A peer in .venv-bench; one that crashed on a signal (durable_rules' C core does, now and
+    then, on the same input) gets two more tries, and the crashes are kept."""
+    crashes = []
+    for _ in range(3):
+        result = run(python, script, *args, env=env)
+        if "error" not in result or not result["error"].startswith("exit -"):
+            break
+        crashes.append(result["error"])
+    if crashes:
+        result["crashes_before"] = crashes if "error" not in result else crashes[:-1]
+    return result
+
+
+ALL_RUNS = ("gateway", "restart", "load", "whole", "drools_jpy", "durable_rules_all_shapes", "durable_rules")
+
+
+def measure(sizes: list[int], whole_up_to: int, only: tuple[str, ...] = ALL_RUNS,
+            results: dict[str, Any] | None = None) -> dict[str, Any]:
     bench_python = ensure_bench_venv()
     project_python = sys.executable
     jpy_env = {"JAVA_HOME": java_home()}
-    results: dict[str, Any] = {"sizes": sizes, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
-                               "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-                               "python": platform.python_version(), "runs": {}}
+    if results is None:
+        results = {"sizes": sizes, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
+                   "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                   "python": platform.python_version(), "runs": {}}
     work = Path(tempfile.mkdtemp(prefix="printeps-growth-bench-"))
     for n in sizes:
         print(f"{n} rules", flush=True)
         cache, archive = str(work / f"cache-{n}"), str(work / f"set-{n}.bin")
-        runs: dict[str, Any] = {}
-        runs["gateway"] = run(project_python, "growth_gateway_peer.py", "build", str(n), cache, archive)
-        runs["restart"] = run(project_python, "growth_gateway_peer.py", "restart", str(n), cache)
-        runs["load"] = run(project_python, "growth_gateway_peer.py", "load", str(n), str(work / f"cache-{n}-load"), archive)
-        if n <= whole_up_to:
+        runs: dict[str, Any] = results["runs"].setdefault(str(n), {})
+        if "gateway" in only:
+            runs["gateway"] = run(project_python, "growth_gateway_peer.py", "build", str(n), cache, archive)
+        if "restart" in only:
+            runs["restart"] = run(project_python, "growth_gateway_peer.py", "restart", str(n), cache)
+        if "load" in only:
+            runs["load"] = run(project_python, "growth_gateway_peer.py", "load", str(n), str(work / f"cache-{n}-load"), archive)
+        if "whole" in only and n <= whole_up_to:
             runs["whole"] = run(project_python, "growth_gateway_peer.py", "whole", str(n), str(work / f"cache-{n}-whole"))
-        runs["drools_jpy"] = run(bench_python, "growth_drools_jpy_peer.py", str(n), env=jpy_env)
-        runs["durable_rules_all_shapes"] = run(bench_python, "growth_durable_peer.py", str(n), "range,equality,join2,join3")
-        runs["durable_rules"] = run(bench_python, "growth_durable_peer.py", str(n), "equality")
-        results["runs"][str(n)] = runs
+        if "drools_jpy" in only:
+            runs["drools_jpy"] = run_peer(bench_python, "growth_drools_jpy_peer.py", str(n), env=jpy_env)
+        if "durable_rules_all_shapes" in only:
+            runs["durable_rules_all_shapes"] = run(bench_python, "growth_durable_peer.py", str(n), "range,equality,join2,join3",
+                                                   timeout=300)
+        if "durable_rules" in only:
+            runs["durable_rules"] = run_peer(bench_python, "growth_durable_peer.py", str(n), "equality")
     results["load_end"] = os.getloadavg()
     return results
 
@@ -314,6 +339,9 @@ def main() -> None:
                         help="skip the non-incremental path from this size on (default: measure it at every size)")
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md and docs/img/growth.svg")
     parser.add_argument("--from-results", action="store_true", help="measure nothing: report the saved results again")
+    parser.add_argument("--only", default=",".join(ALL_RUNS),
+                        help=f"which runs (of {', '.join(ALL_RUNS)}); with --merge, the others are kept from the saved results")
+    parser.add_argument("--merge", action="store_true", help="update the saved results instead of starting new ones")
     args = parser.parse_args()
     if args.from_results:
         results = json.loads(RESULTS.read_text(encoding="utf-8"))
@@ -321,7 +349,8 @@ def main() -> None:
         sizes = [int(s) for s in args.sizes.split(",")]
         whole_up_to = (args.no_whole_at - 1) if args.no_whole_at else max(sizes)
         started = time.perf_counter()
-        results = measure(sizes, whole_up_to)
+        saved = json.loads(RESULTS.read_text(encoding="utf-8")) if args.merge and RESULTS.exists() else None
+        results = measure(sizes, whole_up_to, tuple(args.only.split(",")), saved)
         results["total_s"] = time.perf_counter() - started
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps(results, indent=1), encoding="utf-8")

@@ -137,7 +137,8 @@ def parse_items(file: str, text: str, described: str) -> SourceItems | None:
     for a, b in zip(items, items[1:]):
         if a.end > b.start:
             return None
-    return SourceItems(file, info["package"] or "", text, items, unit=bool(info["unit"]))
+    # a text without a package statement is in Drools' "defaultpkg"
+    return SourceItems(file, info["package"] or "defaultpkg", text, items, unit=bool(info["unit"]))
 
 
 def _place(kind: str, text: str, start: int, end: int, masked: _Masked) -> tuple[int, int] | None:

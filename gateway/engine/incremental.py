@@ -100,9 +100,11 @@ MAX_LOADED_RULES = 60_000  # loaded units kept for the next build (their classes
 
 
 def env_key() -> str:
-    """What generated classes are valid for: this Drools, these Java helpers, this unit format."""
+    """What generated classes are valid for: this Drools, the helper classes generated code calls
+    (the ``actions`` global), this unit format. Other helper changes keep the cache."""
     units = jvm.helper_class("Units")
-    helpers = drl_items.digest(*(f"{k}\0{v}" for k, v in sorted(jvm.helper_sources().items())))
+    linked = {k: v for k, v in jvm.helper_sources().items() if k.endswith(".Actions")}
+    helpers = drl_items.digest(*(f"{k}\0{v}" for k, v in sorted(linked.items())))
     return f"drools-{units.droolsVersion()}-{FORMAT_VERSION}-{helpers[:12]}"
 
 

@@ -477,3 +477,21 @@ def _run_python(code: str) -> object:
         if line.startswith("RESULT "):
             return json.loads(line.removeprefix("RESULT "))
     raise AssertionError(f"no result (exit {proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}")
+
+
+def test_rules_without_a_package_and_rule_inheritance_build(options):
+    plain = {"a.drl": 'declare Thing id: String end\nrule "one" when Thing() then System.out.print(""); end\n',
+             "b.drl": 'rule "two" when $t: Thing(id == "x") then System.out.print(""); end\n'}
+    built = compiler.compile_files(plain, "nopkg", options)
+    assert built.stats.mode == "incremental" and built.rule_count == 2
+    assert fire(built, [{"type": "Thing", "id": "x"}])["fired"] == fire(whole(plain), [{"type": "Thing", "id": "x"}])["fired"]
+    inherited = {"r.drl": HEADER.replace("\n\n", "\ndeclare Thing id: String end\n")
+                 + 'rule "base" when $t: Thing() then end\nrule "child" extends "base" when Thing(id == "x") then end\n'}
+    built = compiler.compile_files(inherited, "extends", options)
+    assert built.stats.mode == "whole" and built.rule_count == 2  # one unit: a child needs its parent
+
+
+def test_warming_the_builder_compiles_a_fresh_set_each_round(options):
+    before = compiler._cache.copy()
+    compiler.warm_builder(rounds=2)
+    assert compiler._cache == before  # nothing kept for serving
