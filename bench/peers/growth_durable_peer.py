@@ -36,7 +36,7 @@ def define(name: str, n: int, fired: list, variants: dict[int, int] | None = Non
             p = params(i + variants.get(i, 0) * 7919)
             if k == "range":
                 conds = [(m.type == "Order") & (m.category == p["category"]) & (m.amount >= p["lo"])
-                         & (m.amount < p["lo"] + 400) & (m.quantity >= p["q"])]
+                         & (m.amount < p["lo"] + BAND) & (m.quantity >= p["q"])]
             elif k == "equality":
                 conds = [(m.type == "Customer") & (m.tier == p["tier"]) & (m.region == p["region"])]
             elif k == "join2":
