@@ -42,7 +42,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 PEERS = ROOT / "bench" / "peers"
 sys.path.insert(0, str(ROOT / "bench"))
-from engine_bench import ensure_bench_venv, java_home  # noqa: E402  (the peers' venv and Java)
+from engine_bench import ensure_bench_venv, java_home
 
 DOC = ROOT / "docs" / "benchmarks.md"
 PLOT = ROOT / "docs" / "img" / "growth.svg"
@@ -148,7 +148,7 @@ def report(r: dict[str, Any]) -> str:
     runs = r["runs"]
     sizes = [int(n) for n in runs]
     big, mid = str(max(sizes)), "1000" if "1000" in runs else None
-    g = lambda n, *p: _get(runs.get(str(n), {}), *p)  # noqa: E731
+    g = lambda n, *p: _get(runs.get(str(n), {}), *p)
     loads = [v.get("load_before") for n in runs for v in runs[n].values() if isinstance(v, dict) and v.get("load_before") is not None]
     cold = g(big, "gateway", "cold_deploy", "seconds")
     rss = g(big, "gateway", "peak_rss_mb")
@@ -304,8 +304,8 @@ def plot(r: dict[str, Any]) -> str:
         values = [v for pts in points.values() for _, v in pts] or [1]
         lo, hi = math.floor(math.log10(min(values))), math.ceil(math.log10(max(values)))
         hi = max(hi, lo + 1)
-        x = lambda n: ox + pad + (math.log10(n) - math.log10(sizes[0])) / max(math.log10(sizes[-1] / sizes[0]), 1e-9) * (w - pad - 10)  # noqa: E731
-        y = lambda v: oy + h - 30 - (math.log10(v) - lo) / (hi - lo) * (h - 60)  # noqa: E731
+        x = lambda n: ox + pad + (math.log10(n) - math.log10(sizes[0])) / max(math.log10(sizes[-1] / sizes[0]), 1e-9) * (w - pad - 10)
+        y = lambda v: oy + h - 30 - (math.log10(v) - lo) / (hi - lo) * (h - 60)
         out.append(f'<text x="{ox + pad}" y="{oy + 16}" font-weight="bold">{title}</text>')
         out.append(f'<line x1="{ox + pad}" y1="{oy + h - 30}" x2="{ox + w - 10}" y2="{oy + h - 30}" stroke="#888"/>')
         out.append(f'<line x1="{ox + pad}" y1="{oy + 30}" x2="{ox + pad}" y2="{oy + h - 30}" stroke="#888"/>')

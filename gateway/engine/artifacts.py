@@ -35,7 +35,7 @@ class IncompatibleArtifact(EngineError):
     kind = "incompatible"
 
 
-def export_compiled(compiled: "CompiledRuleSet", options: "CompileOptions | None" = None) -> bytes:
+def export_compiled(compiled: CompiledRuleSet, options: CompileOptions | None = None) -> bytes:
     """``compiled`` as one archive (see the module docstring); its units come from the unit cache
     that built it (or the one of ``options``)."""
     from gateway.engine import compiler, incremental
@@ -60,7 +60,7 @@ def export_compiled(compiled: "CompiledRuleSet", options: "CompileOptions | None
     return buffer.getvalue()
 
 
-def load_compiled(data: bytes, files: dict[str, str], options: "CompileOptions | None" = None) -> "CompiledRuleSet":
+def load_compiled(data: bytes, files: dict[str, str], options: CompileOptions | None = None) -> CompiledRuleSet:
     """The rule set ``files`` from an archive :func:`export_compiled` made, without compiling.
 
     Raises :class:`IncompatibleArtifact` when the archive is not a build of exactly ``files`` for

@@ -20,10 +20,11 @@ and the compiler then builds the rule set in one unit.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import re
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
 
 _IDENT = re.compile(r"[A-Za-z_$][\w$]*")
 _END = re.compile(r"\bend\b")
@@ -134,7 +135,7 @@ def parse_items(file: str, text: str, described: str) -> SourceItems | None:
             return None
         items.append(Item(kind, name, placed[0], placed[1], int(line), parent))
     items.sort(key=lambda i: i.start)
-    for a, b in zip(items, items[1:]):
+    for a, b in itertools.pairwise(items):
         if a.end > b.start:
             return None
     # a text without a package statement is in Drools' "defaultpkg"
@@ -220,7 +221,7 @@ class RuleSetItems:
     package_headers: dict[str, str] = field(default_factory=dict)  # package -> hash of its files' headers
 
     @classmethod
-    def of(cls, sources: list[SourceItems]) -> "RuleSetItems":
+    def of(cls, sources: list[SourceItems]) -> RuleSetItems:
         out = cls(sources)
         for src in sources:
             for item in src.items:

@@ -35,9 +35,10 @@ import os
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from gateway import jvm
 from gateway.engine import drl_items
@@ -94,7 +95,7 @@ class _Plan:
 
 _cache: UnitCache | None = None
 _cache_config: tuple[Any, ...] | None = None
-_loaded: "OrderedDict[tuple[str, str], _Loaded]" = OrderedDict()
+_loaded: OrderedDict[tuple[str, str], _Loaded] = OrderedDict()
 _loaded_lock = threading.RLock()
 MAX_LOADED_RULES = 60_000  # loaded units kept for the next build (their classes live on in KieBases anyway)
 
@@ -113,7 +114,7 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("PRINTEPS_CACHE_DIR", Path.home() / ".cache" / "printeps")) / "rule-units"
 
 
-def unit_cache(options: "CompileOptions") -> UnitCache:
+def unit_cache(options: CompileOptions) -> UnitCache:
     """The process's unit cache for these options (one per cache directory and bounds)."""
     global _cache, _cache_config
     root = None if not options.disk_cache else Path(options.cache_dir) if options.cache_dir else default_cache_dir()
@@ -161,13 +162,13 @@ def _timeout(timeout_s: float | None) -> CompileResourceError:
 
 def build(
     files: dict[str, str],
-    sources: list["_Source"],
+    sources: list[_Source],
     described: list[str | None],
     expanded: dict[str, str],
     label: str,
-    options: "CompileOptions",
+    options: CompileOptions,
     on_progress: Progress | None = None,
-) -> "CompiledRuleSet":
+) -> CompiledRuleSet:
     """Compiles ``sources`` (syntax-checked, ``described`` by ``Units.describe``) in units; raises
     CompileFailed with positioned errors, or CompileResourceError when out of memory or time."""
     from gateway.engine.ruleset import content_hash
@@ -192,7 +193,7 @@ def build(
     return compiled
 
 
-def _split(sources: list["_Source"], described: list[str | None]) -> RuleSetItems | None:
+def _split(sources: list[_Source], described: list[str | None]) -> RuleSetItems | None:
     split: list[SourceItems] = []
     for source, info in zip(sources, described):
         if info is None:
@@ -322,7 +323,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
                     deadline.check()
                     continue
                 for future in finished:
-                    kind, rules = futures[future]
+                    _, rules = futures[future]
                     try:
                         unit = future.result()
                     except CompileFailed as failed:
@@ -374,13 +375,13 @@ def _batch_size(missing: int, workers: int) -> int:
     return max(1, min(MAX_BATCH, math.ceil(missing / (max(workers, 1) * 3))))
 
 
-def _unit_source(original: "_Source", items: SourceItems, text: str) -> "_Source":
+def _unit_source(original: _Source, items: SourceItems, text: str) -> _Source:
     from gateway.engine.compiler import _Source
 
     return _Source(original.file, text, original.line_map)
 
 
-def _check_duplicates(items: RuleSetItems, sources: list["_Source"]) -> None:
+def _check_duplicates(items: RuleSetItems, sources: list[_Source]) -> None:
     """Two rules (or queries) of one name in one package: an error a one-unit build reports too,
     but units compiled apart would not see."""
     by_file = {s.file: s for s in sources}
@@ -444,7 +445,7 @@ def _load(unit: UnitArtifact, parent: _Loaded | None) -> _Loaded:
 
 
 def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache: UnitCache | None,
-             stats: BuildStats, on_progress: Progress | None = None) -> "CompiledRuleSet":
+             stats: BuildStats, on_progress: Progress | None = None) -> CompiledRuleSet:
     """One KieBase from the plan's units, wrapped as a CompiledRuleSet."""
     import json
 
@@ -517,8 +518,8 @@ class _MissingUnit(LookupError):
     """A unit of a plan is in no cache any more (evicted): the set is compiled again."""
 
 
-def build_from_plan(files: dict[str, str], options: "CompileOptions", on_progress: Progress | None = None
-                    ) -> "CompiledRuleSet | None":
+def build_from_plan(files: dict[str, str], options: CompileOptions, on_progress: Progress | None = None
+                    ) -> CompiledRuleSet | None:
     """The rule set assembled from its cached plan and units (nothing parsed or compiled), or None
     when there is no plan or one of its units is gone."""
     from gateway.engine.ruleset import content_hash

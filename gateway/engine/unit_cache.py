@@ -55,7 +55,7 @@ class UnitArtifact:
                 "rules": {k: list(v) for k, v in self.rules.items()}, "created": self.created, "size": len(self.data)}
 
     @classmethod
-    def from_manifest(cls, manifest: dict[str, Any], data: bytes) -> "UnitArtifact":
+    def from_manifest(cls, manifest: dict[str, Any], data: bytes) -> UnitArtifact:
         return cls(manifest["id"], manifest["kind"], list(manifest["model_classes"]),
                    {k: (v[0], v[1]) for k, v in manifest["rules"].items()}, data, manifest.get("created", 0.0))
 
@@ -77,7 +77,7 @@ class UnitCache:
         self.dir = (Path(root) / env) if root is not None else None
         self.memory_bytes = memory_mb * 1024 * 1024
         self.disk_bytes = disk_mb * 1024 * 1024
-        self._units: "OrderedDict[str, UnitArtifact]" = OrderedDict()
+        self._units: OrderedDict[str, UnitArtifact] = OrderedDict()
         self._memory_used = 0
         self._rule_index: dict[str, str] = {}  # rule key -> unit id (memory or disk)
         self._disk_seen: set[str] = set()

@@ -40,7 +40,7 @@ class WarmStats:
     seconds: float = 0.0
 
 
-def warm(compiled: "CompiledRuleSet", files: dict[str, str] | None = None, budget_s: float = 0.25,
+def warm(compiled: CompiledRuleSet, files: dict[str, str] | None = None, budget_s: float = 0.25,
          max_fires: int = 300, fire_limit: int = 1000) -> WarmStats:
     """Fires ``compiled`` on sample facts until it answers as fast as it is going to (the last
     rounds no slower than twice the best), ``max_fires`` or ``budget_s``; once per compiled rule

@@ -17,7 +17,11 @@ from pathlib import Path
 import pytest
 
 from gateway.engine import compiler, incremental
-from gateway.engine.artifacts import IncompatibleArtifact, export_compiled, load_compiled
+from gateway.engine.artifacts import (
+    IncompatibleArtifact,
+    export_compiled,
+    load_compiled,
+)
 from gateway.engine.compiler import CompileOptions
 from gateway.engine.errors import CompileFailed, CompileResourceError
 from gateway.engine.results import encode_facts
@@ -25,7 +29,7 @@ from gateway.engine.warmup import plain_facts, warm
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench" / "peers"))
-import growth_rules  # noqa: E402  (the growth bench's generated rule sets)
+import growth_rules
 
 HEADER = "package org.printeps.inc;\n\n"
 TYPES = """package org.printeps.inc;
