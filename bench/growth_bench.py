@@ -288,7 +288,7 @@ def plot(r: dict[str, Any]) -> str:
         ("peak RSS (MB)", lambda run, key: run.get("peak_rss_mb")),
     ]
     w, h, pad = 300, 220, 46
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{2 * w + 20}" height="{2 * h + 70}" font-family="sans-serif" font-size="11">',
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{2 * w + 20}" height="{2 * h + 80}" font-family="sans-serif" font-size="11">',
            '<rect width="100%" height="100%" fill="white"/>']
     for k, (title, get) in enumerate(panels):
         ox, oy = (k % 2) * (w + 20), (k // 2) * (h + 10)
@@ -304,7 +304,7 @@ def plot(r: dict[str, Any]) -> str:
         values = [v for pts in points.values() for _, v in pts] or [1]
         lo, hi = math.floor(math.log10(min(values))), math.ceil(math.log10(max(values)))
         hi = max(hi, lo + 1)
-        x = lambda n: ox + pad + (math.log10(n) - math.log10(sizes[0])) / max(math.log10(sizes[-1] / sizes[0]), 1e-9) * (w - pad - 10)
+        x = lambda n: ox + pad + (math.log10(n) - math.log10(sizes[0])) / max(math.log10(sizes[-1] / sizes[0]), 1e-9) * (w - pad - 34)
         y = lambda v: oy + h - 30 - (math.log10(v) - lo) / (hi - lo) * (h - 60)
         out.append(f'<text x="{ox + pad}" y="{oy + 16}" font-weight="bold">{title}</text>')
         out.append(f'<line x1="{ox + pad}" y1="{oy + h - 30}" x2="{ox + w - 10}" y2="{oy + h - 30}" stroke="#888"/>')
@@ -323,11 +323,14 @@ def plot(r: dict[str, Any]) -> str:
             for n, v in pts:
                 out.append(f'<circle cx="{x(n):.1f}" cy="{y(v):.1f}" r="3" fill="{color}"><title>{label}: {v:.3g} at {n:,} rules</title></circle>')
         out.append(f'<text x="{ox + w - 10}" y="{oy + h - 2}" text-anchor="end" fill="#555">rules</text>')
-    ly = 2 * h + 40
+    ly = 2 * h + 24
     for k, (label, (color, _)) in enumerate(series.items()):
-        lx = 10 + k * 155
-        out.append(f'<rect x="{lx}" y="{ly - 9}" width="14" height="4" fill="{color}"/><text x="{lx + 18}" y="{ly - 4}">{label}</text>')
-    out.append(f'<text x="10" y="{ly + 16}" fill="#555">bench/growth_bench.py, {r["measured_at"]}, 2 shared cores; log scales</text>')
+        lx, row = 10 + (k % 2) * 300, k // 2
+        out.append(f'<rect x="{lx}" y="{ly - 9 + 16 * row}" width="14" height="4" fill="{color}"/>'
+                   f'<text x="{lx + 18}" y="{ly - 4 + 16 * row}">{label}</text>')
+    failed = [n for n in sizes if "error" in (runs[str(n)].get("whole") or {})]
+    note = f"; whole set: out of memory at {', '.join(f'{n:,}' for n in failed)}" if failed else ""
+    out.append(f'<text x="10" y="{ly + 36}" fill="#555">bench/growth_bench.py, {r["measured_at"]}, 2 shared cores; log scales{note}</text>')
     out.append("</svg>")
     return "\n".join(out)
 
