@@ -239,11 +239,17 @@ def rules_validate(
     name, files = read_ruleset(path)
     folder = path if path.is_dir() else path.parent
     engine = Engine(_settings(config))
+    from gateway.progress import TerminalProgress
+
+    progress = TerminalProgress() if sys.stderr.isatty() else None  # big sets take a while: show how far
     try:
-        errors = [e.to_dict() for e in engine.validate(name, files)]
+        errors = [e.to_dict() for e in engine.validate(name, files, on_progress=progress)]
     except EngineError as exc:
         body = exc.to_dict()
         errors = body.get("errors") or [{"file": "", "line": 0, "column": 0, "message": str(exc)}]
+    finally:
+        if progress is not None:
+            progress.close()
     if errors:
         for line in format_errors(errors, folder):
             typer.echo(line)

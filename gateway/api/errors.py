@@ -25,6 +25,7 @@ from gateway.stream.rules import BindingError
 from gateway.versions import CatalogUnavailable
 from gateway.engine import (
     CompileFailed,
+    CompileResourceError,
     EngineError,
     FactError,
     InvalidRuleSet,
@@ -66,6 +67,8 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
         return 409, body
     if isinstance(exc, (RuleSetNotFound, VersionNotFound, SessionNotFound)):
         return 404, body
+    if isinstance(exc, CompileResourceError):  # a server limit (memory, time), not the author's text
+        return 503, body
     if isinstance(exc, SessionLimit) or (isinstance(exc, CommandFailed) and exc.kind == "limit"):
         return 429, body
     if isinstance(exc, SessionGone):

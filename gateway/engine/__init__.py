@@ -8,6 +8,7 @@ from gateway.engine.engine import Engine, LiveRuleSet, RuleSetVersion
 from gateway.engine.errors import (
     CompileError,
     CompileFailed,
+    CompileResourceError,
     EngineError,
     FactError,
     InvalidRuleSet,
@@ -22,7 +23,7 @@ from gateway.engine.session import StatefulSession
 from gateway.versions import VersionInfo
 
 __all__ = [
-    "CompileError", "CompileFailed", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",
+    "CompileError", "CompileFailed", "CompileResourceError", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",
     "InvalidRuleSet", "LiveRuleSet", "RuleRuntimeError", "RuleSetNotFound", "RuleSetVersion", "RunawayRules",
     "StatefulSession", "VersionConflict", "VersionInfo", "VersionNotFound",
 ]

@@ -13,24 +13,29 @@ This is the thin JVM adapter of the engine. The order of checks matters for good
    then-parts) come with poor positions — we locate them in the source text.
 
 A successful build gives a :class:`CompiledRuleSet`: the KieBase wrapped by the Java ``Runner``.
+
+Builds are incremental (:mod:`gateway.engine.incremental`): the set is compiled in units whose
+classes are cached by content (memory and disk), and a new version compiles only the rules that
+changed. :func:`build_unit` is the one place a DRL text meets Drools' executable-model builder.
 """
 
 from __future__ import annotations
 
 import difflib
 import itertools
-import json
+import logging
 import re
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 from gateway import jvm
 from gateway.engine import decision_table, scenarios
-from gateway.engine.errors import CompileError, CompileFailed
+from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError
 from gateway.engine.ruleset import check_files, content_hash, is_table_file
 
+log = logging.getLogger(__name__)
 _build_counter = itertools.count(1)
 _compile_lock = threading.RLock()
 _EXPANDER_LINE = re.compile(r"^\s*expander\s+(\S+?)\s*;?\s*$", re.MULTILINE)
@@ -43,12 +48,50 @@ class CompiledRuleSet:
 
     hash: str
     runner: Any  # org.printeps.gateway.Runner
-    container: Any  # org.kie.api.runtime.KieContainer (kept alive with the runner)
+    container: Any  # None since builds assemble the KieBase from units (was the KieContainer)
     rule_count: int
     types: dict[str, dict[str, str]]
     type_names: dict[str, str]
     expanded: dict[str, str] = field(default_factory=dict)
     rule_names: list[str] = field(default_factory=list)
+    kbase: Any = None  # org.kie.api.KieBase (the runner holds it too)
+    plan: dict[str, Any] = field(default_factory=dict)  # which cached units it was assembled from
+    stats: Any = None  # incremental.BuildStats: what the build compiled and reused, and how long it took
+    warmed: bool = False  # set by warmup.warm once its classes are loaded and its paths exercised
+    unit_cache: Any = field(default=None, repr=False)  # the UnitCache holding its units (for export)
+
+
+@dataclass(frozen=True)
+class CompileOptions:
+    """How rule sets are built (from ``EngineSettings``; the defaults suit a gateway)."""
+
+    incremental: bool = True  # False: one unit for the whole set, no unit cache (the classic build)
+    workers: int = 2  # threads compiling units at once
+    timeout_s: float | None = 600.0  # compile time limit (CompileResourceError beyond)
+    disk_cache: bool = True  # keep compiled units on disk, shared by processes
+    cache_dir: str | None = None  # default: $PRINTEPS_CACHE_DIR or ~/.cache/printeps, + /rule-units
+    memory_cache_mb: int = 256  # compiled units kept in memory (zipped class bytes)
+    disk_cache_mb: int = 2048
+
+    @classmethod
+    def from_settings(cls, engine_settings: Any) -> "CompileOptions":
+        """Options from ``settings.engine`` (any object with the same attribute names)."""
+        def pick(name: str, default: Any) -> Any:
+            return getattr(engine_settings, f"compile_{name}", default)
+
+        return cls(
+            incremental=pick("incremental", True),
+            workers=max(1, int(pick("workers", 2))),
+            timeout_s=pick("timeout_s", 600.0) or None,
+            disk_cache=pick("disk_cache", True),
+            cache_dir=pick("cache_dir", None),
+            memory_cache_mb=int(pick("memory_cache_mb", 256)),
+            disk_cache_mb=int(pick("disk_cache_mb", 2048)),
+        )
+
+
+DEFAULT_OPTIONS = CompileOptions()
+Progress = Callable[[int, int, str], None]
 
 
 @dataclass
@@ -239,13 +282,15 @@ def expand(files: dict[str, str]) -> dict[str, str]:
 # --------------------------------------------------------------------------- DRL syntax
 
 
-def _syntax_errors(source: _Source) -> list[CompileError]:
+def _parse(source: _Source) -> tuple[list[CompileError], str | None]:
+    """Syntax errors of one DRL text, and (when there are none) its top-level items as
+    ``Units.describe`` JSON, for the incremental build to split it."""
     j = _j()
     parser = j["DrlParser"](j["LanguageLevel"].DRL6)
     try:
-        parser.parse(False, source.drl)
+        descr = parser.parse(False, source.drl)
     except Exception as exc:  # DroolsParserException: report it with what we know
-        return [CompileError(source.file, 0, 0, f"cannot parse: {exc}")]
+        return [CompileError(source.file, 0, 0, f"cannot parse: {exc}")], None
     errors: list[CompileError] = []
     for err in parser.getErrors():
         message = str(err.getMessage())
@@ -253,7 +298,17 @@ def _syntax_errors(source: _Source) -> list[CompileError]:
         if "Parser returned a null Package" in message:
             continue
         errors.append(CompileError(source.file, source.source_line(line), col, _clean_parser_message(message)))
-    return errors
+    if errors or descr is None:
+        return errors, None
+    try:
+        return [], str(jvm.helper_class("Units").describe(descr))
+    except Exception:  # an item the splitter does not know: the set is built in one unit
+        log.debug("could not describe %s", source.file, exc_info=True)
+        return [], None
+
+
+def _syntax_errors(source: _Source) -> list[CompileError]:
+    return _parse(source)[0]
 
 
 def _parser_position(err: Any, message: str) -> tuple[int, int]:
@@ -281,19 +336,31 @@ def _clean_parser_message(message: str) -> str:
 
 
 def _sources(files: dict[str, str]) -> tuple[list[_Source], dict[str, str], list[CompileError]]:
-    mappings, errors = _parse_dsl_files(files)
+    dsl_key = content_hash({f: t for f, t in files.items() if f.endswith(".dsl")})
+    if any(f.endswith(".dslr") and (f, files[f], dsl_key) not in _expansions for f in files):
+        mappings, errors = _parse_dsl_files(files)
+    else:  # every .dslr expanded before with these very mappings
+        mappings, errors = {}, []
     sources: list[_Source] = []
     expanded: dict[str, str] = {}
     for fname, text in sorted(files.items()):
         if fname.endswith(".drl"):
             sources.append(_Source(fname, text))
         elif fname.endswith(".dslr"):
-            drl, errs = _expand_dslr(fname, text, mappings, files)
+            key = (fname, text, dsl_key)
+            done = _expansions.get(key)
+            if done is None:
+                drl, errs = _expand_dslr(fname, text, mappings, files)
+                line_map = _align_lines(drl, text) if drl is not None and not errs else None
+                done = (drl, errs, line_map)
+                if not errors:  # an expansion next to a broken mapping is not worth keeping
+                    _remember(_expansions, key, done, 64)
+            drl, errs, line_map = done
             errors.extend(errs)
             if drl is not None:
                 expanded[fname] = drl
             if drl is not None and not errs:  # a half-expanded text would only add confusing errors
-                sources.append(_Source(fname, drl, _align_lines(drl, text)))
+                sources.append(_Source(fname, drl, line_map))
         elif is_table_file(fname):
             table = decision_table.convert(fname, text)
             errors.extend(table.errors)
@@ -312,11 +379,40 @@ def _in_tables(errors: list[CompileError], sources: list[_Source]) -> list[Compi
     return [tables[e.file].locate(e) if e.file in tables else e for e in errors]
 
 
+# Expansions and parses of unchanged texts are reused: a one-rule edit re-reads only its file.
+_expansions: "OrderedDict[tuple[str, str, str], tuple[str | None, list[CompileError], list[int] | None]]" = OrderedDict()
+_parses: "OrderedDict[tuple[str, str, tuple[int, ...] | None], tuple[list[CompileError], str | None]]" = OrderedDict()
+
+
+def _remember(cache: "OrderedDict[Any, Any]", key: Any, value: Any, size: int) -> None:
+    cache[key] = value
+    cache.move_to_end(key)
+    while len(cache) > size:
+        cache.popitem(last=False)
+
+
+def _parse_cached(source: _Source) -> tuple[list[CompileError], str | None]:
+    key = (source.file, source.drl, tuple(source.line_map) if source.line_map is not None else None)
+    done = _parses.get(key)
+    if done is None:
+        done = _parse(source)
+        _remember(_parses, key, done, 256)
+    else:
+        _parses.move_to_end(key)
+    return done
+
+
 _cache: "OrderedDict[str, CompiledRuleSet]" = OrderedDict()
 CACHE_SIZE = 16
+CACHE_MAX_RULES = 40_000  # a 10,000-rule KieBase holds ~100 MB of heap: keep a few, not sixteen
 
 
-def compile_cached(files: dict[str, str], label: str = "ruleset") -> CompiledRuleSet:
+def compile_cached(
+    files: dict[str, str],
+    label: str = "ruleset",
+    options: CompileOptions | None = None,
+    on_progress: Progress | None = None,
+) -> CompiledRuleSet:
     """Like :func:`compile_files`, reusing an earlier build of identical files.
 
     A compiled rule set is immutable, so sharing it between versions, engines and drafts is safe;
@@ -328,32 +424,160 @@ def compile_cached(files: dict[str, str], label: str = "ruleset") -> CompiledRul
         if cached is not None:
             _cache.move_to_end(key)
             return cached
-        compiled = compile_files(files, label)
+        compiled = compile_files(files, label, options, on_progress)
         _cache[key] = compiled
-        while len(_cache) > CACHE_SIZE:
+        while len(_cache) > CACHE_SIZE or (
+            len(_cache) > 1 and sum(c.rule_count for c in _cache.values()) > CACHE_MAX_RULES
+        ):
             _cache.popitem(last=False)
         return compiled
 
 
-def compile_files(files: dict[str, str], label: str = "ruleset") -> CompiledRuleSet:
-    """Compiles a rule set; raises CompileFailed with positioned errors."""
+def compile_files(
+    files: dict[str, str],
+    label: str = "ruleset",
+    options: CompileOptions | None = None,
+    on_progress: Progress | None = None,
+) -> CompiledRuleSet:
+    """Compiles a rule set; raises CompileFailed with positioned errors, CompileResourceError when
+    the JVM runs out of memory or the compile time limit passes.
+
+    ``on_progress(done, total, stage)`` is called from this thread as the build goes: stages
+    "parse" (files), "compile" (rules compiled of those that need it), "load" (units), "assemble".
+    """
+    from gateway.engine import incremental
     from gateway.engine.errors import InvalidRuleSet
 
+    options = options or DEFAULT_OPTIONS
     try:
         check_files(files)
     except InvalidRuleSet as bad:
         raise CompileFailed(bad.errors or [CompileError("", 0, 0, str(bad))]) from None
     with _compile_lock:
-        sources, expanded, errors = _sources(files)
-        errors.extend(scenarios.format_errors(files))  # a malformed tests/*.yaml is refused like bad rules
         try:
-            for source in sources:
-                errors.extend(_syntax_errors(source))
+            reused = incremental.build_from_plan(files, options, on_progress)
+            if reused is not None:
+                return reused
+            sources, expanded, errors = _sources(files)
+            errors.extend(scenarios.format_errors(files))  # a malformed tests/*.yaml is refused like bad rules
+            described: list[str | None] = []
+            for n, source in enumerate(sources):
+                errs, info = _parse_cached(source)
+                errors.extend(errs)
+                described.append(info)
+                if on_progress is not None:
+                    incremental._progress(on_progress, n + 1, len(sources), "parse")
             if errors:
-                raise CompileFailed(_sorted(errors))
-            return _build(files, sources, expanded, label)
-        except CompileFailed as failed:
-            raise CompileFailed(_sorted(_in_tables(failed.errors, sources))) from None
+                raise CompileFailed(_sorted(_in_tables(errors, sources)))
+            try:
+                return incremental.build(files, sources, described, expanded, label, options, on_progress)
+            except CompileFailed as failed:
+                raise CompileFailed(_sorted(_in_tables(failed.errors, sources))) from None
+        except _OOM_TYPES() as exc:  # anywhere on the way: the author's text is not to blame
+            raise incremental.memory_error() from exc
+
+
+def _OOM_TYPES() -> tuple[type, ...]:
+    import jpype
+
+    try:
+        return (jpype.JClass("java.lang.OutOfMemoryError"), MemoryError)
+    except Exception:  # the JVM is not running yet
+        return (MemoryError,)
+
+
+_WARM_DRL = """package org.printeps.warmup;
+import org.printeps.gateway.Actions;
+global Actions actions;
+declare Item id: String size: int price: double kind: String end
+rule "range {n}" when $i: Item(kind == "a", price >= {n}.0, price < {m}.0) then actions.say("w", $i.getId()); end
+rule "equal {n}" when Item(kind == "b{n}", size == {n}) then actions.say("w", "{n}"); end
+rule "join {n}" when $a: Item(kind == "a") $b: Item(kind == "b", size > $a.size) then actions.say("w", $b.getId()); end
+rule "sum {n}" when $a: Item(kind == "a") accumulate(Item(kind == "c", $p: price); $t: sum($p); $t > {n}.0)
+then actions.say("w", "sum"); end
+"""
+
+
+def warm_builder(rounds: int = 2) -> None:
+    """Compiles a small, never-cached rule set ``rounds`` times, so the JIT has compiled Drools'
+    builder (DRL parser, code generator, Java compiler) before an author's first edit: a one-rule
+    edit costs ~0.1 s warm and seconds in a cold JVM."""
+    import random
+
+    options = CompileOptions(disk_cache=False, workers=1, timeout_s=None)
+    for _ in range(rounds):
+        n = random.randrange(1_000_000)
+        text = _WARM_DRL.replace("{n}", str(n)).replace("{m}", str(n + 10))
+        compile_files({"warmup.drl": text}, "warmup", options)
+
+
+@dataclass
+class BuiltUnit:
+    """A compiled unit: the executable-model classes Drools generated, zipped, and the model class names."""
+
+    model_classes: list[str]
+    data: bytes
+
+
+def build_unit(sources: list[_Source], unit_id: str, deadline: Any = None) -> BuiltUnit:
+    """Compiles DRL texts with the executable model into class bytes (nothing is loaded).
+
+    Errors are mapped to the authors' files, lines and columns (CompileFailed); running out of
+    memory, also when Drools reports it as a build message, raises CompileResourceError.
+    """
+    j = _j()
+    ks = j["KieServices"].Factory.get()
+    kfs = ks.newKieFileSystem()
+    release = ks.newReleaseId("org.printeps.units", f"u{unit_id[:24]}", "1.0.0")
+    kfs.generateAndWritePomXML(release)
+    by_path: dict[str, _Source] = {}
+    for source in sources:
+        path = _resource_path("units", source)
+        by_path[path.removeprefix("src/main/resources/")] = source
+        kfs.write(path, source.drl)
+    builder = ks.newKieBuilder(kfs)
+    try:
+        try:
+            builder.buildAll(j["ExecModel"])
+        except _OOM_TYPES():
+            raise
+        except Exception as exc:  # e.g. ConsequenceRewriteException: the builder throws instead of reporting
+            if _is_oom_text(str(exc)):
+                raise _memory_error() from None
+            raise CompileFailed(_unbound_variables(sources) or [_error_from_exception(exc, sources)]) from None
+        if deadline is not None:
+            deadline.check()
+        messages = list(builder.getResults().getMessages(_error_level()))
+        try:
+            module = builder.getKieModule()
+        except j["CompilationErrors"] as exc:
+            messages = list(exc.getErrorMessages()) or messages
+            module = None
+        if messages:
+            if any(_is_oom_text(str(m.getText())) for m in messages):
+                raise _memory_error()
+            mapped = _map_build_messages(messages, by_path, sources)
+            unbound = _unbound_variables(sources) if any(e.message.startswith("then-part:") for e in mapped) else []
+            if unbound:  # the likely cause of the Java errors: say it in the author's terms
+                mapped = unbound + [e for e in mapped if not e.message.startswith("then-part:")]
+            raise CompileFailed(_sorted(mapped))
+        units = jvm.helper_class("Units")
+        classes = units.classesOf(module)
+        names = [str(n) for n in units.modelClassNames(module)]
+        data = bytes(memoryview(units.zip(classes)))
+        return BuiltUnit(names, data)
+    finally:
+        ks.getRepository().removeKieModule(release)  # built modules would otherwise pile up in the repository
+
+
+def _is_oom_text(text: str) -> bool:
+    return any(m in text for m in ("OutOfMemoryError", "Java heap space", "GC overhead limit exceeded", "Metaspace"))
+
+
+def _memory_error() -> CompileResourceError:
+    from gateway.engine import incremental
+
+    return incremental.memory_error()
 
 
 _PACKAGE = re.compile(r"^\s*package\s+([A-Za-z_][\w.]*)\s*;?", re.MULTILINE)
@@ -365,51 +589,6 @@ def _resource_path(label: str, source: _Source) -> str:
     package = _PACKAGE.search(source.drl)
     folder = package.group(1).replace(".", "/") if package else re.sub(r"[^A-Za-z0-9_]", "_", label)
     return f"src/main/resources/{folder}/{name}"
-
-
-def _build(files: dict[str, str], sources: list[_Source], expanded: dict[str, str], label: str) -> CompiledRuleSet:
-    j = _j()
-    ks = j["KieServices"].Factory.get()
-    kfs = ks.newKieFileSystem()
-    artifact = re.sub(r"[^A-Za-z0-9_.-]", "_", label) or "ruleset"
-    release = ks.newReleaseId("org.printeps.rules", artifact, f"1.0.{next(_build_counter)}")
-    kfs.generateAndWritePomXML(release)
-    by_path: dict[str, _Source] = {}
-    for source in sources:
-        path = _resource_path(label, source)
-        by_path[path.removeprefix("src/main/resources/")] = source
-        kfs.write(path, source.drl)
-    builder = ks.newKieBuilder(kfs)
-    try:
-        builder.buildAll(j["ExecModel"])
-    except Exception as exc:  # e.g. ConsequenceRewriteException: the builder throws instead of reporting
-        raise CompileFailed(_unbound_variables(sources) or [_error_from_exception(exc, sources)]) from None
-    messages = list(builder.getResults().getMessages(_error_level()))
-    try:
-        builder.getKieModule()
-    except j["CompilationErrors"] as exc:
-        messages = list(exc.getErrorMessages()) or messages
-    if messages:
-        mapped = _map_build_messages(messages, by_path, sources)
-        unbound = _unbound_variables(sources) if any(e.message.startswith("then-part:") for e in mapped) else []
-        if unbound:  # the likely cause of the Java errors: say it in the author's terms
-            mapped = unbound + [e for e in mapped if not e.message.startswith("then-part:")]
-        raise CompileFailed(_sorted(mapped))
-    container = ks.newKieContainer(release)
-    ks.getRepository().removeKieModule(release)  # the container keeps it; don't let the repository grow
-    kiebase = container.newKieBase(_kiebase_configuration(ks))
-    runner = j["Runner"](kiebase)
-    rule_names = sorted(str(rule.getName()) for package in kiebase.getKiePackages() for rule in package.getRules())
-    return CompiledRuleSet(
-        hash=content_hash(files),
-        runner=runner,
-        container=container,
-        rule_count=int(runner.ruleCount()),
-        types=json.loads(str(runner.describeTypes())),
-        type_names=json.loads(str(runner.typeFullNames())),
-        expanded=expanded,
-        rule_names=rule_names,
-    )
 
 
 _RULE_BLOCK = re.compile(r'^\s*rule\s+("[^"]*"|\S+)(.*?)^\s*end\b', re.MULTILINE | re.DOTALL)

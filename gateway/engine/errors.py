@@ -81,6 +81,25 @@ class CompileFailed(EngineError):
         return {"error": str(self), "kind": self.kind, "errors": [e.to_dict() for e in self.errors]}
 
 
+class CompileResourceError(EngineError):
+    """Compiling ran out of memory or time: a server-side limit, not a fault of the rule text.
+
+    Nothing was deployed and what serves is untouched. ``setting`` names what an operator raises
+    (e.g. ``PRINTEPS_JVM_HEAP``); the REST API answers 503.
+    """
+
+    kind = "resources"
+
+    def __init__(self, reason: str, message: str, setting: str, limit: str | None = None):
+        self.reason = reason  # "memory" | "time"
+        self.setting = setting
+        self.limit = limit
+        super().__init__(f"{message}; this is a server limit, not an error in the rules: raise {setting}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "reason": self.reason, "setting": self.setting, "limit": self.limit}
+
+
 class FactError(EngineError):
     """Facts were refused (unknown type/field, wrong value type); nothing was fired."""
 

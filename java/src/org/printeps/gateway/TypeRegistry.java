@@ -135,6 +135,12 @@ public final class TypeRegistry {
 
     TypeInfo type(String name) { return byName.get(name); }
 
+    /** Whether any declared type is an event (@role(event)). */
+    boolean hasEventTypes() {
+        for (TypeInfo t : ordered) if (t.event) return true;
+        return false;
+    }
+
     boolean isEvent(Object fact) {
         TypeInfo t = byClass.get(fact.getClass());
         return t != null && t.event;

@@ -1,0 +1,528 @@
+"""Incremental builds against a real JVM with Drools: a rule set built from cached units after any
+sequence of edits fires exactly as a one-unit build of the same text; only what changed compiles;
+compiled sets move between processes; resource limits are server errors.
+
+No timing assertions (the machine is shared): speed is measured by bench/growth_bench.py.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from gateway.engine import compiler, incremental
+from gateway.engine.artifacts import (
+    IncompatibleArtifact,
+    export_compiled,
+    load_compiled,
+)
+from gateway.engine.compiler import CompileOptions
+from gateway.engine.errors import CompileFailed, CompileResourceError
+from gateway.engine.results import encode_facts
+from gateway.engine.warmup import plain_facts, warm
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench" / "peers"))
+import growth_rules
+
+HEADER = "package org.printeps.inc;\n\n"
+TYPES = """package org.printeps.inc;
+import org.printeps.gateway.Actions;
+global Actions actions;
+
+declare Customer
+    id: String
+    age: int
+    tier: String{extra}
+end
+
+declare Order
+    id: String
+    customer: String
+    amount: double
+end
+
+function String band(double amount) {{ return amount > 500 ? "big" : "small"; }}
+
+query bigSpenders(double $min)
+    Order($min <= amount)
+end
+"""
+
+
+@pytest.fixture()
+def options(tmp_path) -> CompileOptions:
+    """A unit cache of this test's own (memory and disk), so tests never see each other's units."""
+    incremental.reset()
+    yield CompileOptions(cache_dir=str(tmp_path / "units"))
+    incremental.reset()
+
+
+def whole(files: dict[str, str]) -> compiler.CompiledRuleSet:
+    return compiler.compile_files(files, "whole", CompileOptions(incremental=False, disk_cache=False))
+
+
+def fire(compiled, facts) -> dict:
+    answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, True)))
+    assert answer["ok"], answer
+    return {"actions": [(a["rule"], a["module"], a["params"]) for a in answer["actions"]],
+            "fired": [f["rule"] for f in answer["fired"]]}
+
+
+# --------------------------------------------------------------------------- random rule sets and edits
+
+
+def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = True) -> str:
+    """One rule of a random shape; some modify facts, so firing order and inference both matter."""
+    shape = rng.choice(["age", "tier", "amount", "join", "accumulate", "modify", "function", "absent"]
+                       + (["query"] if queries else []) + (["vip"] if vip_field else []))
+    salience = f"salience {rng.randint(-5, 5)}\n" if rng.random() < 0.3 else ""
+    say = f'actions.say("bot", "{name}");'
+    if shape == "age":
+        when = f"$c: Customer(age >= {rng.randint(0, 60)}, age < {rng.randint(30, 90)})"
+        then = say
+    elif shape == "tier":
+        when = f'$c: Customer(tier == "{rng.choice(["gold", "silver", "vip"])}")'
+        then = f'actions.say("bot", "{name} " + $c.getId());'
+    elif shape == "amount":
+        when = f"$o: Order(amount > {rng.randint(0, 900)}.0)"
+        then = f'actions.say("bot", "{name} " + $o.getId());'
+    elif shape == "join":
+        when = f"$c: Customer(age > {rng.randint(10, 50)})\n    $o: Order(customer == $c.id, amount > {rng.randint(0, 500)}.0)"
+        then = f'actions.say("bot", "{name} " + $c.getId() + "/" + $o.getId());'
+    elif shape == "accumulate":
+        when = (f"$c: Customer()\n    accumulate(Order(customer == $c.id, $a: amount); $t: sum($a); "
+                f"$t > {rng.randint(0, 1200)}.0)")
+        then = f'actions.say("bot", "{name} " + $c.getId());'
+    elif shape == "modify":
+        when = f'$c: Customer(age > {rng.randint(20, 70)}, tier != "vip")'
+        then = f'modify($c) {{ setTier("vip") }}\n    {say}'
+    elif shape == "function":
+        when = f"$o: Order(amount > {rng.randint(0, 900)}.0)"
+        then = f'actions.say("bot", "{name} " + band($o.getAmount()));'
+    elif shape == "absent":  # a not after a first pattern: deleting facts may activate it
+        when = f"$c: Customer(age > {rng.randint(10, 60)})\n    not Order(customer == $c.id)"
+        then = f'actions.say("bot", "{name} no order " + $c.getId());'
+    elif shape == "query":
+        when = f"?bigSpenders({rng.randint(100, 900)}.0;)\n    $c: Customer(age < {rng.randint(20, 80)})"
+        then = f'actions.say("bot", "{name} " + $c.getId());'
+    else:
+        when = "$c: Customer(vip == true)"
+        then = f'actions.say("bot", "{name} vip " + $c.getId());'
+    return f'rule "{name}"\n{salience}when\n    {when}\nthen\n    {then}\nend\n'
+
+
+class RandomSet:
+    """A rule set of two rule files and the types file, edited at random."""
+
+    def __init__(self, seed: int, queries: bool = True):
+        self.rng = random.Random(seed)
+        self.queries = queries
+        self.vip = False
+        self.counter = 0
+        self.rules: dict[str, list[tuple[str, str]]] = {"a.drl": [], "b.drl": []}
+        for file in self.rules:
+            for _ in range(8):
+                self.add(file)
+
+    def new_name(self) -> str:
+        self.counter += 1
+        return f"rule {self.counter:03d}"
+
+    def add(self, file: str | None = None) -> None:
+        file = file or self.rng.choice(list(self.rules))
+        name = self.new_name()
+        position = self.rng.randint(0, len(self.rules[file]))
+        self.rules[file].insert(position, (name, random_rule(self.rng, name, self.vip, self.queries)))
+
+    def edit(self) -> str:
+        """One random edit; returns its kind."""
+        kind = self.rng.choice(["add", "change", "change", "remove", "type"])
+        file = self.rng.choice(list(self.rules))
+        if kind == "add" or (kind in ("change", "remove") and not self.rules[file]):
+            self.add(file)
+            return "add"
+        if kind == "change":
+            k = self.rng.randrange(len(self.rules[file]))
+            name = self.rules[file][k][0]
+            self.rules[file][k] = (name, random_rule(self.rng, name, self.vip, self.queries))
+        elif kind == "remove":
+            self.rules[file].pop(self.rng.randrange(len(self.rules[file])))
+        else:  # a declared type changes: a field comes or goes (rules using it go with it)
+            self.vip = not self.vip
+            if not self.vip:
+                for f in self.rules:
+                    self.rules[f] = [(n, t) for n, t in self.rules[f] if "vip ==" not in t]
+            else:
+                self.add()
+        return kind
+
+    def files(self) -> dict[str, str]:
+        extra = "\n    vip: boolean" if self.vip else ""
+        out = {"types.drl": TYPES.format(extra=extra)}
+        for file, rules in self.rules.items():
+            out[file] = HEADER + "\n".join(text for _, text in rules)
+        return out
+
+    def facts(self) -> list[list[dict]]:
+        rng = random.Random(7)
+        sets = []
+        for _ in range(4):
+            facts = []
+            for c in range(3):
+                customer = {"type": "Customer", "id": f"c{c}", "age": rng.randint(5, 90),
+                            "tier": rng.choice(["gold", "silver", "basic"])}
+                if self.vip:
+                    customer["vip"] = rng.random() < 0.5
+                facts.append(customer)
+            facts += [{"type": "Order", "id": f"o{o}", "customer": f"c{rng.randrange(3)}",
+                       "amount": float(rng.randint(1, 1000))} for o in range(4)]
+            sets.append(facts)
+        return sets
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_incremental_builds_fire_exactly_as_whole_builds_over_random_edits(options, seed):
+    rule_set = RandomSet(seed)
+    compiled = compiler.compile_files(rule_set.files(), "inc", options)
+    assert compiled.stats.mode == "incremental"
+    seen = {compiled.hash}
+    for step in range(6):
+        kind = rule_set.edit()
+        files = rule_set.files()
+        texts = _rule_texts(files)
+        built = compiler.compile_files(files, "inc", options)
+        if built.hash in seen:  # an edit that restored an earlier version: assembled from its plan
+            kind = "restored"
+            assert built.stats.mode == "plan"
+        seen.add(built.hash)
+        reference = whole(files)
+        assert built.rule_count == reference.rule_count
+        assert built.types == reference.types
+        for facts in rule_set.facts():
+            assert fire(built, facts) == fire(reference, facts), f"step {step} ({kind}) fires differently"
+        # only what changed was compiled: a new or changed rule, or every rule naming a changed type
+        if kind in ("add", "change"):
+            assert built.stats.rules_compiled == 1, (kind, built.stats)
+        elif kind in ("remove", "restored"):
+            assert built.stats.rules_compiled == 0, (kind, built.stats)
+        else:
+            naming_customer = sum(1 for text in texts.values() if "Customer" in text)
+            assert 0 < built.stats.rules_compiled <= naming_customer + 1, built.stats  # + the rule a new field brings
+            assert built.stats.rules_compiled < built.rule_count
+
+
+def _rule_texts(files: dict[str, str]) -> dict[str, str]:
+    """Rule name -> text, of the generated files (for counting what a type change touches)."""
+    out = {}
+    for file, text in files.items():
+        for block in text.split('rule "')[1:]:
+            out[block.split('"', 1)[0]] = block
+    return out
+
+
+def test_a_declared_type_change_rebuilds_exactly_the_rules_that_use_it(options):
+    files = {"types.drl": TYPES.format(extra=""),
+             "c.drl": HEADER + "".join(f'rule "c{i}" when Customer(age > {i}) then actions.say("b", "c{i}"); end\n'
+                                       for i in range(5)),
+             "o.drl": HEADER + "".join(f'rule "o{i}" when Order(amount > {i}.0) then actions.say("b", "o{i}"); end\n'
+                                       for i in range(5))}
+    compiler.compile_files(files, "types", options)
+    changed = dict(files, **{"types.drl": TYPES.format(extra="\n    vip: boolean")})
+    built = compiler.compile_files(changed, "types", options)
+    assert built.stats.rules_compiled == 5  # the rules naming Customer; the Order rules are reused
+    assert built.types["Customer"]["vip"] == "boolean"
+    facts = [{"type": "Customer", "id": "x", "age": 3, "tier": "gold", "vip": True}, {"type": "Order", "id": "o", "customer": "x", "amount": 2.5}]
+    assert fire(built, facts) == fire(whole(changed), facts)
+
+
+def test_a_type_change_that_breaks_a_rule_is_reported_in_the_rule_file(options):
+    files = {"types.drl": TYPES.format(extra="\n    vip: boolean"),
+             "r.drl": HEADER + 'rule "vip"\nwhen\n    $c: Customer(vip == true)\nthen\n    actions.say("b", "vip");\nend\n'}
+    compiler.compile_files(files, "broken", options)
+    with pytest.raises(CompileFailed) as failed:
+        compiler.compile_files(dict(files, **{"types.drl": TYPES.format(extra="")}), "broken", options)
+    error = failed.value.errors[0]
+    assert (error.file, error.line) == ("r.drl", 5) and "vip" in error.message
+
+
+def test_errors_in_units_carry_the_authors_positions(options):
+    """A bad rule compiled in a unit of its own is reported where a whole build reports it."""
+    good = growth_rules.drl_files(60)
+    broken = dict(good)
+    lines = broken["rules_000.drl"].split("\n")
+    target = next(i for i, line in enumerate(lines) if "r00031" in line and "rule" in line)
+    lines[target + 2] = lines[target + 2].replace("Order(", "Ordr(").replace("Customer(", "Custmer(")
+    broken["rules_000.drl"] = "\n".join(lines)
+    compiler.compile_files(good, "pos", options)  # every other rule is cached: only the broken one compiles
+    with pytest.raises(CompileFailed) as incremental_error:
+        compiler.compile_files(broken, "pos", options)
+    with pytest.raises(CompileFailed) as whole_error:
+        whole(broken)
+    got = [(e.file, e.line, e.column) for e in incremental_error.value.errors]
+    assert got == [(e.file, e.line, e.column) for e in whole_error.value.errors]
+    assert got[0][:2] == ("rules_000.drl", target + 3)
+
+
+def test_duplicate_rule_names_across_units_are_reported(options):
+    files = {"types.drl": TYPES.format(extra=""),
+             "a.drl": HEADER + 'rule "same" when Customer() then actions.say("b", "a"); end\n',
+             "b.drl": HEADER + '\n\nrule "same" when Order() then actions.say("b", "b"); end\n'}
+    with pytest.raises(CompileFailed) as failed:
+        compiler.compile_files(files, "dup", options)
+    error = failed.value.errors[0]
+    assert (error.file, error.line) == ("b.drl", 5) and "Duplicate rule name" in error.message
+
+
+def test_the_dsl_reception_set_builds_in_units_and_fires_as_a_whole_build(options):
+    from gateway.engine.ruleset import read_folder
+
+    files = read_folder(ROOT / "rules" / "drl" / "reception")
+    built = compiler.compile_files(files, "reception", options)
+    reference = whole(files)
+    assert built.stats.mode == "incremental" and built.rule_count == reference.rule_count == 32
+    assert built.expanded == reference.expanded
+    for example in json.loads(files["examples.json"]):
+        assert fire(built, example["facts"]) == fire(reference, example["facts"]), example["name"]
+
+
+# --------------------------------------------------------------------------- big sets
+
+
+def test_a_thousand_rule_set_builds_edits_and_fires_as_expected(options):
+    files = growth_rules.drl_files(1000)
+    compiled = compiler.compile_files(files, "growth", options)
+    assert compiled.rule_count == 1000 and compiled.stats.units_compiled > 1
+    for k in range(6):
+        facts = growth_rules.sample_facts(k)
+        got = {}
+        for rule, _, _ in fire(compiled, facts)["actions"]:
+            got[rule] = got.get(rule, 0) + 1
+        assert got == growth_rules.expected_firings(1000, facts)
+    variants = {517: 1}
+    edited = compiler.compile_files(growth_rules.drl_files(1000, variants), "growth", options)
+    assert edited.stats.rules_compiled == 1 and edited.stats.units_reused > 1
+    for k in range(6):
+        facts = growth_rules.sample_facts(k)
+        fired = [rule for rule, _, _ in fire(edited, facts)["actions"]]
+        assert sorted(set(fired)) == sorted(growth_rules.expected_firings(1000, facts, variants))
+
+
+def test_a_bad_rule_among_a_thousand_is_located_and_nothing_serving_changes(tmp_path, options):
+    from gateway.config import Settings
+    from gateway.engine import Engine
+
+    engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine={
+        "rules_dir": str(tmp_path / "rules"), "compile_cache_dir": options.cache_dir}))
+    files = growth_rules.drl_files(1000)
+    engine.deploy("growth", files)
+    served = engine.fire("growth", growth_rules.sample_facts(2)).to_dict()["actions"]
+    broken = dict(files)
+    text = broken["rules_001.drl"]
+    at = text.index('rule "r00700')
+    broken["rules_001.drl"] = text[:at] + text[at:].replace("actions.say(", "actions.sya(", 1)
+    with pytest.raises(CompileFailed) as failed:
+        engine.deploy("growth", broken)
+    error = failed.value.errors[0]
+    line = broken["rules_001.drl"][:broken["rules_001.drl"].index("actions.sya(")].count("\n") + 1
+    assert (error.file, error.line) == ("rules_001.drl", line) and error.column > 0
+    assert engine.current("growth").info.version == 1
+    assert engine.fire("growth", growth_rules.sample_facts(2)).to_dict()["actions"] == served
+
+
+# --------------------------------------------------------------------------- caches and artifacts
+
+
+def test_the_disk_cache_serves_another_process_without_compiling(options, tmp_path):
+    files = growth_rules.drl_files(120)
+    compiler.compile_files(files, "shared", options)
+    (tmp_path / "files.json").write_text(json.dumps(files))
+    report = _run_python(f"""
+        import json
+        from gateway.engine import compiler
+        files = json.load(open({str(tmp_path / "files.json")!r}))
+        c = compiler.compile_files(files, "shared", compiler.CompileOptions(cache_dir={options.cache_dir!r}))
+        edited = dict(files, **{{"rules_000.drl": files["rules_000.drl"].replace("r00007", "r00007 edited")}})
+        e = compiler.compile_files(edited, "shared", compiler.CompileOptions(cache_dir={options.cache_dir!r}))
+        print("RESULT", json.dumps([c.stats.to_dict(), e.stats.to_dict(), c.rule_count]))
+    """)
+    same, edited, rules = report
+    assert same["mode"] == "plan" and same["rules_compiled"] == 0 and rules == 120
+    assert edited["mode"] == "incremental" and edited["rules_compiled"] == 1
+
+
+def test_export_and_load_a_compiled_set_in_another_process(options, tmp_path):
+    files = growth_rules.drl_files(150)
+    compiled = compiler.compile_files(files, "moved", options)
+    data = export_compiled(compiled, options)
+    (tmp_path / "set.bin").write_bytes(data)
+    (tmp_path / "files.json").write_text(json.dumps(files))
+    facts = growth_rules.sample_facts(4)
+    report = _run_python(f"""
+        import json
+        from gateway.engine import compiler
+        from gateway.engine.artifacts import load_compiled
+        from gateway.engine.results import encode_facts
+        files = json.load(open({str(tmp_path / "files.json")!r}))
+        options = compiler.CompileOptions(cache_dir={str(tmp_path / "other-cache")!r})
+        c = load_compiled(open({str(tmp_path / "set.bin")!r}, "rb").read(), files, options)
+        answer = json.loads(str(c.runner.fire(encode_facts({facts!r}, 100), 1000, False, True)))
+        print("RESULT", json.dumps([c.stats.to_dict(), c.rule_count, answer["actions"]]))
+    """)
+    stats, rules, actions = report
+    assert stats["mode"] == "loaded" and stats["rules_compiled"] == 0 and rules == 150
+    answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 100), 1000, False, True)))
+    assert actions == answer["actions"]
+
+
+def test_load_compiled_refuses_other_files_and_other_environments(options):
+    files = growth_rules.drl_files(20)
+    data = export_compiled(compiler.compile_files(files, "x", options), options)
+    with pytest.raises(IncompatibleArtifact, match="other files"):
+        load_compiled(data, dict(files, **{"types.drl": files["types.drl"] + "\n"}), options)
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as src, zipfile.ZipFile(buffer, "w") as dst:
+        for name in src.namelist():
+            body = src.read(name)
+            if name == "manifest.json":
+                manifest = json.loads(body)
+                manifest["env"] = "drools-7.0-other"
+                body = json.dumps(manifest).encode()
+            dst.writestr(name, body)
+    with pytest.raises(IncompatibleArtifact, match="compiled for drools-7.0-other"):
+        load_compiled(buffer.getvalue(), files, options)
+    with pytest.raises(IncompatibleArtifact, match="not a compiled rule set"):
+        load_compiled(b"not a zip", files, options)
+
+
+def test_a_unit_evicted_from_the_disk_cache_is_compiled_again(options, tmp_path):
+    files = growth_rules.drl_files(40)
+    compiler.compile_files(files, "evicted", options)
+    incremental.reset()  # a fresh process, as far as memory goes
+    for unit in Path(options.cache_dir).rglob("units/*.zip"):
+        unit.unlink()
+    rebuilt = compiler.compile_files(files, "evicted", options)
+    assert rebuilt.stats.mode == "incremental" and rebuilt.stats.rules_compiled == 40
+
+
+# --------------------------------------------------------------------------- limits, warming
+
+
+def test_the_compile_time_limit_is_a_resource_error_and_leaves_serving_alone(tmp_path, options):
+    from gateway.api.errors import engine_error_response
+    from gateway.config import Settings
+    from gateway.engine import Engine
+
+    settings = {"rules_dir": str(tmp_path / "rules"), "compile_cache_dir": options.cache_dir}
+    engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine=settings))
+    engine.deploy("limited", growth_rules.drl_files(10))
+    strict = Engine(Settings(data_dir=str(tmp_path / "data"), engine={**settings, "compile_timeout_s": 0.001}))
+    with pytest.raises(CompileResourceError) as error:
+        strict.deploy("limited", growth_rules.drl_files(300))
+    assert error.value.reason == "time" and "PRINTEPS_COMPILE_TIMEOUT" in error.value.setting
+    assert engine_error_response(error.value)[0] == 503
+    assert strict.current("limited").info.version == 1
+    assert engine.fire("limited", growth_rules.sample_facts(0)).version == 1
+
+
+def test_running_out_of_heap_while_compiling_is_a_resource_error(tmp_path):
+    """A JVM of 32 MB cannot compile 1,000 rules in one piece: the answer names the heap setting."""
+    report = _run_python("""
+        import json, sys
+        sys.path.insert(0, %r)
+        import growth_rules
+        from gateway import jvm
+        from gateway.config import JvmSettings
+        jvm.start(JvmSettings(max_heap="32m"))
+        from gateway.engine import compiler
+        from gateway.engine.errors import CompileResourceError
+        try:
+            compiler.compile_files(growth_rules.drl_files(1000), "oom", compiler.CompileOptions(incremental=False, disk_cache=False))
+            print("RESULT", json.dumps("compiled"))
+        except CompileResourceError as exc:
+            print("RESULT", json.dumps(exc.to_dict()))
+    """ % str(ROOT / "bench" / "peers"))
+    assert report["reason"] == "memory" and "PRINTEPS_JVM_HEAP" in report["setting"]
+    assert "file" not in report  # never blamed on a rule file
+
+
+def test_progress_is_reported_by_stage(options):
+    seen = []
+    compiler.compile_files(growth_rules.drl_files(80), "progress", options, lambda d, t, s: seen.append((s, d, t)))
+    stages = list(dict.fromkeys(s for s, _, _ in seen))
+    assert stages == ["parse", "compile", "load", "assemble"]
+    compile_steps = [(d, t) for s, d, t in seen if s == "compile"]
+    assert compile_steps[-1] == (80, 80) and all(d <= t for d, t in compile_steps)
+
+
+def test_warming_fires_the_examples_once(options):
+    files = dict(growth_rules.drl_files(30), **{"examples.json": json.dumps(
+        [{"name": "one", "facts": growth_rules.sample_facts(1)}])})
+    compiled = compiler.compile_files(files, "warm", options)
+    stats = warm(compiled, files, budget_s=0.01, max_fires=50)
+    assert stats.fires >= 3 and compiled.warmed
+    assert warm(compiled, files).fires == 0
+    assert {f["type"] for f in plain_facts(compiled.types)} == {"Customer", "Order", "Product"}
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _run_python(code: str) -> object:
+    """Runs ``code`` in a fresh Python process (its own JVM) and returns what it printed after RESULT."""
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=600, env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    for line in proc.stdout.splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line.removeprefix("RESULT "))
+    raise AssertionError(f"no result (exit {proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}")
+
+
+def test_rules_without_a_package_and_rule_inheritance_build(options):
+    plain = {"a.drl": 'declare Thing id: String end\nrule "one" when Thing() then System.out.print(""); end\n',
+             "b.drl": 'rule "two" when $t: Thing(id == "x") then System.out.print(""); end\n'}
+    built = compiler.compile_files(plain, "nopkg", options)
+    assert built.stats.mode == "incremental" and built.rule_count == 2
+    assert fire(built, [{"type": "Thing", "id": "x"}])["fired"] == fire(whole(plain), [{"type": "Thing", "id": "x"}])["fired"]
+    inherited = {"r.drl": HEADER.replace("\n\n", "\ndeclare Thing id: String end\n")
+                 + 'rule "base" when $t: Thing() then end\nrule "child" extends "base" when Thing(id == "x") then end\n'}
+    built = compiler.compile_files(inherited, "extends", options)
+    assert built.stats.mode == "whole" and built.rule_count == 2  # one unit: a child needs its parent
+
+
+def test_warming_the_builder_compiles_a_fresh_set_each_round(options):
+    before = compiler._cache.copy()
+    compiler.warm_builder(rounds=2)
+    assert compiler._cache == before  # nothing kept for serving
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_reused_sessions_answer_as_fresh_ones(options, seed):
+    """The Runner empties a session after a request and gives it to the next: over a varied
+    request stream (rules that modify facts, joins, accumulates, queries, salience) every answer
+    equals that of a session of its own."""
+    from gateway import jvm
+
+    rule_set = RandomSet(seed, queries=False)  # a rule opening with a query call disables reuse (below)
+    compiled = compiler.compile_files(rule_set.files(), "reuse", options)
+    assert compiled.runner.reusesSessions()
+    requests = rule_set.facts() * 3
+    random.Random(seed).shuffle(requests)
+    runner_class = jvm.helper_class("Runner")
+    for facts in requests:
+        fresh = runner_class(compiled.kbase)  # a new Runner: its first session is a new one
+        reused = json.loads(str(compiled.runner.fire(encode_facts(facts, 100), 10_000, True, True)))
+        alone = json.loads(str(fresh.fire(encode_facts(facts, 100), 10_000, True, True)))
+        assert reused == alone
+    with_query = RandomSet(seed)
+    with_query.rules["a.drl"].append(("q", 'rule "q" when ?bigSpenders(1.0;) then actions.say("b", "q"); end\n'))
+    assert not compiler.compile_files(with_query.files(), "reuse", options).runner.reusesSessions()
