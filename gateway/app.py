@@ -246,6 +246,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         gateway.app = create_app(gateway)
     if warm_up:
         engine.warm_up()
+        closers.append(("engine warm-up", engine.stop_warm_up))  # closed first: it reads the store
     return gateway
 
 

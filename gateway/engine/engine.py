@@ -90,6 +90,8 @@ class Engine:
         self._listeners: list[Listener] = []
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
+        self._warm_up_stop = threading.Event()
+        self._warm_up_thread: threading.Thread | None = None
         self.session_manager = SessionManager(self, self.settings.sessions)
         self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
 
@@ -464,17 +466,28 @@ class Engine:
         compiling a 10,000-rule set twice at start would cost minutes.)
         """
 
+        stopping = self._warm_up_stop
+
         def work() -> None:
             try:
                 compiler.warm_builder(rounds)
             except Exception:  # best effort, as below
                 log.debug("warm-up of the builder failed", exc_info=True)
-            for info in self.list_rulesets():
+            try:
+                infos = [] if stopping.is_set() else self.list_rulesets()
+            except Exception:  # the store closed under us (shutdown) or is away: nothing to warm
+                log.debug("warm-up could not list the rule sets", exc_info=True)
+                infos = []
+            for info in infos:
+                if stopping.is_set():
+                    return
                 try:
                     files = self.version(info.name, info.version).files
                     _, compiled = self._live_entry(info.name)
                     samples = _example_fact_sets(files) or [[]]
                     for k in range(fires):  # not through fire(): warm-up is no decision to log
+                        if stopping.is_set():
+                            return
                         try:
                             self._fire(compiled, info.name, info.version, samples[k % len(samples)], None, False, True)
                         except EngineError:
@@ -486,8 +499,17 @@ class Engine:
             work()
             return None
         thread = threading.Thread(target=work, name="engine-warm-up", daemon=True)
+        self._warm_up_thread = thread
         thread.start()
         return thread
+
+    def stop_warm_up(self, timeout_s: float = 10.0) -> None:
+        """Ends a background warm-up at its next step and waits for it (a JVM call in progress
+        cannot be interrupted), so shutting down never races it for the store or the JVM."""
+        self._warm_up_stop.set()
+        thread = self._warm_up_thread
+        if thread is not None and thread.is_alive():
+            thread.join(timeout_s)
 
     # ------------------------------------------------------------------ the seed folders
 

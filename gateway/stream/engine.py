@@ -808,7 +808,7 @@ class StreamEngine:
             correlation = f"{name}@{data.end_ms}"
             if binding.mode == "stateful":
                 if runtime.session is None:
-                    runtime.session = self.rules_engine.open_session(binding.ruleset)
+                    runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
                 # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
                 result = runtime.session.push(facts, instant)
                 result.decision_id = self.rules_engine.record_decision(

@@ -59,6 +59,7 @@ class RuleBinding:
     context: list[str] = field(default_factory=list)
     suppress_repeats: dict[str, Any] | None = None
     dispatch: bool = True
+    on_deploy: str | None = None  # a stateful binding's session on a deploy: "follow" | "pin" (None: sessions.on_deploy)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -100,7 +101,8 @@ class RuleBinding:
                    constants=dict(constants), attributes=dict(attributes),
                    subject=str(raw["subject"]).lstrip("?") if raw.get("subject") else None,
                    window_facts=[dict(w) for w in window_facts], context=list(context),
-                   suppress_repeats=dict(repeats) if repeats else None, dispatch=bool(raw.get("dispatch", True)))
+                   suppress_repeats=dict(repeats) if repeats else None, dispatch=bool(raw.get("dispatch", True)),
+                   on_deploy=str(raw["on_deploy"]) if raw.get("on_deploy") is not None else None)
 
 
 def check_binding(binding: RuleBinding, variables: list[str], engine: Any,
@@ -109,6 +111,8 @@ def check_binding(binding: RuleBinding, variables: list[str], engine: Any,
     declared field types of every fact type the binding makes (``{type: {field: java type}}``)."""
     if binding.mode not in ("stateless", "stateful"):
         raise BindingError(f"mode must be 'stateless' or 'stateful', not {binding.mode!r}")
+    if binding.on_deploy not in (None, "follow", "pin"):
+        raise BindingError(f"on_deploy must be 'follow' or 'pin', not {binding.on_deploy!r}")
     declared = engine.declared_types(binding.ruleset)
 
     def fields_of(fact_type: str, where: str) -> dict[str, str]:

@@ -421,11 +421,14 @@ def test_the_compile_time_limit_is_a_resource_error_and_leaves_serving_alone(tmp
     from gateway.api.errors import engine_error_response
     from gateway.config import Settings
     from gateway.engine import Engine
+    from gateway.versions import MemoryCatalog
 
     settings = {"rules_dir": str(tmp_path / "rules"), "compile_cache_dir": options.cache_dir}
-    engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine=settings))
+    catalog = MemoryCatalog()  # two processes' engines over one catalog
+    engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine=settings), catalog)
     engine.deploy("limited", growth_rules.drl_files(10))
-    strict = Engine(Settings(data_dir=str(tmp_path / "data"), engine={**settings, "compile_timeout_s": 0.001}))
+    strict = Engine(Settings(data_dir=str(tmp_path / "data"), engine={**settings, "compile_timeout_s": 0.001}), catalog)
+    strict.load_all()
     with pytest.raises(CompileResourceError) as error:
         strict.deploy("limited", growth_rules.drl_files(300))
     assert error.value.reason == "time" and "PRINTEPS_COMPILE_TIMEOUT" in error.value.setting
