@@ -27,8 +27,11 @@ def benches(quick: bool) -> dict[str, list[str]]:
         "http": ["bench/http_bench.py", "--seconds", seconds, "--write-docs"],
         "propagation": ["bench/propagation_bench.py", "--rounds", "6" if quick else "20", "--write-docs"],
         "ros": ["bench/ros_latency.py", "60" if quick else "200", "--write-docs"],
-        "stream": ["bench/stream_customer_detection.py", "--seconds", "30" if quick else "120", "--write-docs"],
+        "stream": ["bench/stream_bench.py", *(["--quick", "--rdflib-timeout", "0"] if quick else []), "--write-docs"],
+        "sessions": ["bench/session_bench.py", "--seconds", seconds, "--write-docs"],
         "agile": ["bench/agile_loop.py", "--repeat", "1" if quick else "3", "--write", "docs/agile-loop.md"],
+        # the longest (10,000 rules, peers included): last, so the others are not held up
+        "growth": ["bench/growth_bench.py", *(["--sizes", "100,1000"] if quick else []), "--write"],
     }
 
 
