@@ -61,6 +61,10 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
     def root() -> RedirectResponse:
         return RedirectResponse("/workbench", status_code=307)
 
+    @app.get("/workflows", include_in_schema=False)
+    def workflows_page() -> RedirectResponse:
+        return RedirectResponse("/workbench/workflows", status_code=307)
+
     app.add_middleware(BodyLimit, max_bytes=settings.api.max_body_bytes)
     if settings.api.is_open:
         log.warning("REST API is open (no tokens configured): every caller acts as author 'anonymous'")

@@ -149,7 +149,7 @@ class RuleRuntimeError(EngineError):
         return {"error": str(self), "kind": self.kind, "rule": self.rule}
 
 
-class RuleSetNotFound(EngineError):
+class RuleSetNotFound(EngineError, LookupError):
     kind = "not_found"
 
     def __init__(self, name: str):

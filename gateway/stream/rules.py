@@ -113,7 +113,10 @@ def check_binding(binding: RuleBinding, variables: list[str], engine: Any,
         raise BindingError(f"mode must be 'stateless' or 'stateful', not {binding.mode!r}")
     if binding.on_deploy not in (None, "follow", "pin"):
         raise BindingError(f"on_deploy must be 'follow' or 'pin', not {binding.on_deploy!r}")
-    declared = engine.declared_types(binding.ruleset)
+    try:
+        declared = engine.declared_types(binding.ruleset)
+    except LookupError as exc:
+        raise BindingError(f"ruleset: {exc}; deploy it first or bind to a deployed rule set") from exc
 
     def fields_of(fact_type: str, where: str) -> dict[str, str]:
         if fact_type not in declared:

@@ -5,8 +5,8 @@ Why a router of its own: the workbench is plain static files (built from ``web/`
 no CDN or npm at run time. All data comes from the REST API (``/api/...``) the page calls with the
 user's Bearer token; this router holds no state and needs no token itself.
 
-Routes are explicit (not a catch-all) so that other pages under ``/workbench/`` (e.g. the workflow
-view at ``/workbench/workflows``) stay free for their own routers.
+Deep links are limited to the shell's sections (``/workbench/<section>[/<item>]``); anything else
+under ``/workbench/`` is a 404 that names the sections.
 """
 
 from __future__ import annotations
@@ -58,3 +58,18 @@ def workbench_slash() -> RedirectResponse:
 def workbench_asset(relative: str) -> FileResponse:
     """A bundled asset (JavaScript, CSS, fonts) of the workbench page."""
     return FileResponse(static_file(relative), headers=_NO_CACHE)
+
+
+#: The shell's sections; ``/workbench/<section>[/<item>]`` is a deep link the page turns into its
+#: fragment (``#/<section>/<item>``), so every item has an address that can be shared.
+SECTIONS = ("rules", "workflows", "knowledge", "live", "decisions", "history")
+
+
+@router.get("/workbench/{section}", include_in_schema=False)
+@router.get("/workbench/{section}/{item:path}", include_in_schema=False)
+def workbench_deep_link(section: str, item: str = "") -> FileResponse:
+    """The page itself at a section's or an item's address (``/workbench/workflows/show_to_seat``)."""
+    if section not in SECTIONS:
+        raise HTTPException(status_code=404, detail=f"the workbench has no section {section!r}; "
+                                                    f"sections: {', '.join(SECTIONS)}")
+    return workbench_page()

@@ -14,6 +14,7 @@ const ORIGIN_WORDS = {
 };
 
 export async function showDecisions(main, ctx) {
+  ctx.hideSidebar();
   const limitEl = h("select", { "aria-label": "How many" }, [20, 50, 200].map((n) => h("option", { value: n, selected: n === 50 }, `last ${n}`)));
   const bodyEl = h("div", { "data-testid": "decisions" });
   const load = async () => {

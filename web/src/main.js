@@ -1,5 +1,10 @@
-// The workbench page: header (navigation, who is signed in), the rule set list, and one view at a
-// time chosen by the URL fragment: #/rules/NAME, #/history/NAME?from=&to=, #/decisions, #/signin.
+// The workbench shell: one header with the sections (Rules · Workflows · Knowledge · Live ·
+// Decisions · History), a sidebar the current view fills, and one view at a time chosen by the URL
+// fragment: #/<section>/<item>?params. Deep links by path (/workbench/workflows/show_to_seat) are
+// turned into the same fragment at start, so every item has one shareable address.
+//
+// A view is a module exporting show(main, ctx, name, params) -> {dispose?} (see SECTIONS); it puts
+// its own list in the sidebar with ctx.setSidebar, or leaves the rule set list there.
 
 import "./style.css";
 import { h, fill, when } from "./dom.js";
@@ -7,12 +12,29 @@ import { api, getToken, setToken } from "./api.js";
 import { showRules } from "./rules-view.js";
 import { showHistory } from "./history-view.js";
 import { showDecisions } from "./decisions-view.js";
+import { showWorkflows } from "./workflow-view.js";
+import { showKnowledge } from "./knowledge-view.js";
+import { showLive } from "./live-view.js";
+
+/** The sections in navigation order: label, view, and whether the rule set list is its sidebar. */
+const SECTIONS = [
+  { id: "rules", label: "Rules", show: showRules, rulesets: true },
+  { id: "workflows", label: "Workflows", show: showWorkflows },
+  { id: "knowledge", label: "Knowledge", show: showKnowledge },
+  { id: "live", label: "Live", show: showLive },
+  { id: "decisions", label: "Decisions", show: showDecisions },
+  { id: "history", label: "History", show: showHistory, rulesets: true },
+];
+const BY_ID = Object.fromEntries(SECTIONS.map((s) => [s.id, s]));
 
 const ctx = {
   user: null,
   rulesets: [],
   view: null,
   isAuthor: () => ctx.user?.role === "author",
+  /** The fragment of an item: ctx.href("workflows", "show_to_seat") -> "#/workflows/show_to_seat". */
+  href: (section, item = "", params = "") =>
+    `#/${section}${item ? `/${encodeURIComponent(item)}` : ""}${params ? `?${params}` : ""}`,
   navigate(hash, force = false) {
     if (location.hash === hash && force) route();
     else location.hash = hash;
@@ -22,25 +44,44 @@ const ctx = {
     ctx.pendingFlash = h("div", { class: `message ${kind}`, role: "status" }, text);
     fill(flashEl, ctx.pendingFlash);
   },
+  /** Replace the sidebar with a view's own list: a title and the items (nodes). */
+  setSidebar(title, items) {
+    fill(sideTitleEl, title);
+    fill(listEl, items);
+    layoutEl.classList.remove("no-sidebar");
+  },
+  /** Views that need the whole width (Live, Decisions) hide the sidebar. */
+  hideSidebar() {
+    fill(listEl);
+    layoutEl.classList.add("no-sidebar");
+  },
   refreshRulesets: () => loadRulesets(),
 };
 
 const userEl = h("div", { class: "user", "data-testid": "user" });
-const navEl = h("nav", {},
-  h("a", { href: "#/rules", dataset: { section: "rules" } }, "Rules"),
-  h("a", { href: "#/history", dataset: { section: "history" } }, "History"),
-  h("a", { href: "#/decisions", dataset: { section: "decisions" } }, "Recent decisions"),
-  h("a", { href: "/workbench/workflows" }, "Workflows"));
-const listEl = h("ul", { class: "ruleset-list", "data-testid": "rulesets" });
+const navEl = h("nav", { "aria-label": "Sections" },
+  SECTIONS.map((s) => h("a", { href: `#/${s.id}`, dataset: { section: s.id } }, s.label)));
+const sideTitleEl = h("h2", { id: "sidebar-title" }, "Rule sets");
+const listEl = h("ul", { class: "ruleset-list", "data-testid": "rulesets", "aria-labelledby": "sidebar-title" });
 const flashEl = h("div", { class: "flash" });
 const mainEl = h("main", { id: "main" });
+const layoutEl = h("div", { class: "layout" },
+  h("aside", { class: "sidebar" }, sideTitleEl, listEl),
+  h("div", { class: "content" }, flashEl, mainEl));
 
 function shell() {
   fill(document.getElementById("app"),
-    h("header", { class: "top" }, h("a", { class: "brand", href: "#/rules" }, "PRINTEPS · Rules workbench"), navEl, userEl),
-    h("div", { class: "layout" },
-      h("aside", { class: "sidebar" }, h("h2", {}, "Rule sets"), listEl),
-      h("div", { class: "content" }, flashEl, mainEl)));
+    h("header", { class: "top" }, h("a", { class: "brand", href: "#/rules" }, "PRINTEPS · Workbench"), navEl, userEl),
+    layoutEl);
+}
+
+/** /workbench/<section>/<item> (a shared deep link) becomes /workbench#/<section>/<item>. */
+function pathToFragment() {
+  const rest = location.pathname.replace(/^\/workbench\/?/, "");
+  if (!rest) return;
+  const [section] = rest.split("/");
+  if (!BY_ID[section]) return;
+  history.replaceState(null, "", `/workbench#/${rest}${location.search}`);
 }
 
 function parseHash() {
@@ -59,23 +100,36 @@ async function route() {
   const { section, name, params } = parseHash();
   if (ctx.view?.dispose) ctx.view.dispose();
   ctx.view = null;
-  for (const a of navEl.querySelectorAll("a[data-section]")) a.classList.toggle("active", a.dataset.section === section);
+  for (const a of navEl.querySelectorAll("a[data-section]")) {
+    const active = a.dataset.section === section;
+    a.classList.toggle("active", active);
+    if (active) a.setAttribute("aria-current", "page");
+    else a.removeAttribute("aria-current");
+  }
   fill(flashEl, ctx.pendingFlash);
   ctx.pendingFlash = null;
   if (section === "signin" || !ctx.user) return showSignIn();
-  renderList();
-  if (name) ctx.lastRuleset = name;
-  if (section === "decisions") ctx.view = await showDecisions(mainEl, ctx);
-  else if (!name) showChooser(section);
-  else if (section === "history") ctx.view = await showHistory(mainEl, ctx, name, params);
-  else ctx.view = await showRules(mainEl, ctx, name);
+  const target = BY_ID[section];
+  if (!target) {
+    fill(mainEl, h("p", { class: "message error", role: "alert" }, `There is no section "${section}". Choose one above.`));
+    return;
+  }
+  document.title = `${target.label} · PRINTEPS workbench`;
+  if (target.rulesets) {
+    fill(sideTitleEl, "Rule sets");
+    layoutEl.classList.remove("no-sidebar");
+    renderList();
+    if (name) ctx.lastRuleset = name;
+    if (!name) return showChooser(section);
+  }
+  ctx.view = await target.show(mainEl, ctx, name, params);
 }
 
 function showChooser(section) {
   // Stay with the rule set the user was looking at (Rules -> History and back).
   const target = ctx.rulesets.find((r) => r.name === ctx.lastRuleset) || ctx.rulesets[0];
   if (target) {
-    location.replace(`#/${section === "history" ? "history" : "rules"}/${encodeURIComponent(target.name)}`);
+    location.replace(ctx.href(section === "history" ? "history" : "rules", target.name));
     return;
   }
   fill(mainEl, h("p", { class: "muted" }, "There are no rule sets yet. Put a folder of .drl/.dslr files under rules/drl/ and restart the gateway."));
@@ -90,14 +144,14 @@ async function loadRulesets() {
     fill(listEl, h("li", { class: "message error" }, err.message));
     return;
   }
-  renderList();
+  if (BY_ID[parseHash().section]?.rulesets) renderList();
 }
 
 function renderList() {
   const { section, name } = parseHash();
   const target = section === "history" ? "history" : "rules";
   fill(listEl, ctx.rulesets.map((r) => h("li", { class: r.name === name ? "active" : "" },
-    h("a", { href: `#/${target}/${encodeURIComponent(r.name)}`, "data-ruleset": r.name },
+    h("a", { href: ctx.href(target, r.name), "data-ruleset": r.name },
       h("span", { class: "name" }, r.name),
       h("span", { class: "meta" }, `version ${r.version} · ${when(r.deployed_at)}`),
       r.comment ? h("span", { class: "meta comment" }, r.comment) : null))));
@@ -149,13 +203,14 @@ function showSignIn() {
   };
   fill(mainEl, h("section", { class: "signin" },
     h("h1", {}, "Sign in"),
-    h("p", {}, "Paste the access token you were given. An author token lets you change and deploy rules; a caller token lets you look and try."),
+    h("p", {}, "Paste the access token you were given. An author token lets you change rules, workflows and knowledge; a caller token lets you look and try."),
     ctx.user ? null : h("p", { class: "muted" }, ctx.whoamiError || ""),
     h("form", { onsubmit: submit }, tokenEl, " ", h("button", { class: "big primary", type: "submit" }, "Sign in")),
     errorEl));
 }
 
 async function boot() {
+  pathToFragment();
   shell();
   await whoami();
   if (ctx.user) await loadRulesets();

@@ -1,0 +1,9 @@
+// The Knowledge section of the workbench (placeholder until its view lands).
+
+import { h, fill } from "./dom.js";
+
+export async function showKnowledge(main, ctx, name) {
+  ctx.hideSidebar();
+  fill(main, h("section", {}, h("h1", {}, "Knowledge"), h("p", { class: "muted" }, "This view is being built.")));
+  return {};
+}
