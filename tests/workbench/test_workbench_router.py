@@ -40,5 +40,15 @@ def test_trailing_slash_goes_to_the_page():
     assert response.status_code == 308 and response.headers["location"] == "/workbench"
 
 
-def test_workflow_page_is_left_to_its_own_router():
-    assert client.get("/workbench/workflows").status_code == 404
+def test_sections_and_items_have_deep_links_to_the_one_page():
+    for path in ("/workbench/workflows", "/workbench/workflows/show_to_seat", "/workbench/knowledge",
+                 "/workbench/live", "/workbench/decisions/abc-123", "/workbench/rules/reception"):
+        response = client.get(path)
+        assert response.status_code == 200, path
+        assert "/workbench/static/app.js" in response.text
+
+
+def test_unknown_sections_name_the_sections():
+    response = client.get("/workbench/nowhere/x")
+    assert response.status_code == 404
+    assert "workflows" in response.json()["detail"]

@@ -88,7 +88,7 @@ def test_edit_check_try_deploy_fire_rollback(author_page, gateway, ruleset, scre
     assert OLD_GREETING in said(fired) and NEW_GREETING not in said(fired)
 
     # Recent decisions show the fires, with the rules and what Pepper said.
-    page.get_by_role("link", name="Recent decisions").click()
+    page.get_by_role("link", name="Decisions", exact=True).click()
     decisions = page.get_by_test_id("decisions")
     expect(decisions).to_contain_text(NEW_GREETING)
     expect(decisions).to_contain_text("Greet a pair")

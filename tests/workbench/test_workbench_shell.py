@@ -1,0 +1,51 @@
+"""The one shell: every section in one navigation, deep links by path, keyboard and tablet width."""
+
+from __future__ import annotations
+
+import re
+
+from playwright.sync_api import expect
+
+from wb_helpers import AUTHOR_TOKEN, new_page
+
+SECTIONS = ["Rules", "Workflows", "Knowledge", "Live", "Decisions", "History"]
+
+
+def test_one_navigation_reaches_every_section(author_page):
+    page = author_page
+    page.goto("/")
+    expect(page).to_have_url(re.compile(r"/workbench"))
+    nav = page.get_by_role("navigation", name="Sections")
+    for label in SECTIONS:
+        nav.get_by_role("link", name=label, exact=True).click()
+        expect(nav.get_by_role("link", name=label, exact=True)).to_have_attribute("aria-current", "page")
+        expect(page.locator("main h1").first).to_be_visible()
+
+
+def test_a_path_deep_link_opens_its_item(author_page):
+    page = author_page
+    page.goto("/workbench/rules/reception")
+    expect(page).to_have_url(re.compile(r"/workbench#/rules/reception$"))
+    expect(page.locator("[data-ruleset=reception]")).to_be_visible()
+    page.goto("/workflows")
+    expect(page).to_have_url(re.compile(r"/workbench#/workflows$"))
+
+
+def test_sections_are_reachable_by_keyboard(author_page):
+    page = author_page
+    page.goto("/workbench#/rules/reception")
+    expect(page.locator("[data-ruleset=reception]")).to_be_visible()
+    page.get_by_role("navigation", name="Sections").get_by_role("link", name="Decisions", exact=True).focus()
+    page.keyboard.press("Enter")
+    expect(page).to_have_url(re.compile(r"#/decisions$"))
+
+
+def test_tablet_width_keeps_everything_on_screen(browser, gateway):
+    page = new_page(browser, gateway, AUTHOR_TOKEN)
+    page.set_viewport_size({"width": 768, "height": 1024})
+    page.goto("/workbench#/rules/reception")
+    expect(page.locator("[data-testid=check-status]")).to_have_text("✓ No problems")
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= 768, f"the page scrolls sideways at tablet width ({width} px)"
+    page.context.close()
+    assert page.js_errors == []
