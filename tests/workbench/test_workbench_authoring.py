@@ -199,3 +199,35 @@ def test_the_grid_edits_a_decision_table_and_the_change_fires(author_page, gatew
     diff = page.get_by_test_id("diff")
     expect(diff).to_contain_text("greetings.xlsx")
     expect(diff).to_contain_text("13 |  | Greet a pair | pair |  |  | Welcome! A cosy table for two?")
+
+
+def test_a_spreadsheet_from_the_desktop_becomes_a_decision_table_of_the_rule_set(author_page, gateway, tmp_path):
+    page = author_page
+    files = {k: v for k, v in folder_files(GREETINGS).items() if not k.endswith(".xlsx") and not k.startswith("tests/")}
+    name = deploy_copy(gateway, files, "upload")
+    pair = [{"type": "Group", "entrance": "entrance", "kind": "pair", "size": 2}]
+    assert said(gateway.fire(name, pair)) == []
+    open_ruleset(page, name)
+    picker = page.get_by_test_id("add-file")
+
+    # A file of the wrong kind, or one the rule set already has, is refused and adds nothing.
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not rules", encoding="utf-8")
+    picker.set_input_files(str(notes))
+    expect(page.get_by_test_id("add-file-result")).to_contain_text("notes.txt: only .xlsx, .csv")
+    clash = tmp_path / "types.drl"
+    clash.write_text("package x;", encoding="utf-8")
+    picker.set_input_files(str(clash))
+    expect(page.get_by_test_id("add-file-result")).to_contain_text("already has a file of that name")
+    expect(page.locator(".tab")).to_have_count(len(files))
+
+    # The owner's workbook opens as a grid, is checked, and deploys with the rule set.
+    picker.set_input_files(str(GREETINGS / "greetings.xlsx"))
+    expect(page.get_by_test_id("add-file-result")).to_contain_text("Added greetings.xlsx")
+    expect(page.locator(".tab[aria-selected=true]")).to_have_attribute("data-file", "greetings.xlsx")
+    expect(cell(page, "F13")).to_have_value("Welcome. Two seats?")
+    expect(page.get_by_test_id("check-status")).to_have_text("✓ No problems")
+    page.get_by_label("What did you change?").fill("Greetings table from the owner's spreadsheet")
+    page.get_by_test_id("deploy").click()
+    expect(page.get_by_test_id("deploy-result")).to_contain_text("Version 2 is now live")
+    assert said(gateway.fire(name, pair)) == ["Welcome. Two seats?"]

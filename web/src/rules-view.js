@@ -12,6 +12,19 @@ import { mountTests } from "./tests-view.js";
 import { mountTableEditor } from "./table-editor.js";
 
 const CHECK_DELAY_MS = 500;
+const ADDABLE = [".xlsx", ".csv", ".dslr", ".dsl", ".drl"];
+const MAX_ADDED_BYTES = 1024 * 1024;
+const XLSX_TYPE = "application/vnd.openxmlformats-officedocument.spreadsheetml.sheet";
+
+/** A workbook as the REST API carries it: a base64 data: URL of the spreadsheet type. */
+function readAsDataUrl(file, type) {
+  return new Promise((resolve, reject) => {
+    const reader = new FileReader();
+    reader.onload = () => resolve(`data:${type};base64,${String(reader.result).split(",")[1] || ""}`);
+    reader.onerror = () => reject(reader.error);
+    reader.readAsDataURL(file);
+  });
+}
 
 const KINDS = [
   [".dslr", "rules in plain sentences"],
@@ -149,7 +162,7 @@ class RulesView {
         "You are signed in with a caller token: you can read and try the rules, but not change or deploy them."),
       h("div", { class: "columns" },
         h("div", { class: "left" },
-          h("div", { class: "toolbar" }, this.tabsEl,
+          h("div", { class: "toolbar" }, this.tabsEl, this.buildAddFile(),
             h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
@@ -490,6 +503,44 @@ class RulesView {
   }
 
   // ---- Deploy ---------------------------------------------------------------------------------
+
+  /** "Add a file": a spreadsheet decision table (.xlsx/.csv) or a rule file from the user's computer,
+   * added to the draft as a new tab (deployed with the rest); nothing is sent until Deploy. */
+  buildAddFile() {
+    if (!this.editable) return null;
+    this.addResultEl = h("span", { class: "add-file-result", "data-testid": "add-file-result", "aria-live": "polite" });
+    const input = h("input", { type: "file", class: "visually-hidden", "data-testid": "add-file",
+      accept: ADDABLE.join(","), "aria-label": "Add a file to the rule set",
+      onchange: async () => {
+        const file = input.files[0];
+        input.value = "";
+        if (file) fill(this.addResultEl, await this.addFile(file));
+      } });
+    return h("span", { class: "add-file" },
+      h("button", { class: "secondary", type: "button", onclick: () => input.click() }, "＋ Add a file…"), input, this.addResultEl);
+  }
+
+  /** Read `file` into the draft; the message says what happened or what is wrong with the file. */
+  async addFile(file) {
+    const name = file.name;
+    const lower = name.toLowerCase();
+    const fail = (text) => h("span", { class: "message error inline", role: "alert" }, text);
+    if (!ADDABLE.some((ext) => lower.endsWith(ext))) return fail(`${name}: only ${ADDABLE.join(", ")} files can be added.`);
+    if (!/^[A-Za-z0-9._-]+$/.test(name)) return fail(`${name}: a file name may hold only letters, digits, '.', '_' and '-'.`);
+    if (file.size > MAX_ADDED_BYTES) return fail(`${name}: ${Math.round(file.size / 1024)} KB is more than the ${MAX_ADDED_BYTES / 1024} KB allowed.`);
+    if (this.hosts[name]) return fail(`${name}: the rule set already has a file of that name; edit its tab or rename the file.`);
+    let content;
+    try {
+      content = lower.endsWith(".xlsx") ? await readAsDataUrl(file, XLSX_TYPE) : await file.text();
+    } catch (err) {
+      return fail(`${name}: cannot be read (${err.message || err}).`);
+    }
+    if (!lower.endsWith(".xlsx") && content.includes("\u0000")) return fail(`${name}: is not a text file.`);
+    this.createEditors({ [name]: content });
+    this.select(name);
+    this.changed();
+    return h("span", { class: "message ok inline", role: "status" }, `Added ${name}: check it, then deploy.`);
+  }
 
   buildDeploy() {
     if (!this.editable) return null;
