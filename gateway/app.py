@@ -30,6 +30,7 @@ from gateway.actions import ActionRouter, workflow_handler
 from gateway.config import Settings
 from gateway.engine import Engine
 from gateway.follower import ChangeFollower
+from gateway.jobs import JobRecords, JobService
 from gateway.ontology.knowledge import KnowledgeBase
 from gateway.rdf.mapping import Mapper
 from gateway.ros.robots import RobotStates
@@ -68,6 +69,7 @@ class Gateway:
     follower: ChangeFollower | None = None
     app: Any = None
     members: Any = None  # gateway.store.members.Membership: where other processes reach this one
+    jobs: Any = None  # gateway.jobs.JobService: deploys and validations in the background
 
     name: str = field(default_factory=process_name)
     _closers: list[tuple[str, Callable[[], None]]] = field(default_factory=list, repr=False)
@@ -182,6 +184,10 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         engine.session_manager.directory = SessionDirectory(store.db, name, members)
         closers.append(("the session records", engine.session_manager.directory.release_all))
     closers.append(("the rules engine's sessions", engine.session_manager.close_all))
+    jobs = JobService(engine, JobRecords(store.db if store is not None else None), name,
+                      alive=(lambda p: members.alive(members.get(p))) if members is not None else None,
+                      max_queued=settings.engine.max_queued_jobs)
+    closers.append(("the build jobs", jobs.close))
 
     cfg = settings.streams
     knowledge = KnowledgeBase(catalog)
@@ -239,7 +245,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       mappings=mappings, streams=streams, queries=queries, robots=robots, actions=actions,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
-                      members=members, _closers=closers)
+                      members=members, jobs=jobs, _closers=closers)
     if rest:
         from gateway.api.main import create_app
 

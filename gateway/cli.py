@@ -357,21 +357,51 @@ def rules_deploy(
     if base_version is not None:
         body["base_version"] = base_version
     url = f"{_server(server)}/api/rulesets/{name}"
-    try:
-        response = httpx.put(url, json=body, headers=_headers(token), timeout=120)
+    try:  # as a build job: a big rule set takes longer than one HTTP request should wait
+        response = httpx.put(url, json=body, headers={**_headers(token), "Prefer": "respond-async"}, timeout=120)
+        status, data = response.status_code, _json_or_text(response)
+        if status == 202:
+            status, data = _follow_job(_server(server), response.headers["location"], token)
     except httpx.HTTPError as exc:
         _fail(f"{url}: {exc}")
-    data = _json_or_text(response)
-    if response.status_code == 201:
+    if status == 201:
         typer.echo(f"deployed {data['name']} version {data['version']}")
         return
-    if response.status_code == 422 and isinstance(data, dict) and data.get("errors"):
+    if status == 422 and isinstance(data, dict) and data.get("errors"):
         for line in format_errors(data["errors"], folder):
             typer.echo(line)
         if data.get("kind") == "scenarios":  # issue 16: red test scenarios refuse the deploy
             typer.echo(f"{data.get('error')}")
         raise typer.Exit(1)
-    _fail(f"{url}: HTTP {response.status_code}: {data.get('error') if isinstance(data, dict) else data}")
+    _fail(f"{url}: HTTP {status}: {data.get('error') if isinstance(data, dict) else data}")
+
+
+def _follow_job(server: str, location: str, token: Optional[str]) -> tuple[int, Any]:
+    """Poll a deploy job to its end, drawing its progress on a terminal; answers (status, body) as
+    the synchronous deploy would have."""
+    import time
+
+    import httpx
+
+    from gateway.progress import TerminalProgress
+
+    progress = TerminalProgress() if sys.stderr.isatty() else None
+    try:
+        while True:
+            job = httpx.get(f"{server}{location}", headers=_headers(token), timeout=30).json()
+            step = job.get("progress")
+            if progress is not None and step:
+                progress(step["done"], step["total"], step["stage"])
+            if job["status"] == "succeeded":
+                version = job["result"]["version"]
+                return 201, {"name": version["name"], "version": version["version"]}
+            if job["status"] in ("failed", "cancelled"):
+                error = job.get("error") or {}
+                return int(error.get("status", 500)), error
+            time.sleep(0.2)
+    finally:
+        if progress is not None:
+            progress.close()
 
 
 @app.command()

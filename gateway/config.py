@@ -49,6 +49,9 @@ class EngineSettings(BaseModel):
     compile_disk_cache_mb: int = Field(default=2048, description="Bound of the on-disk rule unit cache.")
     warm_budget_s: float = Field(
         default=0.25, description="Time spent firing a new version on sample facts before it serves.")
+    max_queued_jobs: int = Field(
+        default=16, ge=1, description="Build jobs (asynchronous deploys/validations) waiting per process; "
+        "beyond it a new one is refused with 429.")
 
 
 class SessionSettings(BaseModel):

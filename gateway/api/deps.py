@@ -73,6 +73,10 @@ async def _workflows(request: Request) -> WorkflowService:
     return gateway_of(request).workflows
 
 
+async def _jobs(request: Request) -> Any:
+    return gateway_of(request).jobs
+
+
 async def _metrics(request: Request) -> Any:
     return request.app.state.metrics
 
@@ -88,6 +92,7 @@ QueriesDep = Annotated[QueryService, Depends(_queries)]
 MappingsDep = Annotated[MappingService, Depends(_mappings)]
 WorkflowsDep = Annotated[WorkflowService, Depends(_workflows)]
 MetricsDep = Annotated[Any, Depends(_metrics)]
+JobsDep = Annotated[Any, Depends(_jobs)]  # gateway.jobs.JobService
 
 Caller = Annotated[Principal, Depends(caller)]
 Author = Annotated[Principal, Depends(author)]
@@ -104,6 +109,13 @@ def iso_datetime(name: str, value: str | None) -> datetime | None:
         raise ApiError(422, f"query parameter {name}={value!r}: not an ISO-8601 date-time",
                        errors=[{"field": name, "message": "not an ISO-8601 date-time"}]) from None
     return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def wants_async(request: Request) -> bool:
+    """The client asked for a job instead of waiting: ``Prefer: respond-async`` (RFC 7240) or ``?async=true``."""
+    prefer = request.headers.get("prefer", "").lower()
+    flag = request.query_params.get("async", "").lower()
+    return "respond-async" in prefer or flag in ("1", "true", "yes")
 
 
 def correlation_id(request: Request) -> str | None:

@@ -82,6 +82,16 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
     return 500, body
 
 
+#: The status of an engine error by its ``kind`` (for errors that travel as records, e.g. a build job's).
+KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "invalid": 422, "facts": 422,
+               "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503}
+
+
+def engine_error_status(kind: str) -> int:
+    """The HTTP status the synchronous call answers for an engine error of ``kind``."""
+    return KIND_STATUS.get(kind, 500)
+
+
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
     out = []
     for err in exc.errors():

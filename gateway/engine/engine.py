@@ -233,6 +233,7 @@ class Engine:
         comment: str = "",
         base_version: int | None = None,
         force: bool = False,
+        on_progress: Callable[[int, int, str], None] | None = None,
     ) -> VersionInfo:
         """Compiles ``files`` and, only if that succeeds, makes them the live version of ``name``.
 
@@ -240,11 +241,12 @@ class Engine:
         process) deployed in between, :class:`VersionConflict` is raised and nothing changes.
         The rule set's own test scenarios (``tests/*.yaml``) must pass: a red one raises
         :class:`ScenariosFailed` unless ``force``. Compiling happens before anything is stored:
-        requests keep hitting the old version until the new one is ready.
+        requests keep hitting the old version until the new one is ready. ``on_progress(done,
+        total, stage)`` follows the build (a deploy job reports it).
         """
         check_name(name)
         started = time.perf_counter()
-        compiled = self._compile(files, name)
+        compiled = self._compile(files, name, on_progress)
         if not force:
             scenarios.require_green(self, name, files)
         try:

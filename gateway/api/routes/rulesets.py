@@ -18,7 +18,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path as PathParam, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
-from gateway.api.deps import Author, Caller, EngineDep, SettingsDep, correlation_id
+from gateway.api.deps import Author, Caller, EngineDep, JobsDep, SettingsDep, correlation_id, wants_async
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, read_json, run_blocking
 
@@ -116,20 +116,34 @@ def history(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
     return JSON(events)
 
 
+def accepted(job: dict[str, Any]) -> JSON:
+    """202 with the job and where to follow it."""
+    return JSON(job, status_code=202, headers={"Location": f"/api/jobs/{job['id']}"})
+
+
 @router.put("/api/rulesets/{name}", status_code=201)
-def deploy(name: RuleSetName, body: DeployBody, engine: EngineDep, who: Author) -> JSON:
+def deploy(name: RuleSetName, body: DeployBody, request: Request, engine: EngineDep, jobs: JobsDep,
+           who: Author) -> JSON:
     """Compile and make live on every gateway process; 422 with ``errors`` (file, line, column,
     message) if it does not compile, 422 ``{"kind": "scenarios", ...}`` if one of its test
     scenarios is red (unless ``force``), 409 ``{"error": "base version changed", "current": n}``
-    if ``base_version`` is stale."""
+    if ``base_version`` is stale. With ``Prefer: respond-async`` (or ``?async=true``): 202 and a
+    build job (``Location: /api/jobs/{id}``) whose result or error is the same."""
+    if wants_async(request):
+        return accepted(jobs.submit("deploy", name, dict(body.files), author=who.name, comment=body.comment,
+                                    base_version=body.base_version, force=body.force))
     info = engine.deploy(name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version,
                          force=body.force)
     return JSON({"name": info.name, "version": info.version}, status_code=201)
 
 
 @router.post("/api/rulesets/{name}/validate")
-def validate(name: RuleSetName, body: DeployBody, engine: EngineDep, _: Caller) -> JSON:
-    """Compile only (the body a deploy takes is accepted as is): ``{"ok": bool, "errors": [...]}``."""
+def validate(name: RuleSetName, body: DeployBody, request: Request, engine: EngineDep, jobs: JobsDep,
+             who: Caller) -> JSON:
+    """Compile only (the body a deploy takes is accepted as is): ``{"ok": bool, "errors": [...]}``;
+    asynchronous as a job like the deploy."""
+    if wants_async(request):
+        return accepted(jobs.submit("validate", name, dict(body.files), author=who.name))
     errors = engine.validate(name, dict(body.files))
     return JSON({"ok": not errors, "errors": [e.to_dict() for e in errors]})
 

@@ -1,0 +1,256 @@
+"""Build jobs: deploys and validations that run in the background and report their progress.
+
+Why: compiling thousands of rules takes a minute the first time, longer than HTTP clients, load
+balancers and people like to wait on one request. A client that asks for it (``Prefer:
+respond-async`` or ``?async=true``) gets ``202 Accepted`` and a job at once, then follows the job:
+its state (queued → running → succeeded | failed | cancelled), the build's stage and how far it is,
+and in the end the deployed version or the compile errors (with file, line and column) — the same
+answers the synchronous call gives.
+
+Jobs run one at a time per process (a build is CPU- and memory-bound: two at once only make both
+slower and double the peak heap), in the process that accepted them. Their records go to the
+Information State (collection ``jobs``), so any gateway process answers ``GET /api/jobs/{id}``; a
+job whose process died while it was queued or running is reported as failed with that reason.
+Serving is never blocked: the old version answers until the new one is swapped in.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from collections import OrderedDict, deque
+from collections.abc import Callable
+from datetime import datetime, timezone
+from typing import Any
+
+from gateway.engine.errors import EngineError
+
+log = logging.getLogger(__name__)
+
+JOBS = "jobs"
+KINDS = ("deploy", "validate")
+FINISHED = ("succeeded", "failed", "cancelled")
+PROGRESS_WRITE_INTERVAL_S = 0.5  # progress reaches the store at most twice a second
+LOST_AFTER_S = 30.0  # an unfinished job of a process that is gone, untouched this long, is lost
+
+
+class JobError(Exception):
+    """A job request the service refuses (``status``: the HTTP status that fits)."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat()
+
+
+class JobRecords:
+    """Where job records live: the ``jobs`` collection when there is a store, else this process only."""
+
+    def __init__(self, db: Any = None, keep: int = 500) -> None:
+        self.db = db
+        self._memory: OrderedDict[str, dict[str, Any]] = OrderedDict()
+        self._keep = keep
+        self._lock = threading.Lock()
+        if db is not None:
+            try:
+                db[JOBS].create_index([("ruleset", 1), ("created_at", -1)])
+            except Exception as exc:  # an index is an optimisation; jobs work without it
+                log.warning("jobs index not created: %s", exc)
+
+    def write(self, job: dict[str, Any]) -> None:
+        with self._lock:
+            self._memory[job["id"]] = dict(job)
+            self._memory.move_to_end(job["id"])
+            while len(self._memory) > self._keep:
+                self._memory.popitem(last=False)
+        if self.db is not None:
+            try:
+                self.db[JOBS].replace_one({"_id": job["id"]}, {"_id": job["id"], **job}, upsert=True)
+            except Exception as exc:  # the job goes on; this process still answers for it
+                log.warning("job %s not recorded: %s", job["id"], exc)
+
+    def read(self, job_id: str) -> dict[str, Any] | None:
+        with self._lock:
+            if job_id in self._memory:
+                return dict(self._memory[job_id])
+        if self.db is None:
+            return None
+        doc = self.db[JOBS].find_one({"_id": job_id})
+        if doc is not None:
+            doc.pop("_id", None)
+        return doc
+
+    def recent(self, ruleset: str | None, limit: int) -> list[dict[str, Any]]:
+        if self.db is None:
+            with self._lock:
+                jobs = [dict(j) for j in self._memory.values() if ruleset is None or j["ruleset"] == ruleset]
+            return sorted(jobs, key=lambda j: j["created_at"], reverse=True)[:limit]
+        query = {"ruleset": ruleset} if ruleset else {}
+        docs = list(self.db[JOBS].find(query).sort("created_at", -1).limit(limit))
+        for doc in docs:
+            doc.pop("_id", None)
+        return docs
+
+
+class JobService:
+    """Accepts build jobs, runs them one at a time on a worker thread, and answers for them.
+
+    ``engine`` is the rules engine (:class:`gateway.engine.engine.Engine`); ``alive(process)`` says
+    whether another gateway process is still running (for jobs that process accepted).
+    """
+
+    def __init__(self, engine: Any, records: JobRecords, process: str,
+                 alive: Callable[[str], bool] | None = None, max_queued: int = 16) -> None:
+        self.engine = engine
+        self.records = records
+        self.process = process
+        self.alive = alive or (lambda _process: True)
+        self.max_queued = max_queued
+        self._queue: deque[tuple[dict[str, Any], dict[str, Any]]] = deque()
+        self._jobs: dict[str, dict[str, Any]] = {}
+        self._cond = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._work, name="build-jobs", daemon=True)
+        self._thread.start()
+
+    # ---- requests --------------------------------------------------------------------------------
+    def submit(self, kind: str, ruleset: str, files: dict[str, str], *, author: str = "anonymous",
+               comment: str = "", base_version: int | None = None, force: bool = False) -> dict[str, Any]:
+        """A new queued job; the build starts when the jobs before it in this process are done."""
+        if kind not in KINDS:
+            raise JobError(422, f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
+        job = {"id": uuid.uuid4().hex, "kind": kind, "ruleset": ruleset, "status": "queued",
+               "author": author, "comment": comment, "base_version": base_version, "force": force,
+               "process": self.process, "created_at": _now(), "started_at": None, "finished_at": None,
+               "updated_at": _now(), "progress": None, "result": None, "error": None}
+        with self._cond:
+            if self._closed:
+                raise JobError(503, "the gateway is shutting down; try again on another process")
+            if len(self._queue) >= self.max_queued:
+                raise JobError(429, f"{len(self._queue)} build jobs are already waiting in this process "
+                                    f"(engine.max_queued_jobs = {self.max_queued}); try again later")
+            self._jobs[job["id"]] = job
+            self._queue.append((job, dict(files)))
+            self.records.write(job)
+            self._cond.notify()
+        return dict(job)
+
+    def get(self, job_id: str) -> dict[str, Any]:
+        with self._cond:
+            if job_id in self._jobs:
+                return dict(self._jobs[job_id])
+        job = self.records.read(job_id)
+        if job is None:
+            raise JobError(404, f"no job {job_id!r}")
+        return self._maybe_lost(job)
+
+    def list(self, ruleset: str | None = None, limit: int = 50) -> list[dict[str, Any]]:
+        return [self._maybe_lost(j) for j in self.records.recent(ruleset, max(1, min(limit, 500)))]
+
+    def cancel(self, job_id: str, by: str = "anonymous") -> dict[str, Any]:
+        """Cancels a queued job of this process. A running build cannot be stopped half-way (the
+        compiler holds the JVM); a finished job stays as it ended."""
+        with self._cond:
+            job = self._jobs.get(job_id)
+            if job is None:
+                other = self.records.read(job_id)
+                if other is None:
+                    raise JobError(404, f"no job {job_id!r}")
+                if other.get("process") == self.process:
+                    raise JobError(409, f"job {job_id} is {other['status']}: only a queued job can be cancelled")
+                raise JobError(409, f"job {job_id} belongs to gateway process {other['process']}; "
+                                    "cancel it there")
+            if job["status"] != "queued":
+                raise JobError(409, f"job {job_id} is {job['status']}: only a queued job can be cancelled")
+            self._queue = deque((j, f) for j, f in self._queue if j["id"] != job_id)
+            self._finish(job, "cancelled", error={"kind": "cancelled", "error": f"cancelled by {by}"})
+            return dict(job)
+
+    def running(self) -> int:
+        with self._cond:
+            return sum(1 for j in self._jobs.values() if j["status"] in ("queued", "running"))
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Refuse new jobs, cancel the queued ones, and give the running build a moment to end."""
+        with self._cond:
+            self._closed = True
+            for job, _files in self._queue:
+                self._finish(job, "cancelled", error={"kind": "cancelled", "error": "the gateway process stopped"})
+            self._queue.clear()
+            self._cond.notify_all()
+        self._thread.join(timeout_s)
+
+    # ---- running ---------------------------------------------------------------------------------
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._closed:
+                    self._cond.wait()
+                if self._closed and not self._queue:
+                    return
+                job, files = self._queue.popleft()
+                job.update(status="running", started_at=_now(), updated_at=_now())
+                self.records.write(job)
+            self._run(job, files)
+
+    def _run(self, job: dict[str, Any], files: dict[str, str]) -> None:
+        progress = self._progress_writer(job)
+        try:
+            if job["kind"] == "deploy":
+                info = self.engine.deploy(job["ruleset"], files, author=job["author"], comment=job["comment"],
+                                          base_version=job["base_version"], force=job["force"],
+                                          on_progress=progress)
+                outcome: dict[str, Any] = {"version": info.to_dict()}
+            else:
+                errors = self.engine.validate(job["ruleset"], files, on_progress=progress)
+                outcome = {"valid": not errors, "errors": [e.to_dict() for e in errors]}
+        except EngineError as exc:
+            with self._cond:
+                self._finish(job, "failed", error=exc.to_dict())
+            return
+        except Exception as exc:  # a job must end with a record, whatever broke
+            log.exception("build job %s failed", job["id"])
+            with self._cond:
+                self._finish(job, "failed", error={"kind": "internal", "error": f"{type(exc).__name__}: {exc}"})
+            return
+        with self._cond:
+            self._finish(job, "succeeded", result=outcome)
+
+    def _progress_writer(self, job: dict[str, Any]) -> Callable[[int, int, str], None]:
+        last = [0.0]
+
+        def report(done: int, total: int, stage: str) -> None:
+            with self._cond:
+                job["progress"] = {"stage": stage, "done": done, "total": total}
+                job["updated_at"] = _now()
+                now = time.monotonic()
+                if now - last[0] >= PROGRESS_WRITE_INTERVAL_S or done >= total:
+                    last[0] = now
+                    self.records.write(job)
+        return report
+
+    def _finish(self, job: dict[str, Any], status: str, *, result: dict[str, Any] | None = None,
+                error: dict[str, Any] | None = None) -> None:
+        job.update(status=status, result=result, error=error, finished_at=_now(), updated_at=_now())
+        self.records.write(job)
+        self._jobs.pop(job["id"], None)  # finished jobs are answered from the records
+
+    def _maybe_lost(self, job: dict[str, Any]) -> dict[str, Any]:
+        """An unfinished job of another process that died is reported as failed, not as running forever."""
+        if job["status"] in FINISHED or job.get("process") == self.process:
+            return job
+        try:
+            age = (datetime.now(timezone.utc) - datetime.fromisoformat(job["updated_at"])).total_seconds()
+        except (KeyError, TypeError, ValueError):
+            age = LOST_AFTER_S
+        if age >= LOST_AFTER_S and not self.alive(job.get("process", "")):
+            return {**job, "status": "failed",
+                    "error": {"kind": "lost", "error": f"gateway process {job.get('process')} stopped before "
+                                                       "the job finished; submit it again"}}
+        return job
