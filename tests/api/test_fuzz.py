@@ -30,6 +30,7 @@ FUZZ = settings(max_examples=25, deadline=None, derandomize=True, database=None,
                 suppress_health_check=list(HealthCheck))
 
 
+@pytest.mark.timeout(900)  # ~30 operations x 25 requests, some compiling rules: minutes on a busy 2-core machine
 def test_no_server_errors(fuzz_schema):
     """Every operation, a dozen generated requests each (deterministic), only the 5xx check."""
     operations = [result.ok() for result in fuzz_schema.get_all_operations()]
