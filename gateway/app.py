@@ -249,6 +249,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
                       members=members, live=live, _closers=closers)
+    closers.append(("the live feed", live.close))  # first: open event streams end, the server can stop
     if rest:
         from gateway.api.main import create_app
 

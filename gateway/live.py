@@ -6,7 +6,8 @@ Why: the teahouse owner wants to watch the reception as it plays (the workbench'
 in the gateway; the composition root (:mod:`gateway.app`) wires these hooks to one feed:
 
 - ``on_stream_item(stream, timestamp_ms, triples)`` — a stream engine input listener: each person's
-  distance in a sensor message becomes a ``reading`` (``{"t", "stream", "distances": {person: m}}``);
+  distance in a message on the entrance stream (``reading_streams``) becomes a ``reading``
+  (``{"t", "stream", "distances": {person: m}}``; ``t`` is the sensor's time, ms);
 - ``on_stream_event(event)`` — a stream engine subscriber: a non-empty query result becomes a
   ``detection`` (``{"query", "window", "rows", "solutions"}``);
 - ``on_engine_event(kind, payload)`` — a rules engine listener: each fire is a ``decision``
@@ -38,6 +39,7 @@ import uuid
 from collections import deque
 from typing import Any, Callable
 
+from gateway.config import ENTRANCE_STREAM
 from gateway.rdf.terms import PRINTEPS
 
 log = logging.getLogger(__name__)
@@ -94,6 +96,7 @@ class Subscription:
         self._lock = threading.Lock()
         self._wake = wake
         self.dropped = 0
+        self.closed = False  # the feed closed (the server is stopping): the reader should end
 
     def put(self, event: Event) -> None:
         with self._lock:
@@ -118,12 +121,22 @@ class Subscription:
     def close(self) -> None:
         self._feed.unsubscribe(self)
 
+    def end(self) -> None:
+        """The feed is closing: wake the reader so it can finish its response."""
+        self.closed = True
+        if self._wake is not None:
+            try:
+                self._wake()
+            except Exception:
+                log.debug("waking a live subscriber failed", exc_info=True)
+
 
 class LiveFeed:
     """The feed of one gateway process (see the module docstring)."""
 
-    def __init__(self, *, kept: int = 500, queue_size: int = 2000,
-                 kept_by_kind: dict[str, int] | None = None) -> None:
+    def __init__(self, *, kept: int = 500, queue_size: int = 2000, kept_by_kind: dict[str, int] | None = None,
+                 reading_streams: tuple[str, ...] = (ENTRANCE_STREAM,)) -> None:
+        self.reading_streams = frozenset(reading_streams)
         self.id = uuid.uuid4().hex[:8]  # tells a reconnecting browser whether its Last-Event-ID is ours
         self._kept = {kind: (kept_by_kind or {}).get(kind, kept) for kind in KINDS}
         self._recent: dict[str, deque[Event]] = {kind: deque(maxlen=n) for kind, n in self._kept.items()}
@@ -132,6 +145,7 @@ class LiveFeed:
         self._seq = itertools.count(1)
         self._lock = threading.Lock()
         self.published = {kind: 0 for kind in KINDS}
+        self.closed = False
 
     # -- publishing --------------------------------------------------------------------------------
     def publish(self, kind: str, data: Event) -> Event:
@@ -157,7 +171,16 @@ class LiveFeed:
                 subscription.put(event)
             self._subscribers.append(subscription)
         subscription._wake = wake
+        subscription.closed = self.closed
         return subscription
+
+    def close(self) -> None:
+        """End every reader (a stopping server must not wait for browsers that never hang up)."""
+        with self._lock:
+            self.closed = True
+            subscribers, self._subscribers = list(self._subscribers), []
+        for subscriber in subscribers:
+            subscriber.end()
 
     def unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
@@ -179,7 +202,9 @@ class LiveFeed:
 
     # -- hooks (wired by gateway.app) ----------------------------------------------------------------
     def on_stream_item(self, stream: str, timestamp_ms: int, triples: list[Any]) -> None:
-        """Stream engine input listener: the people's distances in one message, if it has any."""
+        """Stream engine input listener: the people's distances in one entrance message, if it has any."""
+        if stream not in self.reading_streams:
+            return
         distances = distances_in(triples)
         if distances:
             self.publish("reading", {"stream": stream, "t": int(timestamp_ms), "distances": distances})

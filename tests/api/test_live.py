@@ -68,6 +68,10 @@ def test_distances_are_read_from_the_entrance_mapping_and_from_plain_triples(gat
         {"id": "b", "distance": 3, "age": 31, "gender": "female"}]}, 1000, "entrance")
     assert distances_in(triples) == {"a": 2.5, "b": 3.0}
     assert distances_in([]) == {}
+    feed = LiveFeed()
+    feed.on_stream_item("http://printeps.org/cafe/tables", 1000, triples)  # only the entrance is plotted
+    feed.on_stream_item(ENTRANCE, 1000, triples)
+    assert [(e["kind"], e["distances"]) for e in feed.recent()] == [("reading", {"a": 2.5, "b": 3.0})]
 
 
 def test_replay_then_live_events_of_every_kind(gateway) -> None:
@@ -182,3 +186,12 @@ def test_resuming_from_last_event_id_sends_only_what_was_missed(gateway) -> None
                       headers={"Last-Event-ID": f"{gateway.live.id}-{last['seq']}"}).text
     events = parse_sse(body)
     assert events[0][1]["resumed_after"] == last["seq"] and events[1][1]["seq"] == recent[-1]["seq"]
+
+
+def test_closing_the_feed_ends_its_readers() -> None:
+    feed = LiveFeed()
+    woken: list[int] = []
+    reader = feed.subscribe(lambda: woken.append(1))
+    feed.close()
+    assert reader.closed and woken and feed.stats()["subscribers"] == 0
+    assert feed.subscribe().closed  # a server that is stopping takes no new reader for long

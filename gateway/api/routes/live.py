@@ -7,7 +7,9 @@ was asked to do and how it went) — each with JSON data and ``id: <feed>-<seq>`
 kept events are replayed (``replay=false``: only new ones; a reconnecting ``EventSource`` sends
 ``Last-Event-ID`` and gets only what it missed from the same process). ``hello`` opens the stream,
 ``heartbeat`` comes every ``heartbeat_s`` seconds of quiet, ``dropped`` says how many events a slow
-reader lost (its queue is bounded: the gateway never waits for a browser).
+reader lost (its queue is bounded: the gateway never waits for a browser). The stream ends when
+the server stops (:meth:`gateway.live.LiveFeed.close`), so an open Live view never holds up a
+shutdown.
 
 Auth: the caller role, by ``Authorization: Bearer`` or ``?access_token=`` (``EventSource`` cannot
 set headers).
@@ -65,6 +67,8 @@ async def live(request: Request, gateway: GatewayDep, who: EventStreamCaller,
                                 "resumed_after": after, "kinds": ["reading", "detection", "decision", "action"]})
             while max_events is None or sent < max_events:
                 batch, dropped = subscription.take()
+                if not batch and not dropped and subscription.closed:
+                    return  # the server is stopping
                 if not batch and not dropped:
                     wake.clear()
                     batch, dropped = subscription.take()  # queued between the take and the clear
