@@ -6,7 +6,7 @@
 
 import "./live-view.css";
 import { h, fill } from "./dom.js";
-import { getToken } from "./api.js";
+import { api, getToken } from "./api.js";
 import { describeAction, ruleName } from "./actions.js";
 
 const WINDOW_MS = 60_000; // the plot shows the last minute of readings
@@ -16,6 +16,7 @@ const PENDING_MAX = 5000; // events held while paused
 const KINDS = ["reading", "detection", "decision", "action"];
 const COLORS = ["#1f6feb", "#cf222e", "#1a7f37", "#9a6700", "#8250df", "#bf3989", "#0a7ea4", "#57606a"];
 const DASHES = ["", "6 3", "2 3", "8 3 2 3"];
+const THRESHOLD_REFRESH_MS = 30_000; // the entrance distance is knowledge the owner may change live
 const ORIGIN_WORDS = {
   rest: "asked over REST", kie: "asked by a KIE client", stream: "detected in the sensor stream",
   ros: "asked by a ROS workflow", workflow: "a workflow step", api: "asked over REST",
@@ -62,6 +63,7 @@ export async function showLive(main, ctx) {
     counts: { reading: 0, detection: 0, decision: 0, action: 0 },
     process: null,
     drawQueued: false,
+    threshold: null, // {name, value}: the ontology's distance to the entrance (the detection threshold)
   };
 
   const statusEl = h("span", { class: "badge live-status connecting", role: "status", "data-testid": "live-status" }, "Connecting…");
@@ -216,7 +218,7 @@ export async function showLive(main, ctx) {
       state.marks = state.marks.filter((m) => m.t >= right - KEEP_MS);
     }
     const people = [...state.series.keys()];
-    let maxD = 5;
+    let maxD = Math.max(5, state.threshold ? state.threshold.value : 0);
     for (const points of state.series.values()) for (const p of points) if (p.t >= right - WINDOW_MS) maxD = Math.max(maxD, p.d);
     const yMax = Math.ceil(maxD);
     const x = (t) => M.left + ((t - (right - WINDOW_MS)) / WINDOW_MS) * (W - M.left - M.right);
@@ -255,6 +257,10 @@ export async function showLive(main, ctx) {
       clip, ...grid,
       s("line", { x1: M.left, x2: M.left, y1: M.top, y2: H - M.bottom, class: "axis" }),
       s("line", { x1: M.left, x2: W - M.right, y1: H - M.bottom, y2: H - M.bottom, class: "axis" }),
+      state.threshold ? s("g", { class: "threshold", "data-testid": "threshold" },
+        s("line", { x1: M.left, x2: W - M.right, y1: y(state.threshold.value), y2: y(state.threshold.value) }),
+        s("text", { x: M.left + 6, y: y(state.threshold.value) - 5, "text-anchor": "start" },
+          `entrance: ${state.threshold.value} m (${state.threshold.name})`)) : null,
       s("g", { "clip-path": "url(#live-clip)" }, ...marks, ...lines),
       s("text", { x: (M.left + W - M.right) / 2, y: H - 8, class: "label", "text-anchor": "middle" }, "seconds before the latest reading (sensor time)"),
       s("text", { x: 14, y: (M.top + H - M.bottom) / 2, class: "label", "text-anchor": "middle",
@@ -272,9 +278,26 @@ export async function showLive(main, ctx) {
     state.marks.length ? h("li", { class: "mark-key" }, h("span", { class: "mark-swatch", "aria-hidden": "true" }), " a query detected something") : null);
   }
 
+  const loadThreshold = async () => {
+    try {
+      const data = await api("GET", "/api/knowledge/values");
+      const entry = Object.entries((data && data.values) || {}).find(([key]) => key.endsWith(".distanceToEntrance"));
+      const value = entry ? Number(entry[1]) : NaN;
+      const next = Number.isFinite(value) ? { name: entry[0], value } : null;
+      if (JSON.stringify(next) !== JSON.stringify(state.threshold)) {
+        state.threshold = next;
+        scheduleDraw();
+      }
+    } catch {
+      // no knowledge base here (or no right to read it): the plot goes without the line
+    }
+  };
   connect();
+  loadThreshold();
+  const thresholdTimer = setInterval(loadThreshold, THRESHOLD_REFRESH_MS);
   return {
     dispose() {
+      clearInterval(thresholdTimer);
       if (source) source.close();
       source = null;
     },
