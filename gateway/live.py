@@ -89,7 +89,7 @@ class Subscription:
     ``wake`` is called (from the gateway's thread) after each event is queued — the SSE route uses
     it to wake its asyncio task; it must not block."""
 
-    def __init__(self, feed: "LiveFeed", size: int, wake: Callable[[], None] | None) -> None:
+    def __init__(self, feed: LiveFeed, size: int, wake: Callable[[], None] | None) -> None:
         self._feed = feed
         self._queue: deque[Event] = deque()
         self._size = size

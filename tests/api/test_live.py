@@ -115,16 +115,16 @@ def test_a_connected_browser_gets_new_events_as_they_happen(gateway) -> None:
         subscribers = gateway.live.stats()["subscribers"]
 
         def listen() -> None:
-            with httpx.Client(base_url=server.url, timeout=WAIT_S) as http:
-                with http.stream("GET", "/api/live", params={"replay": "false", "heartbeat_s": 1}) as r:
-                    kind = None
-                    for line in r.iter_lines():
-                        if line.startswith("event: "):
-                            kind = line[7:]
-                        elif line.startswith("data: "):
-                            received.append((kind, json.loads(line[6:])))
-                            if kind == "decision":
-                                return
+            with httpx.Client(base_url=server.url, timeout=WAIT_S) as http, \
+                    http.stream("GET", "/api/live", params={"replay": "false", "heartbeat_s": 1}) as r:
+                kind = None
+                for line in r.iter_lines():
+                    if line.startswith("event: "):
+                        kind = line[7:]
+                    elif line.startswith("data: "):
+                        received.append((kind, json.loads(line[6:])))
+                        if kind == "decision":
+                            return
 
         listener = threading.Thread(target=listen, daemon=True)
         listener.start()

@@ -75,7 +75,7 @@ async def live(request: Request, gateway: GatewayDep, who: EventStreamCaller,
                 if not batch and not dropped:
                     try:
                         await asyncio.wait_for(wake.wait(), timeout=heartbeat_s)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         if await request.is_disconnected():
                             return
                         yield sse("heartbeat", {"at": int(time.time() * 1000), "feed": feed.id})
