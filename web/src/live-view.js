@@ -188,7 +188,20 @@ export async function showLive(main, ctx) {
   function addDetection(event) {
     const end = event.window && event.window.end;
     if (end !== undefined && end !== null) state.marks.push({ t: Number(end), query: event.query });
-    prepend(detectionsEl, detectionItem(event));
+    // The same query seeing the same people window after window is one detection going on:
+    // its item is updated (latest values, how many windows) instead of a new one each second.
+    const key = `${event.query}|${detectionKey(event)}`;
+    const first = detectionsEl.firstElementChild;
+    if (first && first.dataset.key === key) {
+      const windows = Number(first.dataset.windows) + 1;
+      const item = detectionItem(event, windows, first.dataset.since);
+      item.dataset.key = key;
+      first.replaceWith(item);
+    } else {
+      const item = detectionItem(event, 1, String(event.at));
+      item.dataset.key = key;
+      prepend(detectionsEl, item);
+    }
     scheduleDraw();
   }
 
@@ -312,14 +325,22 @@ function timeCell(event) {
   return h("time", { datetime: new Date(event.at).toISOString() }, clock(event.at));
 }
 
-function detectionItem(event) {
+/** What a detection is about: the first column's values (the people, the tables). */
+function detectionKey(event) {
+  const rows = event.rows || [];
+  const first = (event.variables || (rows[0] ? Object.keys(rows[0]) : []))[0];
+  return rows.map((row) => shortValue(row[first])).sort().join(",");
+}
+
+function detectionItem(event, windows, since) {
   const rows = event.rows || [];
   const vars = event.variables || (rows[0] ? Object.keys(rows[0]) : []);
   const described = rows.slice(0, 8).map((row) => h("li", {}, vars.filter((v) => row[v] !== undefined && row[v] !== null)
     .map((v, i) => [i ? " · " : "", i ? `${v} ` : "", i ? shortValue(row[v]) : h("b", {}, shortValue(row[v]))])));
-  return h("li", { class: "detection", "data-query": event.query || "" },
+  const span = windows > 1 ? ` in ${windows} windows since ${clock(Number(since))}` : "";
+  return h("li", { class: "detection", "data-query": event.query || "", dataset: { windows: String(windows), since } },
     h("div", { class: "when-row" }, timeCell(event), " ", h("b", {}, event.query || "a query"),
-      ` found ${event.solutions} result${event.solutions === 1 ? "" : "s"}`),
+      ` found ${event.solutions} result${event.solutions === 1 ? "" : "s"}${span}`),
     h("ul", { class: "rows" }, described, rows.length > 8 ? h("li", { class: "muted" }, `and ${rows.length - 8} more`) : null));
 }
 
