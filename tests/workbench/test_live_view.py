@@ -52,6 +52,7 @@ def test_readings_fill_the_plot_and_a_decision_link_opens_the_decision(author_pa
         expect(page.locator(f"[data-testid=plot-svg] g.person[data-person='{person}'] polyline")).to_have_count(1)
     expect(legend.locator(f"li[data-person='{people[0]}']")).to_contain_text("1.80 m")
     expect(page.locator("[data-testid=plot-svg] desc")).to_contain_text(people[0])
+    expect(page.get_by_test_id("latest-reading")).to_contain_text("Latest entrance reading received at")
     expect(page.get_by_test_id("threshold")).to_contain_text("entrance: 3.3 m")  # the ontology's value
     detection = page.get_by_test_id("live-detections").locator("li.detection", has_text=people[0])
     expect(detection).to_have_count(1)  # one detection going on, however many windows saw it

@@ -56,6 +56,7 @@ export async function showLive(main, ctx) {
     colors: new Map(), // person -> index in COLORS/DASHES (kept for the whole visit)
     marks: [], // detections on the plot: {t, query}
     latest: null, // the newest reading's sensor time (ms): the plot's right edge
+    latestAt: null, // when the gateway received it (wall clock, ms): says how current the picture is
     paused: false,
     pending: [],
     skipped: 0,
@@ -176,6 +177,7 @@ export async function showLive(main, ctx) {
 
   function addReading(event) {
     const t = Number(event.t);
+    if (state.latest === null || t >= state.latest) state.latestAt = event.at;
     state.latest = state.latest === null ? t : Math.max(state.latest, t);
     for (const [person, d] of Object.entries(event.distances || {})) {
       if (!state.colors.has(person)) state.colors.set(person, state.colors.size);
@@ -280,7 +282,9 @@ export async function showLive(main, ctx) {
         transform: `rotate(-90 14 ${(M.top + H - M.bottom) / 2})` }, "distance to the entrance (m)"),
       right === null ? s("text", { x: (M.left + W) / 2, y: H / 2, class: "placeholder", "text-anchor": "middle" },
         "Waiting for entrance readings… (start printeps demo, or post to /api/streams)") : null);
-    fill(plotHost, svg);
+    fill(plotHost, svg, state.latestAt
+      ? h("p", { class: "hint live-latest", "data-testid": "latest-reading" }, `Latest entrance reading received at ${clock(state.latestAt)}.`)
+      : null);
     fill(legendEl, people.map((person) => {
       const i = state.colors.get(person);
       const swatch = s("svg", { width: 28, height: 10, "aria-hidden": "true" },
