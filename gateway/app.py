@@ -31,6 +31,7 @@ from gateway.config import Settings
 from gateway.engine import Engine
 from gateway.follower import ChangeFollower
 from gateway.jobs import JobRecords, JobService
+from gateway.live import LiveFeed
 from gateway.ontology.knowledge import KnowledgeBase
 from gateway.rdf.mapping import Mapper
 from gateway.ros.robots import RobotStates
@@ -38,6 +39,7 @@ from gateway.store.store import QUERY_RESULTS
 from gateway.stream.engine import StreamEngine
 from gateway.stream.services import MappingService, QueryService
 from gateway.versions import Catalog, MemoryCatalog
+from gateway.workflow.recorder import CallableRecorder, FanOutRecorder
 from gateway.workflow.service import WorkflowService, build_service
 
 log = logging.getLogger(__name__)
@@ -67,6 +69,7 @@ class Gateway:
     decisions: Any = None
     ros: Any = None
     follower: ChangeFollower | None = None
+    live: LiveFeed = field(default_factory=LiveFeed)  # what this process sees happen (GET /api/live)
     app: Any = None
     members: Any = None  # gateway.store.members.Membership: where other processes reach this one
     jobs: Any = None  # gateway.jobs.JobService: deploys and validations in the background
@@ -178,6 +181,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     engine = Engine(settings, catalog)
     if decisions is not None:
         engine.add_listener(decisions.on_engine_event)
+    live = LiveFeed()
+    engine.add_listener(live.on_engine_event)  # after the decision record: a decision shown can be opened
     if members is not None:  # sessions are recorded with their owner, so other processes can forward to it
         from gateway.store.session_records import SessionDirectory
 
@@ -202,10 +207,13 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     robots = RobotStates(settings.ros.robot_start)
     actions = ActionRouter(store, queue_size=settings.ros.queue_size)
     actions.add_listener(robots.on_outcome)
+    actions.add_listener(live.on_outcome)
     mapper = Mapper()
     mappings = MappingService(mapper, catalog, describe=_describe_if_available())
     streams = StreamEngine(cfg, rules_engine=engine, ontology=knowledge.ontology, providers={"robots": robots.facts})
     closers.append(("the stream engine", streams.close))
+    streams.add_input_listener(live.on_stream_item)
+    streams.subscribe(live.on_stream_event, nonempty=True)
     queries = QueryService(streams, catalog)
     if seed:
         mappings.seed(cfg.mappings_dir)
@@ -231,6 +239,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
                               ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed)
     closers.append(("the workflow executor", workflows.close))
+    workflows.executor.recorder = FanOutRecorder(workflows.executor.recorder, CallableRecorder(live.on_workflow_record))
     actions.register("workflow", workflow_handler(workflows))
     streams.subscribe(actions.on_stream_event)
 
@@ -245,7 +254,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       mappings=mappings, streams=streams, queries=queries, robots=robots, actions=actions,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
-                      members=members, jobs=jobs, _closers=closers)
+                      members=members, jobs=jobs, live=live, _closers=closers)
+    closers.append(("the live feed", live.close))  # first: open event streams end, the server can stop
     if rest:
         from gateway.api.main import create_app
 

@@ -57,7 +57,22 @@ def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | 
     signal.signal(signal.SIGTERM, _exit_quietly)
     config = uvicorn.Config(gateway.app, host=host, port=port, loop="auto", http="auto", log_level="info",
                             access_log=False)
-    uvicorn.Server(config).run(sockets=sockets)
+    closing_server(config, on_exit=gateway.live.close).run(sockets=sockets)
+
+
+def closing_server(config: Any, on_exit: Any) -> Any:
+    """uvicorn's server that first calls ``on_exit`` (ends the gateway's open event streams) when
+    told to stop: uvicorn waits for every response to finish, and a Live view's never does."""
+    import uvicorn
+
+    class ClosingServer(uvicorn.Server):
+        def handle_exit(self, sig: int, frame: Any) -> None:
+            try:
+                on_exit()
+            finally:
+                super().handle_exit(sig, frame)
+
+    return ClosingServer(config)
 
 
 def _exit_quietly(signum: int, frame: Any) -> None:

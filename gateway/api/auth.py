@@ -113,6 +113,21 @@ def require(role: str) -> Callable[..., Principal]:
     return dependency
 
 
+def require_event_stream(role: str) -> Callable[..., Principal]:
+    """Like :func:`require`, also accepting the token as ``?access_token=`` (RFC 6750 §2.3): a
+    browser's ``EventSource`` cannot set headers. Only for Server-Sent Events routes."""
+
+    async def dependency(
+        request: Request, bearer: HTTPAuthorizationCredentials | None = Security(_bearer)
+    ) -> Principal:
+        token = request.query_params.get("access_token")
+        if bearer is None and token:
+            bearer = HTTPAuthorizationCredentials(scheme="Bearer", credentials=token)
+        return _auth(request).check(role, bearer)
+
+    return dependency
+
+
 def require_kie(role: str) -> Callable[..., Principal]:
     """Like :func:`require`, also accepting HTTP basic auth (what KIE Server clients send)."""
 
@@ -129,3 +144,4 @@ def require_kie(role: str) -> Callable[..., Principal]:
 caller = require("caller")
 author = require("author")
 kie_caller = require_kie("caller")
+event_stream_caller = require_event_stream("caller")

@@ -76,6 +76,7 @@ from gateway.stream.windows import StreamBuffer, merge, merge_latest, pane_size
 log = logging.getLogger(__name__)
 
 Subscriber = Callable[[dict[str, Any]], None]
+InputListener = Callable[[str, int, list[Triple]], None]
 
 
 class StreamError(ValueError):
@@ -182,6 +183,7 @@ class StreamEngine:
         self._static_version = 0
         self._ontology_canonical: tuple[int, frozenset[Triple]] | None = None
         self._subscribers: dict[int, tuple[Subscriber, str | None, bool]] = {}
+        self._input_listeners: list[InputListener] = []
         self._ids = itertools.count(1)
         self._lock = threading.RLock()
         self.stream_stats: dict[str, dict[str, int]] = {}
@@ -382,6 +384,13 @@ class StreamEngine:
         with self._lock:
             self._subscribers.pop(token, None)
 
+    def add_input_listener(self, listener: InputListener) -> None:
+        """``listener(stream, timestamp_ms, triples)`` for every message pushed from outside (sensor
+        readings as they arrive, before the windows they close are evaluated: the live view shows a
+        reading before what was detected in it). Errors are logged, never raised."""
+        with self._lock:
+            self._input_listeners.append(listener)
+
     def _publish(self, event: dict[str, Any]) -> None:
         solutions = event.get("solutions", 1)
         for callback, query, nonempty in list(self._subscribers.values()):
@@ -412,6 +421,12 @@ class StreamEngine:
         collected: list[ResultEvent] | None = [] if with_results else None
         canonical = [canonical_triple(t) if type(t[2]) is Literal else t for t in triples]
         with self._lock:
+            for listener in self._input_listeners:
+                try:
+                    listener(stream, ts, canonical)
+                except Exception:  # an observer must never stop the stream
+                    self.subscriber_errors += 1
+                    log.exception("stream input listener failed")
             self._ingest(stream, ts, canonical, report, collected, external=True)
         if collected is not None:
             report["results"] = collected
