@@ -73,6 +73,7 @@ class KnowledgeBase:
         self._values: dict[tuple[str, str], Any] = {}
         self.base = ""
         self.inferred: list[dict[str, Any]] = []
+        self.inferred_types: list[dict[str, str]] = []
         self.error: str | None = None
         self._lock = threading.RLock()
         self._listeners: list[Callable[[str], None]] = []
@@ -257,10 +258,12 @@ class KnowledgeBase:
             self.error = f"{self.files['ontology']}: {exc}"
             log.error("knowledge: the ontology does not parse: %s", exc)
             return
-        self.inferred = []
+        self.error = None
+        self.inferred, self.inferred_types = [], []
         if self.infer and self._text.ontology:
             try:
-                self.inferred = self.reasoner.reason(None)["inferred"]
+                reasoned = self.reasoner.reason(None)
+                self.inferred, self.inferred_types = reasoned["inferred"], reasoned["types"]
             except ReasonerError as exc:
                 self.error = str(exc)
                 log.error("knowledge: Pellet could not infer from the current knowledge: %s", exc)
