@@ -188,3 +188,17 @@ def test_a_new_rule_is_added_at_the_end(client):
     added = client.post("/api/knowledge/swrl/rules", json={"text": text, "comment": "seniors"})
     assert added.status_code == 201, added.text
     assert added.json()["number"] == count + 1 and added.json()["comment"] == "seniors"
+
+
+def _poured(client: TestClient) -> str:
+    run = client.post("/api/workflows/prepare_drinks/run", json={"inputs": {}}).json()
+    assert run["status"] == "succeeded", run
+    return next(s["params"]["name"] for s in run["steps"] if s["type"] == "module" and s["step_id"] == "pour")
+
+
+def test_a_value_inferred_by_swrl_reaches_the_workflow(client):
+    """Table 2 #16 on the running gateway: the drink-preparation workflow pours what the rule infers."""
+    assert _poured(client) == "pour green tea x 2, 140 ml each"
+    pour = client.get("/api/knowledge/swrl/rules/7").json()["text"]
+    assert client.put("/api/knowledge/swrl/rules/7", json={"text": pour.replace("0.8", "0.7")}).status_code == 200
+    assert _poured(client) == "pour green tea x 2, 122.5 ml each"
