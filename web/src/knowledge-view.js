@@ -67,8 +67,14 @@ async function sidebar(ctx, section, cls, individual) {
       h("a", { href: ctx.href("knowledge", i), "data-individual": i, class: i === individual ? "current" : "" }, i)))) : null,
     c.children.length ? h("ul", {}, c.children.map(node)) : null);
   ctx.setSidebar("Knowledge", [...items,
-    h("li", { class: "class-tree" }, h("h3", { id: "class-tree-title" }, "Classes"),
-      h("ul", { "aria-labelledby": "class-tree-title", "data-testid": "class-tree" }, tree.map(node)))]);
+    h("li", { class: "class-tree" }, h("details", { open: !narrow() || Boolean(cls) },
+      h("summary", { id: "class-tree-title" }, "Classes"),
+      h("ul", { "aria-labelledby": "class-tree-title", "data-testid": "class-tree" }, tree.map(node))))]);
+}
+
+/** Tablet width: the class tree starts folded so the page content is in view. */
+function narrow() {
+  return window.matchMedia("(max-width: 900px)").matches;
 }
 
 // ---------------------------------------------------------------- values
@@ -135,7 +141,7 @@ function valueRow(ctx, ind, v, state, messageEl) {
   const errorId = `err-${id.replace(/\W/g, "-")}`;
   const input = h("input", { class: "value-input", value: v.lexical, "aria-label": `${id} (xsd:${v.datatype})`,
     inputmode: NUMBER[v.datatype] ? "decimal" : null, "aria-describedby": errorId, "data-testid": `value-${id}` });
-  const comment = h("input", { class: "comment-input", placeholder: "why? (optional)", "aria-label": `Comment for ${id}` });
+  const comment = h("input", { class: "comment-input", placeholder: "why?", "aria-label": `Comment for ${id}` });
   const save = h("button", { class: "primary", disabled: true, "data-testid": `save-${id}` }, "Save");
   const problem = h("div", { id: errorId, class: "field-error", "aria-live": "polite" });
   const readOnly = !ctx.isAuthor();
