@@ -15,8 +15,21 @@ from typing import Any
 from gateway.ontology.knowledge import KnowledgeBase, KnowledgeInvalid, digest
 from gateway.ontology.model import OntologyModel, local, read_model
 from gateway.ontology.reasoner import ReasonerError
-from gateway.ontology.swrl import RuleInvalid, append_rule, describe, parse_rule, read_rules, replace_rule, rule_lines
-from gateway.ontology.values import ValueInvalid, lexical_form, set_value_in_text, value_type
+from gateway.ontology.swrl import (
+    RuleInvalid,
+    append_rule,
+    describe,
+    parse_rule,
+    read_rules,
+    replace_rule,
+    rule_lines,
+)
+from gateway.ontology.values import (
+    ValueInvalid,
+    lexical_form,
+    set_value_in_text,
+    value_type,
+)
 from gateway.versions import VersionInfo
 
 
@@ -99,8 +112,10 @@ class KnowledgeEditor:
             raise ValueInvalid("value", f"{prop}: a value is needed")
         datatype = value_type(model, individual, prop)
         lexical = lexical_form(prop, datatype, value)
-        text = set_value_in_text(self.knowledge.text("ontology"), model, individual, prop, lexical, datatype)
-        saved = self.knowledge.replace("ontology", text, author=author, base_hash=base_hash,
+        current = self.knowledge.text("ontology")
+        text = set_value_in_text(current, model, individual, prop, lexical, datatype)
+        # the edit was made on `current`: a change saved meanwhile is a conflict, never overwritten
+        saved = self.knowledge.replace("ontology", text, author=author, base_hash=base_hash or digest(current),
                                        comment=comment or f"{individual}.{prop} = {lexical}")
         return saved, {"individual": individual, "property": prop, "lexical": lexical, "datatype": datatype,
                        "value": self.knowledge.value(f"{individual}.{prop}")}
@@ -141,10 +156,11 @@ class KnowledgeEditor:
 
     def save_rule(self, number: int | None, text: str, *, author: str, comment: str = "",
                   base_hash: str | None = None) -> tuple[VersionInfo, int]:
+        current = self.knowledge.text("swrl")
         errors, candidate = self.check_rule(number, text, comment if number is None else "")
         if errors:
             raise KnowledgeInvalid("swrl", errors)
-        saved = self.knowledge.replace("swrl", candidate, author=author, base_hash=base_hash,
+        saved = self.knowledge.replace("swrl", candidate, author=author, base_hash=base_hash or digest(current),
                                        comment=comment or (f"rule {number}" if number else "new rule"))
         return saved, number or len(rule_lines(candidate))
 

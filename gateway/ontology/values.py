@@ -78,7 +78,7 @@ def _turtle_literal(lexical: str, datatype: str, xsd_prefix: str | None) -> str:
 
 
 def _prefixes(text: str, namespace: str) -> list[str]:
-    return [m.group(1) for m in re.finditer(r"@prefix\s+([\w-]*):\s*<([^>]*)>\s*\.", text, re.I) if m.group(2) == namespace] + \
+    return [m.group(1) for m in re.finditer(r"@prefix\s+([\w-]*):\s*<([^>]*)>\s*\.", text, re.IGNORECASE) if m.group(2) == namespace] + \
         [m.group(1) for m in re.finditer(r"(?im)^\s*PREFIX\s+([\w-]*):\s*<([^>]*)>", text) if m.group(2) == namespace]
 
 

@@ -202,3 +202,10 @@ def test_a_value_inferred_by_swrl_reaches_the_workflow(client):
     pour = client.get("/api/knowledge/swrl/rules/7").json()["text"]
     assert client.put("/api/knowledge/swrl/rules/7", json={"text": pour.replace("0.8", "0.7")}).status_code == 200
     assert _poured(client) == "pour green tea x 2, 122.5 ml each"
+
+
+def test_a_string_value_is_quoted_and_escaped_in_the_turtle(client, gateway):
+    answer = client.put("/api/knowledge/individuals/table4/values/locationId", json={"value": 'table "4" b'})
+    assert answer.status_code == 200, answer.text
+    assert gateway.knowledge.value("table4.locationId") == 'table "4" b'
+    assert 'printeps:locationId "table \\"4\\" b"' in client.get("/api/knowledge/ontology").json()["text"]

@@ -233,3 +233,44 @@ def test_the_knowledge_view_fits_laptop_and_tablet(browser, gateway, width, scre
         assert page.js_errors == []
     finally:
         page.context.close()
+
+
+def test_keyboard_only_edits_a_value_and_a_rule(page: Page, gateway):
+    page.goto("/workbench/knowledge/pepper1")
+    cell = page.get_by_test_id("value-pepper1.robotToTableDistance")
+    cell.focus()
+    page.keyboard.press("Control+a")
+    page.keyboard.type("9")
+    page.keyboard.press("Escape")  # Escape puts the saved value back
+    expect(cell).to_have_value("0.5")
+    page.keyboard.press("Control+a")
+    page.keyboard.type("0.6")
+    page.keyboard.press("Tab")  # to the comment
+    page.keyboard.type("keyboard only")
+    page.keyboard.press("Tab")  # to Save
+    page.keyboard.press("Enter")
+    expect(page.get_by_test_id("values-message")).to_contain_text("✓ pepper1.robotToTableDistance = 0.6 is live")
+    assert _value(gateway, "pepper1.robotToTableDistance") == 0.6
+
+    page.goto("/workbench/knowledge/rules/7")
+    page.get_by_test_id("edit-7").focus()
+    page.keyboard.press("Enter")
+    area = page.get_by_test_id("rule-text-7")
+    expect(area).to_be_focused()
+    page.keyboard.press("End")
+    area.fill(area.input_value().replace("0.8)", "0.75)"))
+    page.keyboard.press("Control+Enter")
+    expect(page.get_by_test_id("rules-message")).to_contain_text("✓ Rule 7 saved and live")
+    assert _value(gateway, "cup1.pourQuantity") == pytest.approx(131.25)
+
+
+def test_a_value_the_individual_lacks_is_added(page: Page, gateway):
+    page.goto("/workbench/knowledge/hsr1")
+    page.get_by_test_id("add-property").select_option("robotToHumanDistance")
+    page.get_by_test_id("add-value").fill("x")
+    expect(page.locator("#add-value-error")).to_have_text("robotToHumanDistance: 'x' is not an xsd:decimal")
+    page.get_by_test_id("add-value").fill("1.2")
+    page.get_by_test_id("add-value-button").click()
+    expect(page.locator(".flash")).to_contain_text("✓ hsr1.robotToHumanDistance = 1.2 is live")
+    expect(page.get_by_test_id("value-hsr1.robotToHumanDistance")).to_have_value("1.2")
+    assert _value(gateway, "hsr1.robotToHumanDistance") == 1.2

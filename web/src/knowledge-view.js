@@ -109,6 +109,7 @@ async function showValues(main, ctx, individual, cls) {
       h("thead", {}, h("tr", {}, ["Individual", "Property", "Value", "Type", ""].map((t) => h("th", { scope: "col" }, t)))),
       h("tbody", {}, rows)) : h("p", { class: "muted" }, "No data values here."),
     individual ? individualCard(ctx, data.individuals.find((i) => i.name === individual)) : null,
+    individual && ctx.isAuthor() ? addValueCard(ctx, data, tree.classes, data.individuals.find((i) => i.name === individual), state) : null,
     inferPanel(ctx, data, individual)));
   return {};
 }
@@ -200,6 +201,59 @@ function individualCard(ctx, ind) {
     h("p", {}, "Of class ", ind.types.map((t, i) => [i ? ", " : "", h("a", { href: ctx.href("knowledge", "values", `class=${encodeURIComponent(t)}`) }, t)])),
     ind.links.length ? h("ul", { class: "links" }, ind.links.map((l) => h("li", {}, `${l.property} → `,
       h("a", { href: ctx.href("knowledge", l.individual) }, l.individual)))) : null);
+}
+
+/** The classes `types` belong to, themselves included (a property whose domain is one of them fits). */
+function withAncestors(tree, types) {
+  const out = new Set(types);
+  const walk = (nodes, path) => nodes.forEach((c) => {
+    if (types.includes(c.name)) path.forEach((p) => out.add(p));
+    walk(c.children, [...path, c.name]);
+  });
+  walk(tree, []);
+  return out;
+}
+
+/** A data value the individual does not have yet: a property that fits its class, a typed value. */
+function addValueCard(ctx, data, tree, ind, state) {
+  const fits = withAncestors(tree, ind.types);
+  const has = new Set(ind.values.map((v) => v.property));
+  const props = data.properties.filter((p) => p.kind === "data" && !has.has(p.name) && (!p.domain || fits.has(p.domain)));
+  if (!props.length) return null;
+  const prop = h("select", { "aria-label": "New property", "data-testid": "add-property" },
+    props.map((p) => h("option", { value: p.name }, `${p.name} (xsd:${p.range || "string"})`)));
+  const value = h("input", { class: "value-input", "aria-label": "New value", "data-testid": "add-value", "aria-describedby": "add-value-error" });
+  const comment = h("input", { class: "comment-input", placeholder: "why?", "aria-label": "Comment for the new value" });
+  const problem = h("div", { id: "add-value-error", class: "field-error", "aria-live": "polite" });
+  const range = () => (props.find((p) => p.name === prop.value) || {}).range || "string";
+  const validate = () => {
+    const text = value.value ? typeProblem(prop.value, range(), value.value) : "";
+    fill(problem, text);
+    value.setAttribute("aria-invalid", text ? "true" : "false");
+    return text || (value.value.trim() ? "" : `${prop.value}: a value is needed`);
+  };
+  const add = async () => {
+    const wrong = validate();
+    if (wrong) {
+      fill(problem, wrong);
+      value.focus();
+      return;
+    }
+    try {
+      const result = await api("PUT", `/api/knowledge/individuals/${encodeURIComponent(ind.name)}/values/${encodeURIComponent(prop.value)}`,
+        { value: value.value, comment: comment.value, base_hash: state.hash });
+      ctx.flash("ok", `✓ ${ind.name}.${result.property} = ${result.lexical} is live (ontology version ${result.version}).`);
+      ctx.navigate(ctx.href("knowledge", ind.name), true);
+    } catch (err) {
+      fill(problem, (err.errors[0] || {}).message || err.message);
+    }
+  };
+  value.addEventListener("input", validate);
+  prop.addEventListener("change", validate);
+  value.addEventListener("keydown", (e) => { if (e.key === "Enter") add(); });
+  return h("div", { class: "card add-value" }, h("h2", {}, `Add a value to ${ind.name}`),
+    h("div", { class: "compare" }, prop, " = ", value, " ", comment, " ",
+      h("button", { class: "primary", onclick: add, "data-testid": "add-value-button" }, "Add")), problem);
 }
 
 // ---------------------------------------------------------------- what does it infer
