@@ -120,7 +120,11 @@ class KnowledgeBase:
         try:
             Reasoner(lambda: candidate).reason(None)
         except ReasonerError as exc:
-            return [_position(exc, name)]
+            error = _position(exc, name)
+            if "inconsistent" in error["message"]:
+                error["message"] = ("Pellet finds the ontology and the rules inconsistent together (a value or a "
+                                    "conclusion contradicts the ontology, e.g. a value outside a property's range)")
+            return [error]
         return []
 
     def replace(self, kind: str, text: str, *, author: str, comment: str = "", base_hash: str | None = None,

@@ -154,6 +154,21 @@ def _check_atom(atom: Atom, model: OntologyModel, in_head: bool) -> None:
     if arity != expected:
         raise RuleInvalid(f"{name} takes {expected} argument{'s' if expected != 1 else ''}, not {arity}",
                           atom.column, atom.text)
+    individual_args = atom.args if name in model.classes else atom.args[:1] if name in model.properties else []
+    if name in model.properties and model.properties[name].kind == "object":
+        individual_args = atom.args
+    for arg in individual_args:
+        if not arg.startswith("?") and (arg.startswith('"') or _is_literal(arg) or arg not in model.individuals):
+            raise RuleInvalid(f"{name}: {arg} is not a ?variable or an individual of the ontology", atom.column, atom.text)
+    if name in model.properties and model.properties[name].kind == "data":
+        value = atom.args[1]
+        if not (value.startswith(("?", '"')) or _is_literal(value)):
+            raise RuleInvalid(f"{name}: {value} is not a ?variable or a value (number, \"text\", true, false)",
+                              atom.column, atom.text)
+
+
+def _is_literal(arg: str) -> bool:
+    return arg in ("true", "false") or bool(re.fullmatch(r"[+-]?\d+(\.\d+)?([eE][+-]?\d+)?", arg))
 
 
 def read_rules(text: str, model: OntologyModel | None = None) -> list[Rule]:

@@ -158,13 +158,26 @@ def test_a_bad_rule_says_where_and_changes_nothing(client, gateway, text, column
     assert _child_seat(client, 6) is True
 
 
-def test_a_rule_pellet_refuses_names_its_rule(client):
-    # syntactically fine for our check, but owlready2 cannot read a class used as a property
-    check = client.post("/api/knowledge/swrl/rules/6/check",
-                        json={"text": "Customer(?c), age(?c, ?a) -> Child(?c), needsChildSeat(?c, \"maybe\")"}).json()
-    assert check["ok"] in (True, False)  # Pellet decides; either way the answer has the shape below
-    for error in check["errors"]:
-        assert {"rule", "line", "column", "atom", "message"} <= set(error)
+@pytest.mark.parametrize("text, says", [
+    ('Cup(?c) -> hasCup(?c, "x")', 'hasCup: "x" is not a ?variable or an individual of the ontology'),
+    ("Cup(?c) -> cupCapacity(?c, big)", "cupCapacity: big is not a ?variable or a value"),
+    ("Cup(nobody) -> Child(nobody)", "Cup: nobody is not a ?variable or an individual"),
+])
+def test_arguments_of_the_wrong_kind_are_named(client, text, says):
+    error = client.post("/api/knowledge/swrl/rules/7/check", json={"text": text}).json()["errors"][0]
+    assert says in error["message"] and error["column"] > 0 and error["atom"]
+
+
+def test_a_rule_pellet_finds_inconsistent_is_refused_with_its_rule(client, gateway):
+    # cup1 is a Cup: giving every cup a text capacity contradicts cupCapacity's range (xsd:decimal)
+    text = 'Cup(?c) -> cupCapacity(?c, "big")'
+    check = client.post("/api/knowledge/swrl/rules/7/check", json={"text": text}).json()
+    assert check["ok"] is False
+    error = check["errors"][0]
+    assert (error["rule"], error["line"]) == (7, 20)
+    assert error["message"].startswith("rule 7: Pellet finds the ontology and the rules inconsistent")
+    assert client.put("/api/knowledge/swrl/rules/7", json={"text": text}).status_code == 422
+    assert gateway.knowledge.value("cup1.pourQuantity") == 140.0
 
 
 def test_what_pellet_infers_for_an_individual(client):
