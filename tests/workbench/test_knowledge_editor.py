@@ -185,7 +185,7 @@ def test_what_pellet_infers_for_an_individual(page: Page, gateway):
     expect(result.locator("[data-inferred=needsChildSeat]")).to_contain_text("needsChildSeat = true — by rule 6")
 
 
-def test_history_diff_and_rollback(page: Page, gateway):
+def test_history_diff_and_rollback(page: Page, gateway, screenshots):
     with gateway.rest() as client:
         first = client.get("/api/knowledge/ontology").json()["version"]
         answer = client.put("/api/knowledge/individuals/pepper1/values/robotToHumanDistance",
@@ -196,6 +196,7 @@ def test_history_diff_and_rollback(page: Page, gateway):
     versions = page.get_by_test_id("knowledge-versions")
     expect(versions.locator("tr.live-row")).to_contain_text("a test change")
     expect(page.get_by_test_id("diff")).to_contain_text('"1.25"^^xsd:decimal')
+    page.screenshot(path=str(screenshots / "knowledge-history.png"), full_page=True)
     page.get_by_test_id(f"rollback-{first}").click()
     page.get_by_test_id(f"confirm-rollback-{first}").click()
     expect(page.locator(".flash")).to_contain_text(f"Rolled back: version {first} is live again")

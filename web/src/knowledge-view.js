@@ -482,8 +482,8 @@ async function showHistory(main, ctx, kind, params) {
   const fromEl = pick(Number(params.get("from")) || (versions[1] || versions[0] || {}).version, "Compare version");
   const toEl = pick(Number(params.get("to")) || (versions[0] || {}).version, "with version");
   const compare = () => showDiff(diffEl, kind, Number(fromEl.value), Number(toEl.value));
-  const tabs = h("div", { class: "kind-tabs", role: "tablist" }, [["ontology", "Ontology (values)"], ["swrl", "SWRL rules"]].map(([k, label]) =>
-    h("a", { href: ctx.href("knowledge", "history", `kind=${k}`), role: "tab", "aria-selected": String(k === kind), class: k === kind ? "button primary" : "button secondary" }, label)));
+  const tabs = h("nav", { class: "kind-tabs", "aria-label": "Which history" }, [["ontology", "Ontology (values)"], ["swrl", "SWRL rules"]].map(([k, label]) =>
+    h("a", { href: ctx.href("knowledge", "history", `kind=${k}`), "aria-current": k === kind ? "page" : null, class: k === kind ? "button primary" : "button secondary" }, label)));
   fill(main, h("section", { class: "knowledge history" },
     h("div", { class: "title-row" }, h("h1", {}, "Knowledge · History"), tabs),
     messageEl,
