@@ -202,6 +202,9 @@ def test_history_diff_and_rollback(page: Page, gateway, screenshots):
     expect(page.locator(".flash")).to_contain_text(f"Rolled back: version {first} is live again")
     assert _value(gateway, "pepper1.robotToHumanDistance") == 1.0
     assert _moves(gateway)[0] == (2.0, 0.0)
+    page.locator(".kind-tabs").get_by_role("link", name="SWRL rules").click()
+    expect(page.locator(".kind-tabs").get_by_role("link", name="SWRL rules")).to_have_attribute("aria-current", "page")
+    expect(page.get_by_test_id("knowledge-versions").locator("tr.live-row")).to_be_visible()
 
 
 def test_a_caller_sees_the_knowledge_but_cannot_edit(browser, gateway):
