@@ -40,6 +40,7 @@ class NotFound(LookupError):
 class KnowledgeEditor:
     def __init__(self, knowledge: KnowledgeBase) -> None:
         self.knowledge = knowledge
+        self.last_changes: list[dict[str, Any]] = []  # what the last checked rule would change
 
     # ---- reading -------------------------------------------------------------------------------
     def model(self) -> OntologyModel:
@@ -149,10 +150,23 @@ class KnowledgeEditor:
             parse_rule(text.strip(), self.model())
         except RuleInvalid as exc:
             return [{**where, "column": exc.column, "atom": exc.atom, "message": f"rule {rule_no}: {exc.message}"}], candidate
-        errors = self.knowledge.check("swrl", candidate)
+        errors, reasoned = self.knowledge.trial("swrl", candidate)
+        self.last_changes = self._changes(reasoned) if reasoned else []
         return [{**where, "column": e.get("column", 0), "atom": "",
                  "message": f"rule {rule_no}: {e['message']}" if e.get("line") == line or not e.get("line")
                  else e["message"]} for e in errors], candidate
+
+    def _changes(self, reasoned: dict[str, Any]) -> list[dict[str, Any]]:
+        """Inferred values of the ontology's individuals that a candidate would change (before → after)."""
+        base = self.knowledge.base
+
+        def values(facts: list[dict[str, Any]]) -> dict[str, str]:
+            return {f"{local(str(f['subject']), base)}.{local(str(f['predicate']), base)}": str(f.get("lexical", f["object"]))
+                    for f in facts if f.get("object_type") == "literal" and local(str(f["subject"]), base)}
+
+        now, then = values(self.knowledge.inferred), values(reasoned["inferred"])
+        return [{"value": k, "before": now.get(k), "after": then.get(k)}
+                for k in sorted(set(now) | set(then)) if now.get(k) != then.get(k)]
 
     def save_rule(self, number: int | None, text: str, *, author: str, comment: str = "",
                   base_hash: str | None = None) -> tuple[VersionInfo, int]:

@@ -112,20 +112,24 @@ class KnowledgeBase:
     # ---- changing -------------------------------------------------------------------------------
     def check(self, kind: str, text: str) -> list[dict[str, Any]]:
         """Errors of a candidate text together with the other one as it is now ([] = acceptable)."""
+        return self.trial(kind, text)[0]
+
+    def trial(self, kind: str, text: str) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+        """Pellet on a candidate text with the other one as it is now: (errors, what it infers).
+        Nothing changes; the editor shows what a rule would change before it is saved."""
         name = self.files[kind]
         if "\x00" in text:
-            return [{"file": name, "line": 0, "column": 0, "message": "binary content is not an ontology or SWRL text"}]
+            return [{"file": name, "line": 0, "column": 0, "message": "binary content is not an ontology or SWRL text"}], None
         candidate = KnowledgeText(-1, text if kind == "ontology" else self._text.ontology,
                                   text if kind == "swrl" else self._text.swrl, self.files["ontology"], self.files["swrl"])
         try:
-            Reasoner(lambda: candidate).reason(None)
+            return [], Reasoner(lambda: candidate).reason(None)
         except ReasonerError as exc:
             error = _position(exc, name)
             if "inconsistent" in error["message"]:
                 error["message"] = ("Pellet finds the ontology and the rules inconsistent together (a value or a "
                                     "conclusion contradicts the ontology, e.g. a value outside a property's range)")
-            return [error]
-        return []
+            return [error], None
 
     def replace(self, kind: str, text: str, *, author: str, comment: str = "", base_hash: str | None = None,
                 base_version: int | None = None) -> VersionInfo:

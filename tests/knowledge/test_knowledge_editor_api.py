@@ -126,13 +126,16 @@ def _child_seat(client: TestClient, age: int) -> bool:
 def test_one_rule_is_checked_saved_and_live(client, gateway):
     rule = client.get("/api/knowledge/swrl/rules/6").json()
     new = rule["text"].replace("lessThan(?a, 7)", "lessThan(?a, 6)")
-    assert client.post("/api/knowledge/swrl/rules/6/check", json={"text": new}).json() == {"ok": True, "errors": []}
+    assert client.post("/api/knowledge/swrl/rules/6/check", json={"text": new}).json() == {"ok": True, "errors": [],
+                                                                                           "changes": []}
     assert _child_seat(client, 6) is True
     saved = client.put("/api/knowledge/swrl/rules/6", json={"text": new, "comment": "#15", "base_hash": rule["hash"]})
     assert saved.status_code == 200, saved.text
     assert saved.json()["version"] == 2 and "?a < 6" in saved.json()["readable"]
     assert _child_seat(client, 6) is False and _child_seat(client, 5) is True
     pour = client.get("/api/knowledge/swrl/rules/7").json()["text"]
+    check = client.post("/api/knowledge/swrl/rules/7/check", json={"text": pour.replace("0.8", "0.7")}).json()
+    assert check["changes"] == [{"value": "cup1.pourQuantity", "before": "140.0", "after": "122.5"}]
     assert client.put("/api/knowledge/swrl/rules/7", json={"text": pour.replace("0.8", "0.7")}).status_code == 200
     assert gateway.knowledge.value("cup1.pourQuantity") == pytest.approx(122.5)  # what workflows read
 

@@ -147,6 +147,8 @@ def test_table2_swrl_changes_in_the_browser_change_what_pellet_infers(page: Page
 
     # #16 pour factor 0.8 -> 0.7: the drink-preparation workflow pours the inferred quantity
     _edit_rule(page, 7, "0.8)", "0.7)")
+    page.get_by_test_id("check-7").click()
+    expect(page.get_by_test_id("rule-changes")).to_have_text("cup1.pourQuantity: 140.0 → 122.5")
     page.get_by_test_id("save-rule-7").click()
     expect(page.get_by_test_id("rules-message")).to_contain_text("✓ Rule 7 saved and live")
     assert _poured(gateway) == "pour green tea x 2, 122.5 ml each"

@@ -433,7 +433,7 @@ async function runCheck(path, area, verdict) {
   fill(verdict, h("p", { class: "muted" }, "Pellet is checking…"));
   try {
     const result = await api("POST", path, { text: area.value });
-    showVerdict(verdict, result.ok, result.errors, area);
+    showVerdict(verdict, result.ok, result.errors, area, result.changes);
   } catch (err) {
     showVerdict(verdict, false, [{ message: err.message }], area);
   }
@@ -441,9 +441,12 @@ async function runCheck(path, area, verdict) {
 
 /** Pellet's verdict: consistent, or each error with where it is (rule, line, column, atom); the
  * cursor goes to the column so the owner sees the spot. */
-function showVerdict(verdict, ok, errors, area) {
+function showVerdict(verdict, ok, errors, area, changes = []) {
   if (ok) {
-    fill(verdict, h("div", { class: "message ok", role: "status" }, "✓ Pellet: consistent with the ontology and the other rules."));
+    fill(verdict, h("div", { class: "message ok", role: "status" }, "✓ Pellet: consistent with the ontology and the other rules.",
+      changes.length ? h("ul", { class: "changes", "data-testid": "rule-changes" }, changes.map((c) => h("li", {},
+        `${c.value}: ${c.before ?? "—"} → ${c.after ?? "— (no longer inferred)"}`)))
+        : h("p", { class: "muted" }, "No inferred value of the ontology's individuals changes (try a new individual under Values).")));
     return;
   }
   fill(verdict, h("div", { class: "message error", role: "alert" }, errors.map((e) => h("p", {},

@@ -131,8 +131,9 @@ def rules(knowledge: KnowledgeDep, _: Caller) -> JSON:
 @router.post("/api/knowledge/swrl/rules/check")
 def check_new_rule(body: RuleCheckBody, knowledge: KnowledgeDep, _: Caller) -> JSON:
     """Check a new rule (added at the end) with Pellet; changes nothing."""
-    errors, _text = KnowledgeEditor(knowledge).check_rule(None, body.text)
-    return JSON({"ok": not errors, "errors": errors})
+    editor = KnowledgeEditor(knowledge)
+    errors, _text = editor.check_rule(None, body.text)
+    return JSON({"ok": not errors, "errors": errors, "changes": editor.last_changes})
 
 
 @router.post("/api/knowledge/swrl/rules", status_code=201)
@@ -154,12 +155,14 @@ def rule(number: RuleNumber, knowledge: KnowledgeDep, _: Caller) -> JSON:
 @router.post("/api/knowledge/swrl/rules/{number}/check")
 def check_rule(number: RuleNumber, body: RuleCheckBody, knowledge: KnowledgeDep, _: Caller) -> JSON:
     """Check rule ``number`` replaced by ``text``, with Pellet and everything else as it is now; changes
-    nothing. Errors name the rule, line, column and atom."""
+    nothing. Errors name the rule, line, column and atom; ``changes`` lists the inferred values of the
+    ontology's individuals the rule would change (``{"value", "before", "after"}``)."""
+    editor = KnowledgeEditor(knowledge)
     try:
-        errors, _text = KnowledgeEditor(knowledge).check_rule(number, body.text)
+        errors, _text = editor.check_rule(number, body.text)
     except NotFound as exc:
         raise ApiError(404, str(exc)) from None
-    return JSON({"ok": not errors, "errors": errors})
+    return JSON({"ok": not errors, "errors": errors, "changes": editor.last_changes})
 
 
 @router.put("/api/knowledge/swrl/rules/{number}")
