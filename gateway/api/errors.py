@@ -172,4 +172,4 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _internal(request: Request, exc: Exception) -> JSON:
         count("internal")
         log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return JSON(error_body("internal error", type=type(exc).__name__, message=str(exc)), status_code=500)
+        return JSON(error_body("internal error", type=type(exc).__name__, detail=str(exc)), status_code=500)

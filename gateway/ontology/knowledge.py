@@ -73,6 +73,7 @@ class KnowledgeBase:
         self._values: dict[tuple[str, str], Any] = {}
         self.base = ""
         self.inferred: list[dict[str, Any]] = []
+        self.inferred_types: list[dict[str, str]] = []
         self.error: str | None = None
         self._lock = threading.RLock()
         self._listeners: list[Callable[[str], None]] = []
@@ -111,16 +112,24 @@ class KnowledgeBase:
     # ---- changing -------------------------------------------------------------------------------
     def check(self, kind: str, text: str) -> list[dict[str, Any]]:
         """Errors of a candidate text together with the other one as it is now ([] = acceptable)."""
+        return self.trial(kind, text)[0]
+
+    def trial(self, kind: str, text: str) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+        """Pellet on a candidate text with the other one as it is now: (errors, what it infers).
+        Nothing changes; the editor shows what a rule would change before it is saved."""
         name = self.files[kind]
         if "\x00" in text:
-            return [{"file": name, "line": 0, "column": 0, "message": "binary content is not an ontology or SWRL text"}]
+            return [{"file": name, "line": 0, "column": 0, "message": "binary content is not an ontology or SWRL text"}], None
         candidate = KnowledgeText(-1, text if kind == "ontology" else self._text.ontology,
                                   text if kind == "swrl" else self._text.swrl, self.files["ontology"], self.files["swrl"])
         try:
-            Reasoner(lambda: candidate).reason(None)
+            return [], Reasoner(lambda: candidate).reason(None)
         except ReasonerError as exc:
-            return [_position(exc, name)]
-        return []
+            error = _position(exc, name)
+            if "inconsistent" in error["message"]:
+                error["message"] = ("Pellet finds the ontology and the rules inconsistent together (a value or a "
+                                    "conclusion contradicts the ontology, e.g. a value outside a property's range)")
+            return [error], None
 
     def replace(self, kind: str, text: str, *, author: str, comment: str = "", base_hash: str | None = None,
                 base_version: int | None = None) -> VersionInfo:
@@ -257,10 +266,12 @@ class KnowledgeBase:
             self.error = f"{self.files['ontology']}: {exc}"
             log.error("knowledge: the ontology does not parse: %s", exc)
             return
-        self.inferred = []
+        self.error = None
+        self.inferred, self.inferred_types = [], []
         if self.infer and self._text.ontology:
             try:
-                self.inferred = self.reasoner.reason(None)["inferred"]
+                reasoned = self.reasoner.reason(None)
+                self.inferred, self.inferred_types = reasoned["inferred"], reasoned["types"]
             except ReasonerError as exc:
                 self.error = str(exc)
                 log.error("knowledge: Pellet could not infer from the current knowledge: %s", exc)

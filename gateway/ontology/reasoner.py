@@ -199,7 +199,10 @@ class Reasoner:
         manager = jvm.jclass("org.semanticweb.owlapi.apibinding.OWLManager").createOWLOntologyManager()
         source = jvm.jclass("org.semanticweb.owlapi.io.StringDocumentSource")(world_xml)
         factory = jvm.jclass("com.clarkparsia.pellet.owlapiv3.PelletReasonerFactory").getInstance()
-        ontology = manager.loadOntologyFromOntologyDocument(source)
+        try:
+            ontology = manager.loadOntologyFromOntologyDocument(source)
+        except Exception as exc:  # the OWL API refuses what owlready2 wrote (e.g. a literal as an individual)
+            raise ReasonerError(f"the OWL API cannot read the rules and data: {_java_message(exc)}", "rules", 422) from None
         reasoner = factory.createReasoner(ontology)
         try:
             if not reasoner.isConsistent():
@@ -241,6 +244,11 @@ class Reasoner:
 
 
 _RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
+
+
+def _java_message(exc: Exception) -> str:
+    """The innermost sentence of a (nested) Java exception's message."""
+    return str(exc).rsplit("Exception: ", 1)[-1].strip()
 
 
 def _read_text(path: Path) -> str:
