@@ -40,5 +40,7 @@ def test_trailing_slash_goes_to_the_page():
     assert response.status_code == 308 and response.headers["location"] == "/workbench"
 
 
-def test_workflow_page_is_left_to_its_own_router():
-    assert client.get("/workbench/workflows").status_code == 404
+def test_workflows_are_a_section_of_the_shell():
+    for path in ("/workbench/workflows", "/workbench/workflows/show_to_seat"):
+        response = client.get(path)
+        assert response.status_code == 200 and "/workbench/static/app.js" in response.text, path
