@@ -646,6 +646,7 @@ class WorkflowEditor {
         step.module, (v) => { update((s) => { s.module = v; }); this.renderSide(); }, "module"));
       const module = (this.doc.modules || {})[step.module] || {};
       for (const param of this.paramsOfModule(step.module)) {
+        if (param.name === "robot") continue; // the module's: its service is under the robot's namespace
         const inherited = (module.params || {})[param.name];
         parts.push(this.field(param, (step.with || {})[param.name], (value) => update((s) => {
           s.with = s.with || {};
@@ -848,7 +849,7 @@ class WorkflowEditor {
     if (this.dirty && !window.confirm("Rolling back discards your unsaved changes. Go on?")) return;
     try {
       const result = await api("POST", wfPath(this.name, "/rollback"), { version, comment: `rollback to version ${version}` });
-      this.ctx.flash("ok", `Rolled back: version ${result.version} (the text of version ${version}) is live.`);
+      this.ctx.flash("ok", `Rolled back: version ${result.version} is live again.`);
       this.ctx.navigate(this.ctx.href("workflows", this.name, "tab=versions"), true);
     } catch (err) {
       fill(this.saveMsgEl, h("div", { class: "message error", role: "alert" }, `Not rolled back: ${err.message}`));
