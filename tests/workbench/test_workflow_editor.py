@@ -10,6 +10,7 @@ so the tests do not depend on each other or on their order.
 from __future__ import annotations
 
 import itertools
+import json
 import os
 
 import pytest
@@ -52,6 +53,18 @@ def run(gateway, name: str, inputs: dict | None = None) -> dict:
 
 def step_ids(result: dict) -> list[str]:
     return [s["step_id"] for s in result["steps"]]
+
+
+@pytest.fixture()
+def author_page(author_page: Page) -> Page:
+    """The signed-in author's page, also failing on console errors (HTTP answers the editor
+    handles itself, such as a 409 conflict or a 422 check, are not errors of the page)."""
+    errors: list[str] = []
+    author_page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error"
+                   and not msg.text.startswith("Failed to load resource: the server responded with a status of 4")
+                   else None)
+    yield author_page
+    assert errors == []
 
 
 def open_workflow(page: Page, name: str) -> None:
@@ -149,7 +162,7 @@ def test_table2_3_an_else_arm_with_a_performance(author_page: Page, gateway):
     open_workflow(page, name)
     page.get_by_role("button", name="Add new steps at the end of the else arm of any_order").click()
     expect(page.get_by_test_id("wf-insertion")).to_have_text("Inserting at the end of the else arm of any_order.")
-    page.get_by_role("button", name="Insert a jaco2_motion step (ros_service)").click()
+    page.get_by_role("button", name="Insert a jaco2_motion step (robot)").click()
     form = page.get_by_test_id("wf-form")
     form.locator("[data-field='with.name']").fill("tea ceremony performance")
     form.locator("[data-field=id]").fill("idle_performance")
@@ -161,6 +174,37 @@ def test_table2_3_an_else_arm_with_a_performance(author_page: Page, gateway):
     performed = next(s for s in result["steps"] if s["step_id"] == "idle_performance")
     assert performed["params"]["name"] == "tea ceremony performance" and performed["actor"] == "jaco2"
     assert "pour" in step_ids(run(gateway, name))  # with an order, the then-arm as before
+
+
+def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, gateway):
+    from gateway.workflow.agile import SEAT_INFO_DRL, TABLES
+
+    ruleset = f"seat_info_{os.getpid()}"
+    response = gateway.deploy(ruleset, {"seat_info.drl": SEAT_INFO_DRL}, "Table 2 #8: seat information")
+    assert response.status_code == 201, response.text
+    name, _ = copy_workflow(gateway, "1_greeting.yaml")
+    page = author_page
+    open_workflow(page, name)
+    step_button(page, "reception_rules").click()
+    page.get_by_role("button", name="Insert: Fire business rules").click()
+    form = page.get_by_test_id("wf-form")
+    form.locator("[data-field='with.facts']").fill("${input.tables}")
+    form.locator("[data-field=id]").fill("seat_info_rules")
+    page.get_by_role("button", name="Edit module fire_rules").click()
+    form.locator("[data-field=ruleset]").select_option(ruleset)  # only deployed rule sets are offered
+    form.get_by_label("Rule action (e.g. say)").fill("say")
+    form.get_by_label("Module that performs it").select_option("say")
+    form.get_by_role("button", name="Add action").click()
+    expect(form).to_contain_text("say → say")
+    save(page, "Table 2 #8: tell the free tables", 2)
+
+    traced = run_in_editor(page, json.dumps({"tables": TABLES}))
+    assert traced.index("reception_rules") < traced.index("seat_info_rules")
+    expect(page.locator("[data-testid=wf-trace]")).to_contain_text("2 free tables for you today")
+    result = run(gateway, name, {"tables": TABLES})
+    said = [s["params"].get("text", "") for s in result["steps"] if s["module"] == "say"]
+    welcome = next(i for i, text in enumerate(said) if "Welcome" in text)
+    assert welcome < next(i for i, text in enumerate(said) if "2 free tables for you today" in text)
 
 
 # ---------------------------------------------------------------- editing by keyboard and mouse
@@ -278,6 +322,19 @@ def test_yaml_and_generated_python_tabs(author_page: Page, gateway):
     python = page.get_by_label("Generated Python (read-only)")
     expect(python).to_contain_text("rclpy")
     expect(python).to_have_attribute("contenteditable", "false")
+
+
+def test_the_editor_fits_a_laptop_and_a_tablet(author_page: Page, gateway, screenshots):
+    name, _ = copy_workflow(gateway, "4_prepare_drinks.yaml")
+    page = author_page
+    for width, height in ((1280, 800), (768, 1024)):
+        page.set_viewport_size({"width": width, "height": height})
+        open_workflow(page, name)
+        step_button(page, "carry").click()
+        overflow = page.evaluate("document.documentElement.scrollWidth - document.documentElement.clientWidth")
+        assert overflow <= 0, f"{width}px: the page scrolls sideways by {overflow}px"
+        expect(page.get_by_role("button", name="Add new steps at the end of the else arm of any_order")).to_be_visible()
+        page.screenshot(path=str(screenshots / f"workflow-editor-{width}.png"), full_page=True)
 
 
 def test_a_caller_sees_but_cannot_save(browser, gateway):

@@ -26,6 +26,13 @@ const TABS = [
   ["versions", "Versions"],
 ];
 
+/** Module kinds in the owner's words (the badges of the steps and the palette). */
+const KIND_WORDS = {
+  ros_service: "robot", ros_topic: "message", fire_rules: "rules", ontology_value: "knowledge", wait: "wait",
+  manual: "staff", branch: "branch", process: "process", set: "set", module: "module",
+};
+const kindWord = (kind) => KIND_WORDS[kind] || String(kind).replace("_", " ");
+
 const wfPath = (name, rest = "") => `/api/workflows/${encodeURIComponent(name)}${rest}`;
 const pathKey = (path) => path.join("/");
 
@@ -332,7 +339,7 @@ class WorkflowEditor {
       class: "wf-step-main", "aria-pressed": String(selected), "data-step": step.id || "",
       "aria-label": `Step ${id}: ${stepSummary(step)}. Alt+Arrow keys move it, Delete removes it.`,
       onclick: () => this.select(path), onkeydown: (e) => this.stepKeys(e, path),
-    }, h("span", { class: `wf-kind k-${kind}` }, kind.replace("_", " ")), h("span", { class: "wf-id" }, id),
+    }, h("span", { class: `wf-kind k-${kind}` }, kindWord(kind)), h("span", { class: "wf-id" }, id),
     h("span", { class: "wf-summary" }, stepSummary(step)));
     const list = getIn(this.doc, path.slice(0, -1));
     const index = path[path.length - 1];
@@ -535,10 +542,10 @@ class WorkflowEditor {
       h("ul", { class: "wf-entries", "aria-label": "Modules of this workflow" }, mine.map(([name, module]) => h("li", {},
         h("button", {
           class: "wf-entry", draggable: "true", "data-module": name,
-          "aria-label": `Insert a ${name} step (${module.kind})`,
+          "aria-label": `Insert a ${name} step (${kindWord(module.kind)})`,
           ondragstart: (e) => e.dataTransfer.setData("application/x-wf-palette", JSON.stringify({ module: name })),
           onclick: () => this.insertFrom({ module: name }),
-        }, h("span", { class: `wf-kind k-${module.kind}` }, module.kind.replace("_", " ")), ` ${name}`),
+        }, h("span", { class: `wf-kind k-${module.kind}` }, kindWord(module.kind)), ` ${name}`),
         h("button", { class: "link wf-edit-module", "aria-label": `Edit module ${name}`, onclick: () => this.editModule(name) }, "edit")))),
       h("h3", {}, "Add a new module"),
       Object.entries(groups).map(([group, entries]) => h("div", { class: "wf-group" },
@@ -574,6 +581,7 @@ class WorkflowEditor {
         if (p.name !== "robot" && p.default !== undefined && p.default !== null) defaults[p.name] = p.default;
       }
       if (Object.keys(defaults).length) step.with = defaults;
+      if (entry && entry.save) step.save = step.id; // a look-up is read by later steps under its name
     }
     const path = insertStep(this.doc, at.list, at.index, step);
     this.selected = path;
@@ -613,7 +621,8 @@ class WorkflowEditor {
         return v ? `${c} = ${v.value}` : c;
       };
       input = h("select", { ...common, onchange: (e) => set(e.target.value) },
-        param.required ? null : h("option", { value: "" }, inherited !== undefined ? `(module default: ${inherited})` : "(none)"),
+        param.required ? null : h("option", { value: "" }, inherited !== undefined ? `(module default: ${inherited})`
+          : param.default !== undefined && param.default !== null ? `(default: ${param.default})` : "(none)"),
         known ? null : h("option", { value: String(value), selected: true }, `${value} (not known)`),
         choices.map((c) => h("option", { value: String(c), selected: c === value }, label(c))));
       if (param.required && (value === undefined || value === "")) input.value = "";
