@@ -228,6 +228,11 @@ def test_keyboard_reorders_and_removes_steps_with_focus_kept(author_page: Page, 
     page.keyboard.press("Delete")
     assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     expect(step_button(page, "send_order")).to_be_focused()  # the step that took its place
+    expect(page.get_by_test_id("wf-status")).to_have_text("✓ No problems")
+    page.reload()  # unsaved edits survive a reload
+    expect(page.get_by_test_id("wf-save-message")).to_contain_text("Your unsaved edits (started from version 1) are back")
+    expect(page.get_by_test_id("wf-status")).to_have_text("✓ No problems")
+    assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     save(page, "reordered by keyboard", 2)
     text = current(gateway, name)["text"]
     assert "ask_order" not in text and text.index("id: confirm_order") < text.index("id: send_order")

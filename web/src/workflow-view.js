@@ -74,7 +74,8 @@ class WorkflowEditor {
     this.ctx = ctx;
     this.palette = palette;
     this.name = current.name;
-    this.version = current.version;
+    this.version = current.version; // the live version
+    this.base = current.version; // the version the edits started from (sent with the save)
     this.title = current.title || current.name;
     this.savedText = current.text;
     this.text = current.text;
@@ -89,7 +90,16 @@ class WorkflowEditor {
     this.seq = 0;
     this.timers = [];
     this.checkSoon = debounce(() => this.check(), CHECK_DELAY_MS);
+    const draft = readDraft(this.name);
+    if (draft && draft.text !== current.text) {
+      this.text = draft.text;
+      this.base = draft.base;
+    }
     this.build();
+    if (this.dirty) {
+      fill(this.saveMsgEl, h("div", { class: "message info", role: "status" },
+        `Your unsaved edits (started from version ${this.base}) are back. “Discard changes” drops them.`));
+    }
     this.check({ text: this.text }).then(() => this.renderAll());
   }
 
@@ -147,7 +157,14 @@ class WorkflowEditor {
     this.tabEls.find((t) => t.dataset.tab === target).focus();
   }
 
-  showTab(id) {
+  async showTab(id) {
+    if (this.tab === "yaml" && id !== "yaml" && this.yamlView) {
+      // the views must show what the YAML says now, not before its last keys
+      if (this.yamlCheck) this.yamlCheck.cancel();
+      this.tab = id;
+      await this.check({ text: this.yamlView.state.doc.toString() });
+      this.yamlView = null;
+    }
     this.tab = id;
     this.renderAll();
   }
@@ -189,9 +206,8 @@ class WorkflowEditor {
     }
     if (seq !== this.seq || this.disposed) return;
     this.text = result.text;
-    if (result.document) {
-      if (payload.text !== undefined || !this.doc) this.doc = result.document;
-    }
+    if (payload.text !== undefined || !this.doc) this.doc = result.document || null;
+    this.keepDraft();
     this.problems = result.problems || [];
     if (result.valid) this.scenario = result.scenario_view;
     this.parsed = !!result.document;
@@ -200,6 +216,16 @@ class WorkflowEditor {
     if (this.tab === "yaml" && this.yamlView) {
       if (payload.text === undefined && this.yamlView.state.doc.toString() !== this.text) setText(this.yamlView, this.text);
       showProblems(this.yamlView, this.problems);
+    }
+  }
+
+  /** Unsaved edits survive a reload or a visit to another workflow (dropped on save or discard). */
+  keepDraft() {
+    try {
+      if (this.dirty) localStorage.setItem(draftKey(this.name), JSON.stringify({ text: this.text, base: this.base }));
+      else localStorage.removeItem(draftKey(this.name));
+    } catch {
+      // storage full or disabled: the edits just do not survive a reload
     }
   }
 
@@ -873,7 +899,7 @@ class WorkflowEditor {
     await this.check(this.tab === "yaml" && this.yamlView ? { text: this.yamlView.state.doc.toString() } : undefined);
   }
 
-  async save(baseVersion = this.version) {
+  async save(baseVersion = this.base) {
     await this.flush();
     if (!this.dirty) {
       fill(this.saveMsgEl, h("div", { class: "message info", role: "status" }, "Nothing to save: this is the live version."));
@@ -888,7 +914,9 @@ class WorkflowEditor {
     try {
       const result = await api("PUT", wfPath(this.name), { text: this.text, comment: this.commentEl.value, base_version: baseVersion });
       this.version = result.version;
+      this.base = result.version;
       this.savedText = this.text;
+      this.keepDraft();
       this.commentEl.value = "";
       fill(this.saveMsgEl, h("div", { class: "message ok", role: "status" }, `Saved: version ${result.version} is live. The next run uses it.`));
       this.renderAll();
@@ -907,15 +935,17 @@ class WorkflowEditor {
 
   conflict(current) {
     fill(this.saveMsgEl, h("div", { class: "message error", role: "alert", "data-testid": "wf-conflict" },
-      h("p", {}, `Not saved: someone else saved version ${current} of this workflow while you were editing version ${this.version}. `
+      h("p", {}, `Not saved: someone else saved version ${current} of this workflow while you were editing version ${this.base}. `
         + "Nothing changed live, and your edits are still here."),
       h("div", { class: "buttons" },
         h("button", { class: "secondary", onclick: () => { this.tab = "versions"; this.renderAll(); } }, "See the versions"),
-        h("button", { class: "danger", onclick: () => { this.version = current; this.save(current); } }, `Save mine over version ${current}`))));
+        h("button", { class: "danger", onclick: () => { this.version = current; this.base = current; this.save(current); } }, `Save mine over version ${current}`))));
   }
 
   discard() {
     this.text = this.savedText;
+    this.base = this.version;
+    this.keepDraft();
     this.doc = null;
     this.selected = null;
     this.editingModule = null;
@@ -994,6 +1024,19 @@ class WorkflowEditor {
       li.classList.toggle("ran", done.has(li.dataset.step));
       li.classList.toggle("running", !!current && li.dataset.step === current);
     }
+  }
+}
+
+function draftKey(name) {
+  return `printeps.workbench.workflow-draft.${name}`;
+}
+
+function readDraft(name) {
+  try {
+    const draft = JSON.parse(localStorage.getItem(draftKey(name)) || "null");
+    return draft && typeof draft.text === "string" && Number.isInteger(draft.base) ? draft : null;
+  } catch {
+    return null;
   }
 }
 
