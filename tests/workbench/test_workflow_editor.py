@@ -313,6 +313,27 @@ def test_versions_diff_and_rollback(author_page: Page, gateway):
     expect(page.get_by_test_id("wf-version")).to_have_text("version 1 live")
 
 
+def test_scenario_view_and_editing_the_yaml_by_hand(author_page: Page, gateway):
+    from wb_helpers import replace_text
+
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    page = author_page
+    open_workflow(page, name)
+    page.get_by_role("tab", name="Scenario view").click()
+    scenario = page.get_by_test_id("wf-scenario")
+    expect(scenario.locator("thead th").nth(1)).to_have_text("Pepper")
+    expect(scenario.locator("tbody tr")).to_have_count(4)
+    scenario.get_by_role("button", name="say: Thank you very much. Please come again.").click()
+    expect(page.get_by_test_id("wf-form").locator("[data-field='with.text']")).to_have_value(
+        "Thank you very much. Please come again.")
+    page.get_by_role("tab", name="YAML").click()
+    replace_text(page, "Please come again.", "Come back soon!")  # for those who want the YAML
+    page.get_by_role("tab", name="Process view").click()
+    expect(step_button(page, "thank")).to_contain_text("Come back soon!")
+    save(page, "edited as YAML", 2)
+    assert "Come back soon!" in current(gateway, name)["text"]
+
+
 def test_yaml_and_generated_python_tabs(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "7_thanking.yaml")
     page = author_page
