@@ -313,6 +313,22 @@ def test_versions_diff_and_rollback(author_page: Page, gateway):
     expect(page.get_by_test_id("wf-version")).to_have_text("version 1 live")
 
 
+def test_every_teahouse_workflow_opens_without_problems(author_page: Page, gateway):
+    with gateway.rest(CALLER_TOKEN) as client:
+        names = [w["name"] for w in client.get("/api/workflows").json()]
+    page = author_page
+    for file in sorted(WORKFLOWS.glob("*.yaml")):
+        name = next(line.split(":", 1)[1].strip() for line in file.read_text().splitlines() if line.startswith("workflow:"))
+        assert name in names
+        open_workflow(page, name)
+        expect(page.locator(f".ruleset-list a[data-workflow={name}]")).to_be_visible()
+        expect(page.locator("li.wf-step").first).to_be_visible()
+    open_workflow(page, "take_order")
+    step_button(page, "send_order").click()  # a topic: its parameters as text fields
+    expect(page.get_by_test_id("wf-form").locator("[data-field='with.data']")).to_have_value(
+        "${input.table.id}: ${input.order.cups} x ${input.order.drink}")
+
+
 def test_scenario_view_and_editing_the_yaml_by_hand(author_page: Page, gateway):
     from wb_helpers import replace_text
 

@@ -530,9 +530,15 @@ class WorkflowEditor {
     return entries.find((e) => e.kind === module.kind) || null;
   }
 
-  paramsOfModule(moduleName) {
+  /** The typed parameters of a module's steps: from the palette, else (a module the palette does not
+   *  describe, e.g. a topic) text fields for the parameters the module and the step already use. */
+  paramsOfModule(moduleName, step = null) {
     const entry = this.entryOf(moduleName);
-    return entry ? entry.params || [] : [];
+    if (entry) return entry.params || [];
+    const module = (this.doc.modules || {})[moduleName] || {};
+    const names = new Set([...Object.keys(module.params || {}), ...Object.keys((step && step.with) || {})]);
+    names.delete("robot");
+    return [...names].map((name) => ({ name, type: "string", description: "" }));
   }
 
   renderSide() {
@@ -680,7 +686,7 @@ class WorkflowEditor {
       parts.push(this.field({ name: "module", type: "module", required: true, choices: modules, description: "Which module this step runs." },
         step.module, (v) => { update((s) => { s.module = v; }); this.renderSide(); }, "module"));
       const module = (this.doc.modules || {})[step.module] || {};
-      for (const param of this.paramsOfModule(step.module)) {
+      for (const param of this.paramsOfModule(step.module, step)) {
         if (param.name === "robot") continue; // the module's: its service is under the robot's namespace
         const inherited = (module.params || {})[param.name];
         parts.push(this.field(param, (step.with || {})[param.name], (value) => update((s) => {
@@ -689,9 +695,6 @@ class WorkflowEditor {
           else s.with[param.name] = value;
           if (!Object.keys(s.with).length) delete s.with;
         }), `with.${param.name}`, inherited));
-      }
-      if (step.module && !this.entryOf(step.module) && step.with) {
-        parts.push(h("p", { class: "hint" }, `Parameters: ${JSON.stringify(step.with)} (edit them in the YAML tab).`));
       }
     } else if (kind === "branch") {
       parts.push(this.field({ name: "if", type: "expression", required: true, description: "The condition; the then-arm runs when it holds, else the else-arm." },
