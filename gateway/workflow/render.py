@@ -52,7 +52,7 @@ def _represent_list(dumper: yaml.SafeDumper, value: list[Any]) -> yaml.Node:
 
 def _is_step(value: Any) -> bool:
     """Steps are always blocks (one key a line), however small: they are what people read."""
-    return isinstance(value, dict) and any(k in value for k in ("module", "process", "if", "set")) and "id" in value
+    return isinstance(value, dict) and any(k in value for k in ("module", "process", "if", "set"))
 
 
 class _Block(dict):
