@@ -289,6 +289,9 @@ def test_a_conflict_is_told_and_the_edits_are_kept(author_page: Page, gateway):
     expect(conflict).to_contain_text("your edits are still here")
     expect(field).to_have_value("Thank you, see you soon!")
     assert current(gateway, name)["version"] == 2
+    conflict.get_by_role("button", name="Compare my edits with version 2").click()
+    expect(page.get_by_test_id("wf-conflict-diff")).to_contain_text("Come back soon.")
+    expect(page.get_by_test_id("wf-conflict-diff")).to_contain_text("Thank you, see you soon!")
     conflict.get_by_role("button", name="Save mine over version 2").click()
     expect(page.get_by_test_id("wf-save-message")).to_contain_text("Saved: version 3 is live")
     assert "Thank you, see you soon!" in current(gateway, name)["text"]

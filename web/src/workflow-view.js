@@ -743,8 +743,16 @@ class WorkflowEditor {
       const robot = (entry?.params || []).find((p) => p.name === "robot");
       if (robot) parts.push(this.field(robot, (module.params || {}).robot, (v) => update((m) => { m.params = { ...(m.params || {}), robot: v }; }), "params.robot"));
     }
+    const used = allSteps(this.doc).some(({ step }) => step && step.module === name)
+      || Object.values(this.doc.modules || {}).some((m) => Object.values(m.dispatch || {}).includes(name));
     parts.push(h("div", { class: "buttons" },
       h("button", { class: "primary", onclick: () => this.insertFrom({ module: name }) }, `Insert a ${name} step`),
+      used ? null : h("button", { class: "secondary", "aria-label": `Remove module ${name} (no step uses it)`, onclick: () => {
+        delete this.doc.modules[name];
+        this.editingModule = null;
+        this.say(`Module ${name} removed.`);
+        this.changed();
+      } }, "Remove this module"),
       h("button", { class: "secondary", onclick: () => { this.editingModule = null; this.renderSide(); } }, "Close")));
     return h("div", { "data-editing-module": name }, parts);
   }
@@ -941,8 +949,23 @@ class WorkflowEditor {
       h("p", {}, `Not saved: someone else saved version ${current} of this workflow while you were editing version ${this.base}. `
         + "Nothing changed live, and your edits are still here."),
       h("div", { class: "buttons" },
-        h("button", { class: "secondary", onclick: () => { this.tab = "versions"; this.renderAll(); } }, "See the versions"),
+        h("button", { class: "secondary", onclick: (e) => this.compareWithLive(current, e.currentTarget) }, `Compare my edits with version ${current}`),
         h("button", { class: "danger", onclick: () => { this.version = current; this.base = current; this.save(current); } }, `Save mine over version ${current}`))));
+  }
+
+  /** Under the conflict message: version `current` (left) against the edits (right). */
+  async compareWithLive(current, button) {
+    button.disabled = true;
+    try {
+      const theirs = await api("GET", wfPath(this.name, `/versions/${current}`));
+      const host = h("div", { class: "merge-host", "data-testid": "wf-conflict-diff" });
+      const setup = [basicSetup, EditorState.readOnly.of(true), EditorView.editable.of(false), languageFor("x.yaml")];
+      this.saveMsgEl.append(h("p", { class: "hint" }, `Left: version ${current} (live) · right: your edits`), host);
+      new MergeView({ a: { doc: theirs.text, extensions: setup }, b: { doc: this.text, extensions: setup }, parent: host,
+        collapseUnchanged: { margin: 3, minSize: 6 } });
+    } catch (err) {
+      this.saveMsgEl.append(h("div", { class: "message error", role: "alert" }, `Cannot compare: ${err.message}`));
+    }
   }
 
   discard() {
