@@ -228,6 +228,11 @@ def test_keyboard_reorders_and_removes_steps_with_focus_kept(author_page: Page, 
     page.keyboard.press("Delete")
     assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     expect(step_button(page, "send_order")).to_be_focused()  # the step that took its place
+    page.keyboard.press("Control+z")
+    assert steps_of(page, "take_order") == ["confirm_order", "ask_order", "send_order"]
+    expect(step_button(page, "ask_order")).to_be_focused()  # the step that came back
+    page.get_by_role("button", name="Redo").click()
+    assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     expect(page.get_by_test_id("wf-status")).to_have_text("✓ No problems")
     page.reload()  # unsaved edits survive a reload
     expect(page.get_by_test_id("wf-save-message")).to_contain_text("Your unsaved edits (started from version 1) are back")

@@ -88,6 +88,10 @@ class WorkflowEditor {
     this.editingModule = null;
     this.tab = params && TABS.some(([id]) => id === params.get("tab")) ? params.get("tab") : "process";
     this.seq = 0;
+    this.undoStack = [];
+    this.redoStack = [];
+    this.onKey = (event) => this.historyKeys(event);
+    document.addEventListener("keydown", this.onKey);
     this.timers = [];
     this.checkSoon = debounce(() => this.check(), CHECK_DELAY_MS);
     const draft = readDraft(this.name);
@@ -104,6 +108,7 @@ class WorkflowEditor {
   }
 
   dispose() {
+    document.removeEventListener("keydown", this.onKey);
     this.checkSoon.cancel();
     this.timers.forEach(clearTimeout);
     this.disposed = true;
@@ -132,6 +137,8 @@ class WorkflowEditor {
     this.discardBtn = h("button", { class: "secondary", onclick: () => this.discard() }, "Discard changes");
     this.saveMsgEl = h("div", { "aria-live": "polite", "data-testid": "wf-save-message" });
     this.runEl = h("section", { class: "card wf-run", "aria-label": "Run" });
+    this.undoBtn = h("button", { class: "secondary", "aria-label": "Undo the last change", title: "Undo (Ctrl+Z)", onclick: () => this.undo() }, "↶ Undo");
+    this.redoBtn = h("button", { class: "secondary", "aria-label": "Redo", title: "Redo (Ctrl+Y)", onclick: () => this.redo() }, "↷ Redo");
     const author = this.ctx.isAuthor();
     fill(this.main, h("section", { class: "wf-editor" },
       h("div", { class: "title-row" }, h("h1", {}, this.title), h("span", { class: "muted" }, this.name),
@@ -141,7 +148,9 @@ class WorkflowEditor {
         h("div", { class: "buttons" }, author ? this.saveBtn : h("span", { class: "hint" }, "Only authors may save."), this.discardBtn),
         this.saveMsgEl),
       this.problemsEl,
-      h("div", { class: "tabs", role: "tablist", "aria-label": "Views of the workflow" }, this.tabEls),
+      h("div", { class: "wf-tabrow" },
+        h("div", { class: "tabs", role: "tablist", "aria-label": "Views of the workflow" }, this.tabEls),
+        h("div", { class: "wf-history" }, this.undoBtn, this.redoBtn)),
       h("div", { class: "wf-columns" }, this.panelEl, this.sideEl),
       this.runEl));
     this.renderRun();
@@ -172,6 +181,8 @@ class WorkflowEditor {
   renderAll() {
     if (this.disposed) return;
     this.versionEl.textContent = `version ${this.version} live`;
+    this.historyButtons();
+    this.undoBtn.hidden = this.redoBtn.hidden = this.tab !== "process" && this.tab !== "scenario";
     this.dirtyEl.hidden = !this.dirty;
     for (const t of this.tabEls) t.setAttribute("aria-selected", String(t.dataset.tab === this.tab));
     this.panelEl.setAttribute("aria-labelledby", `wf-tab-${this.tab}`);
@@ -206,7 +217,11 @@ class WorkflowEditor {
     }
     if (seq !== this.seq || this.disposed) return;
     this.text = result.text;
-    if (payload.text !== undefined || !this.doc) this.doc = result.document || null;
+    if (payload.text !== undefined || !this.doc) {
+      this.doc = result.document || null;
+      this.lastDoc = JSON.stringify(this.doc); // edits of the YAML have the YAML editor's own undo
+      this.lastCoalesce = null;
+    }
     this.keepDraft();
     this.problems = result.problems || [];
     if (result.valid) this.scenario = result.scenario_view;
@@ -229,8 +244,69 @@ class WorkflowEditor {
     }
   }
 
+  /** Keep the document as it was before this edit for Undo; typing into one field is one edit. */
+  remember() {
+    const now = JSON.stringify(this.doc);
+    const coalesce = this.coalesce || null;
+    this.coalesce = null;
+    if (this.lastDoc !== undefined && now !== this.lastDoc) {
+      if (!coalesce || coalesce !== this.lastCoalesce) this.undoStack.push(this.lastDoc);
+      this.redoStack = [];
+    }
+    this.lastCoalesce = coalesce;
+    this.lastDoc = now;
+    this.historyButtons();
+  }
+
+  historyButtons() {
+    this.undoBtn.disabled = !this.undoStack.length;
+    this.redoBtn.disabled = !this.redoStack.length;
+  }
+
+  undo() {
+    this.travel(this.undoStack, this.redoStack, "Undone");
+  }
+
+  redo() {
+    this.travel(this.redoStack, this.undoStack, "Redone");
+  }
+
+  travel(from, to, word) {
+    if (!from.length || !this.doc) return this.say(`Nothing to ${word === "Undone" ? "undo" : "redo"}.`);
+    to.push(JSON.stringify(this.doc));
+    this.doc = JSON.parse(from.pop());
+    this.lastDoc = JSON.stringify(this.doc);
+    this.lastCoalesce = null;
+    if (this.selected && !getIn(this.doc, this.selected)) this.selected = null;
+    if (this.editingModule && !(this.doc.modules || {})[this.editingModule]) this.editingModule = null;
+    this.seq += 1;
+    const focusInSteps = this.panelEl.contains(document.activeElement);
+    if (this.tab !== "process" && this.tab !== "scenario") this.tab = "process";
+    this.renderAll();
+    if (focusInSteps && this.selected) this.focusStep(this.selected);
+    this.historyButtons();
+    this.say(`${word}.`);
+    this.checkSoon();
+  }
+
+  /** Ctrl+Z / Ctrl+Y (Ctrl+Shift+Z) in the visual views; text fields and the YAML editor keep theirs. */
+  historyKeys(event) {
+    if (!(event.ctrlKey || event.metaKey) || event.altKey || !this.main.contains(event.target)) return;
+    if (this.tab !== "process" && this.tab !== "scenario") return;
+    if (event.target.closest("input, textarea, select, .cm-editor")) return;
+    const key = event.key.toLowerCase();
+    if (key === "z" && !event.shiftKey) {
+      event.preventDefault();
+      this.undo();
+    } else if (key === "y" || (key === "z" && event.shiftKey)) {
+      event.preventDefault();
+      this.redo();
+    }
+  }
+
   /** After every visual edit: re-draw, then check (debounced). */
   changed({ keepForm = false } = {}) {
+    this.remember();
     this.seq += 1; // an answer to an older check must not overwrite this edit
     this.dirtyEl.hidden = false;
     this.clientProblems = this.requiredProblems();
@@ -662,7 +738,10 @@ class WorkflowEditor {
       input = h("input", {
         ...common, type: "text", value: value === undefined || value === null ? "" : String(value),
         placeholder: inherited !== undefined ? `module default: ${inherited}` : param.type === "number" ? "a number or ${…}" : "",
-        oninput: (e) => set(convert(param.type, e.target.value)),
+        oninput: (e) => {
+          this.coalesce = `${pathKey(this.selected || [])}|${this.editingModule || ""}|${key}`;
+          set(convert(param.type, e.target.value));
+        },
       });
     }
     return h("div", { class: "field wf-field", "data-field-box": key },
