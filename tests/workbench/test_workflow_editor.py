@@ -102,7 +102,7 @@ def run_in_editor(page: Page, inputs: str = "") -> list[str]:
 # ---------------------------------------------------------------- Table 2, the owner's way
 
 
-def test_table2_1_say_before_going_to_the_table(author_page: Page, gateway):
+def test_table2_1_say_before_going_to_the_table(author_page: Page, gateway, screenshots):
     name, _ = copy_workflow(gateway, "2_show_to_seat.yaml")
     page = author_page
     open_workflow(page, name)
@@ -128,6 +128,7 @@ def test_table2_1_say_before_going_to_the_table(author_page: Page, gateway):
     assert traced.index("announce_move") < traced.index("go_to_table")
     expect(page.locator("[data-testid=wf-trace] li[data-step=announce_move]")).to_contain_text("Please follow me.")
     expect(page.locator("li.wf-step.ran[data-step=announce_move]")).to_have_count(1)  # highlighted in the view
+    page.screenshot(path=str(screenshots / "workflow-editor-run.png"), full_page=True)
     result = run(gateway, name)
     said_at = step_ids(result).index("announce_move")
     assert result["steps"][said_at]["module"] == "say" and said_at < step_ids(result).index("go_to_table")
@@ -384,7 +385,7 @@ def test_the_editor_fits_a_laptop_and_a_tablet(author_page: Page, gateway, scree
         overflow = page.evaluate("document.documentElement.scrollWidth - document.documentElement.clientWidth")
         assert overflow <= 0, f"{width}px: the page scrolls sideways by {overflow}px"
         expect(page.get_by_role("button", name="Add new steps at the end of the else arm of any_order")).to_be_visible()
-        page.screenshot(path=str(screenshots / f"workflow-editor-{width}.png"), full_page=True)
+        page.screenshot(path=str(screenshots / f"workflow-editor-{width}.png"))
 
 
 def test_a_caller_sees_but_cannot_save(browser, gateway):

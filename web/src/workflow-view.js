@@ -1110,7 +1110,9 @@ class WorkflowEditor {
   showRecord(record, index) {
     if (this.disposed) return;
     const p = record.params || {};
-    const what = p.text ?? p.name ?? p.location ?? p.prompt ?? (p.seconds !== undefined ? `${p.seconds} s` : "");
+    const looked = record.kind === "ontology_value" && record.output && record.output.value !== undefined;
+    const what = looked ? `${p.name} = ${record.output.value}`
+      : p.text ?? p.name ?? p.location ?? p.prompt ?? (p.seconds !== undefined ? `${p.seconds} s` : "");
     const coords = p.x !== undefined ? `(${p.x}, ${p.y})` : "";
     this.traceEl.append(h("li", { class: `wf-record ${record.status}`, "data-step": record.step_id, "data-index": index },
       h("span", { class: "mark" }, record.status === "ok" ? "✓" : record.status === "skipped" ? "–" : "✗"),
