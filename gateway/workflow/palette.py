@@ -20,9 +20,10 @@ A parameter is ``{name, type, required, default, choices, description}``; types 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 from gateway.workflow.model import Workflow
 
@@ -167,7 +168,8 @@ def _robot_entries(robots: list[Robot], interfaces: Mapping[str, Interface]) -> 
 
 
 def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[str, Interface],
-                  workflows: Iterable[Workflow], rulesets: list[str], ontology_values: Mapping[str, Any]) -> dict[str, Any]:
+                  workflows: Iterable[Workflow], rulesets: list[str],
+                  ontology_values: Mapping[str, Any]) -> dict[str, Any]:
     """The palette: ``robots``, ``rulesets``, ``ontology_values``, ``interfaces`` and ``entries``
     (each: id, group, kind, label, description, module_name, module, params, module_params)."""
     workflows = list(workflows)
@@ -176,7 +178,8 @@ def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[s
     entries = _robot_entries(robots, interfaces)
     entries.append({
         "id": "fire_rules", "group": "Business rules", "kind": "fire_rules", "label": "Fire business rules",
-        "description": "Fire a deployed rule set with facts; its then-part actions run through this workflow's modules.",
+        "description": "Fire a deployed rule set with facts; its then-part actions run through this "
+                       "workflow's modules.",
         "module_name": "fire_rules",
         "module": {"kind": "fire_rules", "actor": "gateway", "ruleset": rulesets[0] if rulesets else "",
                    "dispatch": {}},
@@ -198,7 +201,8 @@ def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[s
         "actor": {"name": "knowledge", "kind": "system", "label": "Teahouse ontology"},
         "params": [Param("name", "ontology_value", True, values[0]["name"] if values else None,
                          [v["name"] for v in values], "individual.property of the ontology.").to_dict(),
-                   Param("default", "string", False, None, None, "Used when the ontology has no such value.").to_dict()],
+                   Param("default", "string", False, None, None,
+                         "Used when the ontology has no such value.").to_dict()],
         "save": True,
     })
     entries.append({
@@ -232,7 +236,8 @@ def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[s
         "ontology_values": values,
         "interfaces": [i.to_dict() for i in interfaces.values()],
         "step_params": [
-            Param("id", "name", True, None, None, "The step's name (letters, digits, _), unique in the workflow.").to_dict(),
+            Param("id", "name", True, None, None,
+                  "The step's name (letters, digits, _), unique in the workflow.").to_dict(),
             Param("label", "string", False, None, None, "A caption for the views.").to_dict(),
             Param("save", "name", False, None, None, "Keep the output under this name for later steps.").to_dict(),
             Param("on_failure", "string", False, "fail", ["fail", "continue", "retry"],

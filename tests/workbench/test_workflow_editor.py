@@ -236,7 +236,8 @@ def test_keyboard_reorders_and_removes_steps_with_focus_kept(author_page: Page, 
     assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     expect(page.get_by_test_id("wf-status")).to_have_text("✓ No problems")
     page.reload()  # unsaved edits survive a reload
-    expect(page.get_by_test_id("wf-save-message")).to_contain_text("Your unsaved edits (started from version 1) are back")
+    expect(page.get_by_test_id("wf-save-message")).to_contain_text(
+        "Your unsaved edits (started from version 1) are back")
     expect(page.get_by_test_id("wf-status")).to_have_text("✓ No problems")
     assert steps_of(page, "take_order") == ["confirm_order", "send_order"]
     save(page, "reordered by keyboard", 2)
@@ -250,7 +251,8 @@ def test_drag_and_drop_moves_a_step_and_inserts_from_the_palette(author_page: Pa
     open_workflow(page, name)
     page.locator("li.wf-step[data-step=bow]").drag_to(page.locator("li.wf-step[data-step=thank]"))
     assert steps_of(page, "see_off") == ["go_to_door", "bow", "thank", "back_to_counter"]
-    page.get_by_role("button", name="Insert: Pepper: gesture").drag_to(page.locator("li.wf-step[data-step=back_to_counter]"))
+    page.get_by_role("button", name="Insert: Pepper: gesture").drag_to(
+        page.locator("li.wf-step[data-step=back_to_counter]"))
     assert steps_of(page, "see_off") == ["go_to_door", "bow", "thank", "gesture", "back_to_counter"]
     page.get_by_test_id("wf-form").locator("[data-field='with.name']").fill("wave")
     save(page, "bow first, wave before leaving", 2)
@@ -327,7 +329,8 @@ def test_every_teahouse_workflow_opens_without_problems(author_page: Page, gatew
         names = [w["name"] for w in client.get("/api/workflows").json()]
     page = author_page
     for file in sorted(WORKFLOWS.glob("*.yaml")):
-        name = next(line.split(":", 1)[1].strip() for line in file.read_text().splitlines() if line.startswith("workflow:"))
+        name = next(line.split(":", 1)[1].strip() for line in file.read_text().splitlines()
+                    if line.startswith("workflow:"))
         assert name in names
         open_workflow(page, name)
         expect(page.locator(f".ruleset-list a[data-workflow={name}]")).to_be_visible()

@@ -27,7 +27,8 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path as PathParam, Query, Request
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi import Path as PathParam
 from fastapi.responses import PlainTextResponse, Response
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -35,13 +36,13 @@ from gateway.api.auth import Principal, author, caller
 from gateway.api.deps import gateway_of
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON
+from gateway.config import PROJECT_ROOT
 from gateway.workflow.codegen import generate
 from gateway.workflow.diagram import scenario_view, workflow_view
-from gateway.config import PROJECT_ROOT
 from gateway.workflow.loader import WorkflowInvalid, schema
 from gateway.workflow.palette import Interface, build_palette, read_interfaces
-from gateway.workflow.render import read_document, to_yaml
 from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
+from gateway.workflow.render import read_document, to_yaml
 from gateway.workflow.service import WorkflowService
 
 router = APIRouter(tags=["workflows"])
@@ -66,7 +67,7 @@ class ValidateBody(BaseModel):
     previous_text: str = Field(default="", max_length=MAX_TEXT)
 
     @model_validator(mode="after")
-    def _one_of(self) -> "ValidateBody":
+    def _one_of(self) -> ValidateBody:
         if (self.text is None) == (self.document is None):
             raise ValueError("give either 'text' or 'document'")
         return self
@@ -160,7 +161,7 @@ def palette(request: Request, _: Principal = Depends(caller)) -> JSON:
     for name in svc.registry.names():
         try:
             workflows.append(svc.registry.get(name))
-        except Exception:  # a workflow that cannot be read only drops out of the robots' services
+        except (WorkflowNotFound, WorkflowInvalid):  # deleted meanwhile, or unreadable: its robots drop out
             continue
     return JSON(build_palette(
         configured_robots=gw.settings.ros.robots, interfaces=_interfaces(), workflows=workflows,
