@@ -177,6 +177,41 @@ def test_table2_3_an_else_arm_with_a_performance(author_page: Page, gateway):
     assert "pour" in step_ids(run(gateway, name))  # with an order, the then-arm as before
 
 
+def test_table2_7_visit_and_speak_before_the_bill(author_page: Page, gateway):
+    name, _ = copy_workflow(gateway, "6_settle_bill.yaml")
+    page = author_page
+    open_workflow(page, name)
+    step_button(page, "settle_bill").click()
+    page.get_by_label("Where new steps go").select_option("before")
+    page.get_by_role("button", name="Insert: Pepper: move to").click()
+    form = page.get_by_test_id("wf-form")
+    form.locator("[data-field='with.x']").fill("${input.table.x - 0.5}")
+    form.locator("[data-field='with.y']").fill("${input.table.y}")
+    form.locator("[data-field=id]").fill("go_to_table")
+    page.get_by_label("Where new steps go").select_option("after")  # after the new go_to_table
+    page.get_by_role("button", name="Insert: Pepper: say").click()
+    form.locator("[data-field='with.text']").fill("Thank you. Our staff will bring your bill now.")
+    form.locator("[data-field=id]").fill("announce_bill")
+    assert steps_of(page, "settle") == ["go_to_table", "announce_bill", "settle_bill"]
+    save(page, "Table 2 #7: visit and speak before the bill", 2)
+    assert run_in_editor(page) == ["go_to_table", "announce_bill", "settle_bill"]
+    expect(page.locator("[data-testid=wf-trace] li[data-step=go_to_table]")).to_contain_text("(3.5, 2)")
+
+
+def test_a_robot_new_to_the_workflow_comes_with_its_actor(author_page: Page, gateway):
+    name, _ = copy_workflow(gateway, "4_prepare_drinks.yaml")
+    page = author_page
+    open_workflow(page, name)
+    page.get_by_role("button", name="Add new steps at the end of the process prepare").click()
+    page.get_by_role("button", name="Insert: Pepper: say").click()
+    page.get_by_test_id("wf-form").locator("[data-field='with.text']").fill("Your drinks are coming.")
+    save(page, "Pepper tells the drinks are coming", 2)
+    text = current(gateway, name)["text"]
+    assert "pepper: {kind: robot, label: Pepper}" in text and "service: /pepper/speak" in text
+    said = next(s for s in run(gateway, name)["steps"] if s["module"] == "say")
+    assert said["actor"] == "pepper" and said["params"] == {"robot": "pepper", "text": "Your drinks are coming."}
+
+
 def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, gateway):
     from gateway.workflow.agile import SEAT_INFO_DRL, TABLES
 
