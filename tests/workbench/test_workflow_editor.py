@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import time
 
 import pytest
 from playwright.sync_api import Page, expect
@@ -497,6 +498,25 @@ def test_version_texts_and_the_shell_serves_the_section(gateway):
         assert client.get(f"/api/workflows/{name}/versions/9").status_code == 404
         page = client.get(f"/workbench/workflows/{name}")
         assert page.status_code == 200 and "/workbench/static/app.js" in page.text
+
+
+def test_a_running_run_shows_the_steps_done_so_far(gateway):
+    name, text = copy_workflow(gateway, "3_take_order.yaml")
+    paused = text.replace("  publish_order:", "  pause: {kind: wait, params: {seconds: 2}}\n  publish_order:").replace(
+        "      - id: confirm_order\n", "      - id: let_them_finish\n        module: pause\n      - id: confirm_order\n")
+    with gateway.rest() as client:
+        assert client.put(f"/api/workflows/{name}", json={"text": paused, "base_version": 1}).status_code == 201
+        run_id = client.post(f"/api/workflows/{name}/run", json={"wait": False}).json()["run_id"]
+        seen_while_running: list[list[str]] = []
+        for _ in range(600):
+            response = client.get(f"/api/workflows/runs/{run_id}")
+            if response.status_code == 200:
+                break
+            assert response.status_code == 202 and response.json()["status"] == "running"
+            seen_while_running.append([s["step_id"] for s in response.json()["steps"]])
+            time.sleep(0.05)
+        assert response.status_code == 200 and response.json()["status"] == "succeeded"
+    assert any("ask_order" in steps and "confirm_order" not in steps for steps in seen_while_running)
 
 
 def test_author_token_is_needed_to_save(gateway):

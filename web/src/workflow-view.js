@@ -20,7 +20,8 @@ import {
 } from "./workflow-model.js";
 
 const CHECK_DELAY_MS = 300;
-const TRACE_STEP_MS = 350;
+const TRACE_STEP_MS = 300; // one trace entry at a time, so the eye can follow the run
+const RUN_POLL_MS = 250;
 const TABS = [
   ["process", "Process view"], ["scenario", "Scenario view"], ["yaml", "YAML"], ["python", "Python"],
   ["versions", "Versions"],
@@ -109,6 +110,7 @@ class WorkflowEditor {
 
   dispose() {
     document.removeEventListener("keydown", this.onKey);
+    clearInterval(this.revealTimer);
     this.checkSoon.cancel();
     this.timers.forEach(clearTimeout);
     this.disposed = true;
@@ -1085,26 +1087,55 @@ class WorkflowEditor {
     }
     this.timers.forEach(clearTimeout);
     this.timers = [];
+    clearInterval(this.revealTimer);
     this.trace = [];
+    this.markTrace();
     fill(this.traceEl);
-    fill(this.runMsgEl, h("p", { class: "muted" }, this.dirty ? `Running the saved version ${this.version} (your unsaved changes are not run)…` : `Running version ${this.version}…`));
-    let result;
+    fill(this.runMsgEl, h("p", { class: "muted", role: "status" }, this.dirty
+      ? `Running the saved version ${this.version} (your unsaved changes are not run)…` : `Running version ${this.version}…`));
+    let started;
     try {
-      result = await api("POST", wfPath(this.name, "/run"), { inputs, wait: true });
+      started = await api("POST", wfPath(this.name, "/run"), { inputs, wait: false });
     } catch (err) {
       fill(this.runMsgEl, h("div", { class: "message error", role: "alert" }, `The run could not start: ${err.message}`));
       return;
     }
-    result.steps.forEach((record, i) => {
-      this.timers.push(setTimeout(() => this.showRecord(record, i), i * TRACE_STEP_MS));
-    });
-    this.timers.push(setTimeout(() => {
-      this.trace = result.steps;
-      this.markTrace();
-      fill(this.runMsgEl, h("div", { class: `message ${result.status === "succeeded" ? "ok" : "error"}`, role: "status", "data-testid": "wf-run-status" },
-        result.status === "succeeded" ? `Run ${result.run_id} of version ${result.version} succeeded: ${result.steps.length} steps.`
-          : `Run ${result.run_id} failed: ${result.error}`));
-    }, result.steps.length * TRACE_STEP_MS));
+    // The steps arrive as the robots do them (polling the run); they are shown one at a time.
+    const runId = started.run_id;
+    this.runId = runId;
+    const queue = [];
+    let received = 0;
+    let final = null;
+    const poll = async () => {
+      if (this.disposed || this.runId !== runId) return;
+      let data;
+      try {
+        data = await api("GET", `/api/workflows/runs/${encodeURIComponent(runId)}`);
+      } catch (err) {
+        final = { status: "failed", error: `the run could not be followed: ${err.message}`, steps: [] };
+        return;
+      }
+      const steps = data.steps || [];
+      queue.push(...steps.slice(received));
+      received = Math.max(received, steps.length);
+      if (data.status === "running") this.timers.push(setTimeout(poll, RUN_POLL_MS));
+      else final = data;
+    };
+    let shown = 0;
+    this.revealTimer = setInterval(() => {
+      if (this.disposed || this.runId !== runId) return clearInterval(this.revealTimer);
+      if (queue.length) {
+        this.showRecord(queue.shift(), shown);
+        shown += 1;
+      } else if (final) {
+        clearInterval(this.revealTimer);
+        this.markTrace();
+        fill(this.runMsgEl, h("div", { class: `message ${final.status === "succeeded" ? "ok" : "error"}`, role: "status", "data-testid": "wf-run-status" },
+          final.status === "succeeded" ? `Run ${runId} of version ${final.version} succeeded: ${shown} steps.`
+            : `Run ${runId} failed: ${final.error}`));
+      }
+    }, TRACE_STEP_MS);
+    poll();
   }
 
   showRecord(record, index) {

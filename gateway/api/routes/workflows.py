@@ -17,7 +17,7 @@ kept in the gateway (versions in the Information State, followed by every gatewa
     DELETE /api/workflows/{name}               stop offering it (versions and history stay)
     GET  /api/workflows/{name}/history         deploys, rollbacks, deletes
     POST /api/workflows/{name}/run             {"inputs": {...}, "wait": true} -> the run (or 202 {run_id})
-    GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id}
+    GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id} (202 + steps so far)
     GET  /api/workflows/manual, POST /api/workflows/manual/{task_id}/done {"result": {...}}
     GET  /api/workflows/{name}/code            the generated standalone rclpy node (text/x-python)
 """
@@ -178,13 +178,15 @@ def list_runs(request: Request, workflow: str | None = None, limit: int = Query(
 
 @router.get("/api/workflows/runs/{run_id}")
 def get_run(run_id: str, request: Request, _: Principal = Depends(caller)) -> JSON:
-    """One run: 200 with the result, 202 ``{"status": "running"}`` while it runs, 404 if unknown."""
+    """One run: 200 with the result, 202 ``{"status": "running", "steps": [...]}`` (the steps done so
+    far) while it runs, 404 if unknown."""
+    svc = service(request)
     try:
-        result = service(request).get_run(run_id)
+        result = svc.get_run(run_id)
     except KeyError:
         raise ApiError(404, f"run {run_id!r} not found (or no longer kept)", run_id=run_id) from None
     if result is None:
-        return JSON({"run_id": run_id, "status": "running"}, status_code=202)
+        return JSON({"run_id": run_id, "status": "running", "steps": svc.steps_so_far(run_id)}, status_code=202)
     return JSON(result.to_dict())
 
 
