@@ -199,6 +199,24 @@ def test_table2_7_visit_and_speak_before_the_bill(author_page: Page, gateway):
     expect(page.locator("[data-testid=wf-trace] li[data-step=go_to_table]")).to_contain_text("(3.5, 2)")
 
 
+def test_a_new_process_in_a_service(author_page: Page, gateway):
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    page = author_page
+    open_workflow(page, name)
+    new_process = page.get_by_label("Name of a new process of service farewell")
+    new_process.fill("see_off")
+    new_process.press("Enter")
+    expect(page.locator(".wf-new-process .wf-field-error")).to_have_text("There is already a process “see_off”.")
+    new_process.fill("wave_goodbye")
+    new_process.press("Enter")
+    expect(page.get_by_test_id("wf-problems")).to_contain_text("processes.wave_goodbye.steps")  # empty until a step
+    expect(page.get_by_test_id("wf-insertion")).to_have_text("Inserting at the end of the process wave_goodbye.")
+    page.get_by_role("button", name="Insert a gesture step (robot)").click()
+    page.get_by_test_id("wf-form").locator("[data-field='with.name']").fill("wave")
+    save(page, "wave goodbye after seeing them off", 2)
+    assert step_ids(run(gateway, name))[-1] == "gesture"
+
+
 def test_a_robot_new_to_the_workflow_comes_with_its_actor(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "4_prepare_drinks.yaml")
     page = author_page

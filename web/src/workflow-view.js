@@ -401,15 +401,45 @@ class WorkflowEditor {
     const inRoute = new Set(services.flatMap((s) => doc.services[s].processes || []));
     const others = Object.keys(doc.processes || {}).filter((p) => !inRoute.has(p));
     fill(this.panelEl, h("div", { class: "wf-process-view", "data-testid": "wf-process-view" },
+      h("p", { class: "hint wf-keys" }, "Keys on a step: Enter edits it, Alt+↑ / Alt+↓ move it, Delete removes it; Ctrl+Z undoes."),
       h("p", { class: "wf-route" }, h("span", { class: "badge" }, "start"), ` ${route.start || "start"}`),
       services.map((s) => h("section", { class: "wf-service", "aria-label": `Service ${s}` },
         h("h2", {}, h("span", { class: "wf-tag" }, "Service"), ` ${s}`),
         doc.services[s].description ? h("p", { class: "hint" }, doc.services[s].description) : null,
-        (doc.services[s].processes || []).filter((p) => (doc.processes || {})[p]).map((p) => this.processBox(p)))),
+        (doc.services[s].processes || []).filter((p) => (doc.processes || {})[p]).map((p) => this.processBox(p)),
+        this.newProcessForm(s))),
       others.length ? h("section", { class: "wf-service" }, h("h2", {}, "Other processes"), others.map((p) => this.processBox(p))) : null,
       h("p", { class: "wf-route" }, h("span", { class: "badge" }, "end"), ` ${route.end || "end"}`)));
     this.markStepErrors();
     this.markTrace();
+  }
+
+  /** "+ Add a process" to a service: a name, then its first step from the palette. */
+  newProcessForm(service) {
+    const id = `wf-new-process-${service}`;
+    const nameEl = h("input", { type: "text", id, placeholder: "e.g. invite_to_sit", "aria-label": `Name of a new process of service ${service}` });
+    const errorEl = h("span", { class: "wf-field-error", role: "alert" });
+    const add = (event) => {
+      event.preventDefault();
+      const name = nameEl.value.trim();
+      if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(name)) {
+        errorEl.textContent = "A process name is letters, digits and _ (not starting with a digit).";
+        return nameEl.focus();
+      }
+      if ((this.doc.processes || {})[name]) {
+        errorEl.textContent = `There is already a process “${name}”.`;
+        return nameEl.focus();
+      }
+      this.doc.processes[name] = { steps: [] };
+      this.doc.services[service].processes = [...(this.doc.services[service].processes || []), name];
+      this.slot = { list: ["processes", name, "steps"], index: 0 };
+      this.selected = null;
+      this.say(`Process ${name} added to service ${service}; add its steps from the palette.`);
+      this.changed();
+      this.panelEl.querySelector(`[data-slot="${CSS.escape(pathKey(this.slot.list))}"]`)?.focus();
+    };
+    return h("form", { class: "wf-new-process", onsubmit: add },
+      h("label", { for: id }, "Add a process: "), nameEl, h("button", { class: "secondary", type: "submit" }, "Add process"), errorEl);
   }
 
   processBox(name) {
