@@ -395,6 +395,21 @@ def test_every_teahouse_workflow_opens_without_problems(author_page: Page, gatew
         "${input.table.id}: ${input.order.cups} x ${input.order.drink}")
 
 
+def test_an_unknown_workflow_is_said_so_and_discard_can_be_undone(author_page: Page, gateway):
+    page = author_page
+    page.goto("/workbench/workflows/no_such_workflow")
+    expect(page.get_by_role("alert")).to_contain_text("Cannot open the workflow “no_such_workflow”")
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    open_workflow(page, name)
+    step_button(page, "bow").focus()
+    page.keyboard.press("Delete")
+    page.get_by_role("button", name="Discard changes").click()
+    expect(step_button(page, "bow")).to_have_count(1)
+    expect(page.locator(".wf-editor .badge.dirty")).to_be_hidden()
+    page.get_by_role("button", name="Undo the last change").click()
+    expect(step_button(page, "bow")).to_have_count(0)
+
+
 def test_scenario_view_and_editing_the_yaml_by_hand(author_page: Page, gateway):
     from wb_helpers import replace_text
 

@@ -1080,6 +1080,11 @@ class WorkflowEditor {
   }
 
   discard() {
+    this.checkSoon.cancel();
+    if (this.doc && (this.dirty || this.undoStack.length)) {
+      this.undoStack.push(JSON.stringify(this.doc)); // Undo brings the discarded edits back
+      this.redoStack = [];
+    }
     this.text = this.savedText;
     this.base = this.version;
     this.keepDraft();
