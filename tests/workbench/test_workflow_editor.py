@@ -246,6 +246,9 @@ def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, 
     form.locator("[data-field='with.facts']").fill("${input.tables}")
     form.locator("[data-field=id]").fill("seat_info_rules")
     page.get_by_role("button", name="Edit module fire_rules").click()
+    form.locator("[data-field=name]").fill("fire_seat_info_rules")
+    form.locator("[data-field=name]").press("Enter")  # renamed, with the step that uses it
+    expect(page.get_by_role("button", name="Insert a fire_seat_info_rules step (rules)")).to_be_visible()
     form.locator("[data-field=ruleset]").select_option(ruleset)  # only deployed rule sets are offered
     form.get_by_label("Rule action (e.g. say)").fill("say")
     form.get_by_label("Module that performs it").select_option("say")
@@ -258,6 +261,7 @@ def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, 
     expect(page.locator("[data-testid=wf-trace]")).to_contain_text("2 free tables for you today")
     result = run(gateway, name, {"tables": TABLES})
     said = [s["params"].get("text", "") for s in result["steps"] if s["module"] == "say"]
+    assert "fire_seat_info_rules:" in current(gateway, name)["text"]
     welcome = next(i for i, text in enumerate(said) if "Welcome" in text)
     assert welcome < next(i for i, text in enumerate(said) if "2 free tables for you today" in text)
 

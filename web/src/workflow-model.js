@@ -180,3 +180,17 @@ export function locateProblem(doc, problem) {
   const step = getIn(doc, stepPath);
   return { stepPath, stepId: step && step.id, field: path.slice(stepEnd + 1).join(".") };
 }
+
+/** Rename module `from` to `to` everywhere: its key (same place), the steps that use it, the
+ *  fire-rules modules that dispatch actions to it. Returns an error sentence, or "" when done. */
+export function renameModule(doc, from, to) {
+  if (from === to) return "";
+  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A module name is letters, digits and _ (not starting with a digit).";
+  if ((doc.modules || {})[to]) return `There is already a module “${to}”.`;
+  doc.modules = Object.fromEntries(Object.entries(doc.modules).map(([name, m]) => [name === from ? to : name, m]));
+  for (const { step } of allSteps(doc)) if (step && step.module === from) step.module = to;
+  for (const module of Object.values(doc.modules)) {
+    for (const [action, target] of Object.entries(module.dispatch || {})) if (target === from) module.dispatch[action] = to;
+  }
+  return "";
+}

@@ -16,7 +16,7 @@ import { EditorView } from "@codemirror/view";
 import { languageFor } from "./lang.js";
 import {
   getIn, allSteps, findStep, uniqueStepId, insertStep, removeStep, shiftStep, moveStep, listName,
-  moduleFor, addModule, stepSummary, locateProblem, samePath,
+  moduleFor, addModule, stepSummary, locateProblem, samePath, renameModule,
 } from "./workflow-model.js";
 
 const CHECK_DELAY_MS = 300;
@@ -831,8 +831,26 @@ class WorkflowEditor {
     if (!module) return h("p", { class: "hint" }, `There is no module “${name}” any more.`);
     const entry = this.entryOf(name);
     const update = (fn) => { fn(module); this.changed({ keepForm: true }); };
+    const nameError = h("span", { class: "wf-field-error", id: "wf-module-name-err", role: "alert" });
+    const nameEl = h("input", { type: "text", id: "wf-module-name", "data-field": "name", value: name,
+      "aria-describedby": "wf-module-name-help wf-module-name-err",
+      onchange: (e) => {
+        const to = e.target.value.trim();
+        const error = renameModule(this.doc, name, to);
+        if (error) {
+          nameError.textContent = error;
+          e.target.setAttribute("aria-invalid", "true");
+          return;
+        }
+        this.editingModule = to;
+        this.say(`Module ${name} renamed to ${to}.`);
+        this.changed();
+        this.sideEl.querySelector("#wf-module-name")?.focus();
+      } });
     const parts = [h("h2", {}, `Module “${name}”`), h("p", { class: "hint" }, `${module.kind}${module.service ? ` · ${module.service} (${module.type})` : ""}`),
-      h("div", { class: "wf-step-problem", role: "alert" })];
+      h("div", { class: "wf-step-problem", role: "alert" }),
+      h("div", { class: "field wf-field" }, h("label", { for: "wf-module-name" }, "name"), nameEl,
+        h("span", { class: "hint", id: "wf-module-name-help" }, "Renaming changes the steps that use it too."), nameError)];
     const actors = Object.keys(this.doc.actors || {});
     if (actors.length) {
       parts.push(this.field({ name: "actor", type: "string", choices: actors, description: "Who performs it (the scenario view's lane)." },
