@@ -33,6 +33,10 @@ log = logging.getLogger(__name__)
 RUNS_COLLECTION = "workflow_runs"
 
 
+class RealRobots(RuntimeError):
+    """A trial run of unsaved edits was asked for where robots are real, not simulated."""
+
+
 class WorkflowService:
     """What the API uses: read, validate, replace and run workflows; see runs and manual tasks."""
 
@@ -71,6 +75,25 @@ class WorkflowService:
         self._remember(run_id, None)
         threading.Thread(target=self._run_quietly, args=(name, inputs, run_id), daemon=True,
                          name=f"workflow-{name}-{run_id}").start()
+        return run_id
+
+    def try_text(self, text: str, inputs: Mapping[str, Any] | None = None) -> str:
+        """Run an unsaved workflow text in the background on the simulated robots (the editor's
+        "try my edits"); nothing is stored as a version. Returns the run id. Raises
+        :class:`WorkflowInvalid`, or :class:`RealRobots` when robots are not simulated here."""
+        if self.robots is None:
+            raise RealRobots("this gateway drives real robots: save the workflow, then run it")
+        workflow = parse(text, file="<try>")
+        run_id = "try-" + uuid.uuid4().hex[:12]
+        self._remember(run_id, None)
+
+        def run() -> None:
+            try:
+                self._remember(run_id, self.executor.run(workflow, inputs or {}, version=None, run_id=run_id))
+            except Exception:  # a background run has nobody to raise to: log it
+                log.exception("trial run %s of %s crashed", run_id, workflow.name)
+
+        threading.Thread(target=run, daemon=True, name=f"workflow-try-{run_id}").start()
         return run_id
 
     def _run_quietly(self, name: str, inputs: Mapping[str, Any] | None, run_id: str) -> None:

@@ -199,6 +199,26 @@ def test_table2_7_visit_and_speak_before_the_bill(author_page: Page, gateway):
     expect(page.locator("[data-testid=wf-trace] li[data-step=go_to_table]")).to_contain_text("(3.5, 2)")
 
 
+def test_unsaved_edits_can_be_tried_without_going_live(author_page: Page, gateway):
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    page = author_page
+    open_workflow(page, name)
+    step_button(page, "thank").click()
+    page.get_by_test_id("wf-form").locator("[data-field='with.text']").fill("Thanks, see you!")
+    page.get_by_test_id("wf-try").click()
+    expect(page.get_by_test_id("wf-run-status")).to_contain_text("Run try-")
+    expect(page.get_by_test_id("wf-run-status")).to_contain_text("of your unsaved edits succeeded")
+    expect(page.locator("[data-testid=wf-trace] li[data-step=thank]")).to_contain_text("Thanks, see you!")
+    assert current(gateway, name)["version"] == 1
+    live = next(s for s in run(gateway, name)["steps"] if s["step_id"] == "thank")
+    assert live["params"]["text"] == "Thank you very much. Please come again."
+    with gateway.rest(CALLER_TOKEN) as client:  # trying is an author's action
+        assert client.post("/api/workflows/try", json={"text": "workflow: x"}).status_code == 403
+    with gateway.rest() as client:
+        bad = client.post("/api/workflows/try", json={"text": "workflow: x"})
+        assert bad.status_code == 422 and bad.json()["problems"]
+
+
 def test_a_new_process_in_a_service(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "7_thanking.yaml")
     page = author_page
@@ -540,7 +560,8 @@ def test_version_texts_and_the_shell_serves_the_section(gateway):
 def test_a_running_run_shows_the_steps_done_so_far(gateway):
     name, text = copy_workflow(gateway, "3_take_order.yaml")
     paused = text.replace("  publish_order:", "  pause: {kind: wait, params: {seconds: 2}}\n  publish_order:").replace(
-        "      - id: confirm_order\n", "      - id: let_them_finish\n        module: pause\n      - id: confirm_order\n")
+        "      - id: confirm_order\n",
+        "      - id: let_them_finish\n        module: pause\n      - id: confirm_order\n")
     with gateway.rest() as client:
         assert client.put(f"/api/workflows/{name}", json={"text": paused, "base_version": 1}).status_code == 201
         run_id = client.post(f"/api/workflows/{name}/run", json={"wait": False}).json()["run_id"]

@@ -1123,11 +1123,15 @@ class WorkflowEditor {
     fill(this.runEl, h("h2", {}, "Run on the simulated robots"),
       h("p", { class: "hint" }, "Runs the saved (live) version; the trace shows each step as it happens."),
       h("details", {}, h("summary", {}, "Inputs"), h("label", { for: "wf-inputs", class: "hint" }, "JSON object, e.g. {\"orders\": []}"), inputsEl),
-      h("div", { class: "buttons" }, h("button", { class: "primary", "data-testid": "wf-run", onclick: () => this.run(inputsEl.value) }, "Run")),
+      h("div", { class: "buttons" },
+        h("button", { class: "primary", "data-testid": "wf-run", onclick: () => this.run(inputsEl.value) }, "Run the live version"),
+        this.ctx.isAuthor() ? h("button", { class: "secondary", "data-testid": "wf-try", onclick: () => this.run(inputsEl.value, true) },
+          "Try my unsaved edits") : null),
       this.runMsgEl, this.traceEl);
   }
 
-  async run(inputsText) {
+  /** Run the live version, or (`trial`) the edited text without saving it; follow it step by step. */
+  async run(inputsText, trial = false) {
     let inputs = {};
     if (inputsText.trim()) {
       try {
@@ -1145,12 +1149,16 @@ class WorkflowEditor {
     this.markTrace();
     fill(this.traceEl);
     fill(this.runMsgEl, h("p", { class: "muted", role: "status" }, this.dirty
-      ? `Running the saved version ${this.version} (your unsaved changes are not run)…` : `Running version ${this.version}…`));
+      ? (trial ? "Trying your unsaved edits (nothing is saved or made live)…" : `Running the saved version ${this.version} (your unsaved changes are not run)…`)
+      : `Running version ${this.version}…`));
     let started;
     try {
-      started = await api("POST", wfPath(this.name, "/run"), { inputs, wait: false });
+      if (trial) await this.flush();
+      started = trial ? await api("POST", "/api/workflows/try", { text: this.text, inputs })
+        : await api("POST", wfPath(this.name, "/run"), { inputs, wait: false });
     } catch (err) {
-      fill(this.runMsgEl, h("div", { class: "message error", role: "alert" }, `The run could not start: ${err.message}`));
+      const why = err.status === 422 ? "your edits have problems (listed above); fix them, then try again." : err.message;
+      fill(this.runMsgEl, h("div", { class: "message error", role: "alert" }, `The run could not start: ${why}`));
       return;
     }
     // The steps arrive as the robots do them (polling the run); they are shown one at a time.
@@ -1184,7 +1192,7 @@ class WorkflowEditor {
         clearInterval(this.revealTimer);
         this.markTrace();
         fill(this.runMsgEl, h("div", { class: `message ${final.status === "succeeded" ? "ok" : "error"}`, role: "status", "data-testid": "wf-run-status" },
-          final.status === "succeeded" ? `Run ${runId} of version ${final.version} succeeded: ${shown} steps.`
+          final.status === "succeeded" ? `Run ${runId} of ${trial ? "your unsaved edits" : `version ${final.version}`} succeeded: ${shown} steps.`
             : `Run ${runId} failed: ${final.error}`));
       }
     }, TRACE_STEP_MS);

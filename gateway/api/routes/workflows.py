@@ -17,6 +17,7 @@ kept in the gateway (versions in the Information State, followed by every gatewa
     DELETE /api/workflows/{name}               stop offering it (versions and history stay)
     GET  /api/workflows/{name}/history         deploys, rollbacks, deletes
     POST /api/workflows/{name}/run             {"inputs": {...}, "wait": true} -> the run (or 202 {run_id})
+    POST /api/workflows/try                    {"text", "inputs"} -> 202 {run_id}: unsaved edits, simulated robots
     GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id} (202 + steps so far)
     GET  /api/workflows/manual, POST /api/workflows/manual/{task_id}/done {"result": {...}}
     GET  /api/workflows/{name}/code            the generated standalone rclpy node (text/x-python)
@@ -43,7 +44,7 @@ from gateway.workflow.loader import WorkflowInvalid, schema
 from gateway.workflow.palette import Interface, build_palette, read_interfaces
 from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
 from gateway.workflow.render import read_document, to_yaml
-from gateway.workflow.service import WorkflowService
+from gateway.workflow.service import RealRobots, WorkflowService
 
 router = APIRouter(tags=["workflows"])
 
@@ -89,6 +90,10 @@ class RunBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
     inputs: dict[str, Any] = Field(default_factory=dict)
     wait: bool = Field(default=True, description="false: start in the background and answer 202 {run_id}.")
+
+
+class TryBody(TextBody):
+    inputs: dict[str, Any] = Field(default_factory=dict)
 
 
 class DoneBody(BaseModel):
@@ -167,6 +172,19 @@ def palette(request: Request, _: Principal = Depends(caller)) -> JSON:
         configured_robots=gw.settings.ros.robots, interfaces=_interfaces(), workflows=workflows,
         rulesets=sorted(info.name for info in gw.engine.list_rulesets()),
         ontology_values=gw.knowledge.values()))
+
+
+@router.post("/api/workflows/try", status_code=202)
+def try_edits(body: TryBody, request: Request, _: Principal = Depends(author)) -> JSON:
+    """Run an unsaved text on the simulated robots (the editor's "try my edits"): 202 ``{run_id}``,
+    followed with ``GET /api/workflows/runs/{run_id}``; 422 ``problems``; 409 where robots are real."""
+    try:
+        run_id = service(request).try_text(body.text, body.inputs)
+    except WorkflowInvalid as exc:
+        raise _invalid(exc) from None
+    except RealRobots as exc:
+        raise ApiError(409, str(exc)) from None
+    return JSON({"run_id": run_id, "status": "running"}, status_code=202)
 
 
 @router.get("/api/workflows/runs")
