@@ -49,6 +49,8 @@ from gateway.workflow.service import RealRobots, WorkflowService
 router = APIRouter(tags=["workflows"])
 
 WorkflowName = Annotated[str, PathParam(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=100)]
+MAX_VERSION = 2**31 - 1
+VersionNumber = Annotated[int, PathParam(ge=1, le=MAX_VERSION)]
 MAX_TEXT = 1_000_000
 INTERFACES_DIR = PROJECT_ROOT / "ros"
 
@@ -82,7 +84,7 @@ class ReplaceBody(TextBody):
 
 class RollbackBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    version: int = Field(ge=1)
+    version: int = Field(ge=1, le=MAX_VERSION)
     comment: str = Field(default="", max_length=2000)
 
 
@@ -240,7 +242,8 @@ def versions(name: WorkflowName, request: Request, _: Principal = Depends(caller
 
 
 @router.get("/api/workflows/{name}/versions/{version}")
-def version_text(name: WorkflowName, version: int, request: Request, _: Principal = Depends(caller)) -> JSON:
+def version_text(name: WorkflowName, version: VersionNumber, request: Request,
+                 _: Principal = Depends(caller)) -> JSON:
     """One stored version's text (the editor compares two of them)."""
     try:
         entry = service(request).registry.version(name, version)
