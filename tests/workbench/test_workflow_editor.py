@@ -118,7 +118,7 @@ def test_table2_1_say_before_going_to_the_table(author_page: Page, gateway, scre
     expect(form.locator("[data-field-box='with.text'] .wf-field-error")).to_have_text("text is required")
     text.fill("I will show you to your table. Please follow me.")
     form.locator("[data-field=id]").fill("announce_move")
-    expect(form.locator("[data-field=robot]")).to_have_count(0)  # the module sets the robot
+    expect(form.locator("[data-field=robot] option")).to_have_text(["pepper"])  # only Pepper can speak
     assert steps_of(page, "lead_to_table") == ["table_distance", "announce_move", "go_to_table"]
     save(page, "Table 2 #1: speak before moving", 2)
 
@@ -235,6 +235,21 @@ def test_a_new_process_in_a_service(author_page: Page, gateway):
     page.get_by_test_id("wf-form").locator("[data-field='with.name']").fill("wave")
     save(page, "wave goodbye after seeing them off", 2)
     assert step_ids(run(gateway, name))[-1] == "gesture"
+
+
+def test_the_robot_of_a_step_is_chosen_from_the_robots(author_page: Page, gateway):
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    page = author_page
+    open_workflow(page, name)
+    step_button(page, "bow").click()
+    robot = page.get_by_test_id("wf-form").locator("[data-field=robot]")
+    expect(robot.locator("option")).to_have_text(["hsr", "jaco2", "pepper"])  # every robot that can gesture
+    expect(robot).to_have_value("pepper")
+    robot.select_option("jaco2")
+    expect(page.get_by_test_id("wf-form").locator("[data-field=module]")).to_have_value("jaco2_gesture")
+    save(page, "the arm bows", 2)
+    bow = next(s for s in run(gateway, name)["steps"] if s["step_id"] == "bow")
+    assert bow["actor"] == "jaco2" and bow["params"]["robot"] == "jaco2"
 
 
 def test_a_robot_new_to_the_workflow_comes_with_its_actor(author_page: Page, gateway):

@@ -797,6 +797,20 @@ class WorkflowEditor {
       parts.push(this.field({ name: "module", type: "module", required: true, choices: modules, description: "Which module this step runs." },
         step.module, (v) => { update((s) => { s.module = v; }); this.renderSide(); }, "module"));
       const module = (this.doc.modules || {})[step.module] || {};
+      if (module.kind === "ros_service" && module.service) {
+        // Which robot: the robots that offer this service; choosing one uses (or adds) its module.
+        const service = String(module.service).split("/").pop();
+        const robots = (this.palette.robots || []).filter((r) => r.services && r.services[service]).map((r) => r.name);
+        const robot = (module.params || {}).robot || module.actor;
+        parts.push(this.field({ name: "robot", type: "string", required: true, choices: robots,
+          description: "The robot that does it (each robot has its own module for this service)." }, robot, (value) => {
+          const entry = (this.palette.entries || []).find((e) => e.id === `${value}.${service}`);
+          if (!entry || value === robot) return;
+          const target = moduleFor(this.doc, entry) || addModule(this.doc, entry);
+          step.module = target;
+          this.changed();
+        }, "robot"));
+      }
       for (const param of this.paramsOfModule(step.module, step)) {
         if (param.name === "robot") continue; // the module's: its service is under the robot's namespace
         const inherited = (module.params || {})[param.name];
