@@ -23,7 +23,7 @@ from gateway.workflow.model import Workflow
 log = logging.getLogger(__name__)
 
 KIND = "workflow"
-RESERVED_NAMES = {"runs", "manual", "validate", "schema", "palette"}
+RESERVED_NAMES = {"runs", "manual", "validate", "schema", "palette", "try"}
 
 
 class WorkflowNotFound(LookupError):

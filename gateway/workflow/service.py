@@ -33,6 +33,10 @@ log = logging.getLogger(__name__)
 RUNS_COLLECTION = "workflow_runs"
 
 
+class RealRobots(RuntimeError):
+    """A trial run of unsaved edits was asked for where robots are real, not simulated."""
+
+
 class WorkflowService:
     """What the API uses: read, validate, replace and run workflows; see runs and manual tasks."""
 
@@ -73,6 +77,25 @@ class WorkflowService:
                          name=f"workflow-{name}-{run_id}").start()
         return run_id
 
+    def try_text(self, text: str, inputs: Mapping[str, Any] | None = None) -> str:
+        """Run an unsaved workflow text in the background on the simulated robots (the editor's
+        "try my edits"); nothing is stored as a version. Returns the run id. Raises
+        :class:`WorkflowInvalid`, or :class:`RealRobots` when robots are not simulated here."""
+        if self.robots is None:
+            raise RealRobots("this gateway drives real robots: save the workflow, then run it")
+        workflow = parse(text, file="<try>")
+        run_id = "try-" + uuid.uuid4().hex[:12]
+        self._remember(run_id, None)
+
+        def run() -> None:
+            try:
+                self._remember(run_id, self.executor.run(workflow, inputs or {}, version=None, run_id=run_id))
+            except Exception:  # a background run has nobody to raise to: log it
+                log.exception("trial run %s of %s crashed", run_id, workflow.name)
+
+        threading.Thread(target=run, daemon=True, name=f"workflow-try-{run_id}").start()
+        return run_id
+
     def _run_quietly(self, name: str, inputs: Mapping[str, Any] | None, run_id: str) -> None:
         try:
             self.run(name, inputs, run_id)
@@ -88,6 +111,12 @@ class WorkflowService:
         """The result, or None while it is running; KeyError when unknown."""
         with self._lock:
             return self._runs[run_id]
+
+    def steps_so_far(self, run_id: str) -> list[dict[str, Any]]:
+        """The steps a run has done until now, in order (what the editor's trace shows while it runs)."""
+        if self.recorder is None:
+            return []
+        return [step for step in self.recorder.of_kind("workflow_step") if step.get("run_id") == run_id]
 
     def runs(self, workflow: str | None = None, limit: int = 50) -> list[RunResult]:
         with self._lock:
