@@ -310,9 +310,8 @@ def _check_steps(wf: Workflow, steps: tuple[Step, ...], specs: list[Any], path: 
         if isinstance(step, ModuleStep):
             if step.module not in wf.modules:
                 errors.add(here + ("module",), f"unknown module {step.module!r}")
-            elif wf.modules[step.module].kind == "wait" and "seconds" not in {
-                    **wf.modules[step.module].params, **step.params}:
-                errors.add(here, f"wait module {step.module!r} needs a 'seconds' parameter")
+            elif wf.modules[step.module].kind == "wait":
+                _check_wait(step.module, {**wf.modules[step.module].params, **step.params}, step.params, here, errors)
             if step.actor and step.actor not in wf.actors:
                 errors.add(here + ("actor",), f"unknown actor {step.actor!r} (declare it under actors)")
             if step.on_failure != "retry" and step.retries:
@@ -326,6 +325,20 @@ def _check_steps(wf: Workflow, steps: tuple[Step, ...], specs: list[Any], path: 
             _check_steps(wf, step.otherwise, spec.get("else") or [], here + ("else",), seen_ids, errors)
         params = step.values if isinstance(step, SetStep) else getattr(step, "params", {})
         _check_templates(params, here + ("set" if isinstance(step, SetStep) else "with",), errors)
+
+
+def _check_wait(module: str, merged: dict[str, Any], own: dict[str, Any], path: PathT, errors: _Collector) -> None:
+    """A wait needs a number of seconds (or a ``${...}`` template giving one): the step's ``with``
+    field when it sets one, else the module's default."""
+    if "seconds" not in merged:
+        errors.add(path, f"wait module {module!r} needs a 'seconds' parameter")
+        return
+    seconds = merged["seconds"]
+    if isinstance(seconds, str) and "${" in seconds:
+        return
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 0 <= seconds <= 3600:
+        where = path + ("with", "seconds") if "seconds" in own else ("modules", module, "params", "seconds")
+        errors.add(where, f"{seconds!r} is not a number of seconds (0 to 3600)")
 
 
 def _check_templates(value: Any, path: PathT, errors: _Collector) -> None:

@@ -89,6 +89,12 @@ class WorkflowService:
         with self._lock:
             return self._runs[run_id]
 
+    def steps_so_far(self, run_id: str) -> list[dict[str, Any]]:
+        """The steps a run has done until now, in order (what the editor's trace shows while it runs)."""
+        if self.recorder is None:
+            return []
+        return [step for step in self.recorder.of_kind("workflow_step") if step.get("run_id") == run_id]
+
     def runs(self, workflow: str | None = None, limit: int = 50) -> list[RunResult]:
         with self._lock:
             done = [r for r in self._runs.values() if r is not None and (workflow is None or r.workflow == workflow)]

@@ -1,5 +1,6 @@
 """REST for workflows: list, read, validate, replace (live), run; runs, manual tasks, generated code;
-and the workbench page ``/workbench/workflows`` (workflow view, scenario view, editor).
+and the palette of the workbench's visual workflow editor (the editor itself is the Workflows
+section of the workbench shell, ``/workbench/workflows/<name>``).
 
 Why thin: everything is in ``gateway.workflow``; this maps HTTP to the :class:`WorkflowService`
 kept in the gateway (versions in the Information State, followed by every gateway process).
@@ -7,46 +8,69 @@ kept in the gateway (versions in the Information State, followed by every gatewa
     GET  /api/workflows                        [{name, title, version, ...}]
     GET  /api/workflows/{name}                 {name, version, text, workflow_view, scenario_view}
     GET  /api/workflows/{name}/versions        [{version, updated_at, author, comment, hash}]
-    POST /api/workflows/validate               {"text": yaml} -> {"valid", "problems", views}
+    GET  /api/workflows/{name}/versions/{v}    {version info, text} (for diffs)
+    GET  /api/workflows/palette                modules the editor offers, typed parameters
+    POST /api/workflows/validate               {"text": yaml} or {"document": {...}, "previous_text"}
+                                               -> {"valid", "problems", "text", "document", views}
     PUT  /api/workflows/{name}                 {"text", "comment", "base_version"} -> 201 {name, version}
     POST /api/workflows/{name}/rollback        {"version"} -> 201 {name, version} (the pointer moves back)
     DELETE /api/workflows/{name}               stop offering it (versions and history stay)
     GET  /api/workflows/{name}/history         deploys, rollbacks, deletes
     POST /api/workflows/{name}/run             {"inputs": {...}, "wait": true} -> the run (or 202 {run_id})
-    GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id}
+    GET  /api/workflows/runs[?workflow=&limit=], GET /api/workflows/runs/{run_id} (202 + steps so far)
     GET  /api/workflows/manual, POST /api/workflows/manual/{task_id}/done {"result": {...}}
     GET  /api/workflows/{name}/code            the generated standalone rclpy node (text/x-python)
 """
 
 from __future__ import annotations
 
-from importlib import resources
+from functools import lru_cache
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path as PathParam, Query, Request
-from fastapi.responses import HTMLResponse, PlainTextResponse, Response
-from pydantic import BaseModel, ConfigDict, Field
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi import Path as PathParam
+from fastapi.responses import PlainTextResponse, Response
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from gateway.api.auth import Principal, author, caller
 from gateway.api.deps import gateway_of
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON
+from gateway.config import PROJECT_ROOT
 from gateway.workflow.codegen import generate
 from gateway.workflow.diagram import scenario_view, workflow_view
 from gateway.workflow.loader import WorkflowInvalid, schema
+from gateway.workflow.palette import Interface, build_palette, read_interfaces
 from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
+from gateway.workflow.render import read_document, to_yaml
 from gateway.workflow.service import WorkflowService
 
 router = APIRouter(tags=["workflows"])
 
 WorkflowName = Annotated[str, PathParam(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=100)]
 MAX_TEXT = 1_000_000
-_ASSETS = {"workflows.js": "text/javascript", "workflows.css": "text/css"}
+INTERFACES_DIR = PROJECT_ROOT / "ros"
 
 
 class TextBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
     text: str = Field(min_length=1, max_length=MAX_TEXT, description="The workflow as YAML.")
+
+
+class ValidateBody(BaseModel):
+    """Either the YAML text, or the document the visual editor changed (written back to YAML under
+    the leading comments of ``previous_text``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    text: str | None = Field(default=None, min_length=1, max_length=MAX_TEXT, description="The workflow as YAML.")
+    document: dict[str, Any] | None = Field(default=None, description="The workflow as data (the parsed YAML).")
+    previous_text: str = Field(default="", max_length=MAX_TEXT)
+
+    @model_validator(mode="after")
+    def _one_of(self) -> ValidateBody:
+        if (self.text is None) == (self.document is None):
+            raise ValueError("give either 'text' or 'document'")
+        return self
 
 
 class ReplaceBody(TextBody):
@@ -109,13 +133,40 @@ def get_schema(_: Principal = Depends(caller)) -> JSON:
 
 
 @router.post("/api/workflows/validate")
-def validate(body: TextBody, request: Request, _: Principal = Depends(caller)) -> JSON:
-    """Check a workflow text without deploying it; on success also the two views (for the editor)."""
-    wf, problems = service(request).validate(body.text)
+def validate(body: ValidateBody, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """Check a workflow without deploying it. Always answers the text and, when the YAML parses, the
+    document (what the visual editor shows); on success also the two views."""
+    text = body.text if body.text is not None else to_yaml(body.document or {}, body.previous_text)
+    document = body.document if body.document is not None else read_document(text)
+    wf, problems = service(request).validate(text)
     if wf is None:
-        return JSON({"valid": False, "problems": [p.to_dict() for p in problems]})
-    return JSON({"valid": True, "problems": [], "name": wf.name,
+        return JSON({"valid": False, "problems": [p.to_dict() for p in problems], "text": text, "document": document})
+    return JSON({"valid": True, "problems": [], "name": wf.name, "text": text, "document": document,
                  "workflow_view": workflow_view(wf), "scenario_view": scenario_view(wf)})
+
+
+@lru_cache(maxsize=1)
+def _interfaces() -> dict[str, Interface]:
+    return read_interfaces(INTERFACES_DIR)
+
+
+@router.get("/api/workflows/palette")
+def palette(request: Request, _: Principal = Depends(caller)) -> JSON:
+    """What the visual editor offers: robot services (ROS interfaces x robots), fire business rules
+    (deployed rule sets), ontology look-ups (its values), waits, staff tasks and branches, each with
+    typed parameters (type, choices, required, default, description)."""
+    gw = gateway_of(request)
+    svc = service(request)
+    workflows = []
+    for name in svc.registry.names():
+        try:
+            workflows.append(svc.registry.get(name))
+        except (WorkflowNotFound, WorkflowInvalid):  # deleted meanwhile, or unreadable: its robots drop out
+            continue
+    return JSON(build_palette(
+        configured_robots=gw.settings.ros.robots, interfaces=_interfaces(), workflows=workflows,
+        rulesets=sorted(info.name for info in gw.engine.list_rulesets()),
+        ontology_values=gw.knowledge.values()))
 
 
 @router.get("/api/workflows/runs")
@@ -127,13 +178,15 @@ def list_runs(request: Request, workflow: str | None = None, limit: int = Query(
 
 @router.get("/api/workflows/runs/{run_id}")
 def get_run(run_id: str, request: Request, _: Principal = Depends(caller)) -> JSON:
-    """One run: 200 with the result, 202 ``{"status": "running"}`` while it runs, 404 if unknown."""
+    """One run: 200 with the result, 202 ``{"status": "running", "steps": [...]}`` (the steps done so
+    far) while it runs, 404 if unknown."""
+    svc = service(request)
     try:
-        result = service(request).get_run(run_id)
+        result = svc.get_run(run_id)
     except KeyError:
         raise ApiError(404, f"run {run_id!r} not found (or no longer kept)", run_id=run_id) from None
     if result is None:
-        return JSON({"run_id": run_id, "status": "running"}, status_code=202)
+        return JSON({"run_id": run_id, "status": "running", "steps": svc.steps_so_far(run_id)}, status_code=202)
     return JSON(result.to_dict())
 
 
@@ -166,6 +219,16 @@ def versions(name: WorkflowName, request: Request, _: Principal = Depends(caller
         return JSON([v.to_dict() for v in service(request).registry.versions(name)])
     except WorkflowNotFound as exc:
         raise ApiError(404, str(exc), name=name) from None
+
+
+@router.get("/api/workflows/{name}/versions/{version}")
+def version_text(name: WorkflowName, version: int, request: Request, _: Principal = Depends(caller)) -> JSON:
+    """One stored version's text (the editor compares two of them)."""
+    try:
+        entry = service(request).registry.version(name, version)
+    except WorkflowNotFound as exc:
+        raise ApiError(404, str(exc), name=name, version=version) from None
+    return JSON({**entry.info.to_dict(), "text": entry.workflow.source})
 
 
 @router.put("/api/workflows/{name}", status_code=201)
@@ -223,22 +286,3 @@ def code(name: WorkflowName, request: Request, _: Principal = Depends(caller)) -
     """The workflow as a standalone Python rclpy node (what the papers' editor generated)."""
     entry = _entry(service(request), name)
     return PlainTextResponse(generate(entry.workflow, version=entry.info.version), media_type="text/x-python")
-
-
-# ------------------------------------------------------------------ the workbench page
-
-def _asset(name: str) -> str:
-    return resources.files("gateway.workflow").joinpath("web", name).read_text(encoding="utf-8")
-
-
-@router.get("/workbench/workflows", response_class=HTMLResponse, include_in_schema=False)
-def page() -> HTMLResponse:
-    """Workflow view, scenario view and editor (static page; data through the API above)."""
-    return HTMLResponse(_asset("workflows.html"))
-
-
-@router.get("/workbench/workflows/assets/{asset}", include_in_schema=False)
-def asset(asset: str) -> Response:
-    if asset not in _ASSETS:
-        raise ApiError(404, f"no asset {asset!r}")
-    return Response(_asset(asset), media_type=_ASSETS[asset])
