@@ -429,6 +429,23 @@ CHANGES: dict[int, tuple[str, Callable[[Owner, Setup], None]]] = {
 }
 
 
+def show_a_deep_bow(page: Page) -> None:
+    """For #9's screenshot: the editor scrolled to a changed line (not one of the owner's steps)."""
+    search = page.locator(".editor-host:not([hidden]) .cm-search input[name=search]")
+    search.fill("deep bow with open arms")
+    search.press("End")  # the query is taken on key-up
+    search.press("Enter")
+
+
+def show_the_saved_value(page: Page) -> None:
+    """For #12-#14's screenshots: the page's top, with the confirmation that the value is live."""
+    page.evaluate("window.scrollTo(0, 0)")
+
+
+FRAMES: dict[int, Callable[[Page], None]] = {9: show_a_deep_bow, 12: show_the_saved_value,
+                                             13: show_the_saved_value, 14: show_the_saved_value}
+
+
 # ---------------------------------------------------------------- preparing, making, restoring
 
 
@@ -471,6 +488,8 @@ def make_all(page: Page, gw: OwnerClient, setup: Setup, shots: Path,
         change(owner, setup)
         after = verified(gw, scenario)
         seconds = time.perf_counter() - started
+        if scenario.id in FRAMES:
+            FRAMES[scenario.id](page)
         shot = shots / f"{scenario.id:02d}.png"
         page.screenshot(path=str(shot))
         done.append(Done(scenario.id, scenario.suggestion, scenario.category, scenario.paper_time, how,
