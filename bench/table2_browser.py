@@ -29,7 +29,7 @@ from gateway.config import PROJECT_ROOT, Settings
 
 sys.path.insert(0, str(PROJECT_ROOT / "tests" / "workbench"))
 
-from table2_steps import Done, Setup, make_all, markdown, prepare  # noqa: E402
+from table2_steps import Done, Setup, make_all, markdown, prepare, steps_markdown  # noqa: E402
 from wb_helpers import AUTHOR_TOKEN, TOKENS, new_page  # noqa: E402
 
 from gateway.workflow.agile import OwnerClient  # noqa: E402
@@ -100,6 +100,8 @@ def section(done: list[Done], image_dir: str) -> str:
         "\\* The workbench cannot create a rule set: for #8 and #11 the engineer deployed an empty "
         "`seat_info` rule set (the `Table` fact type) through REST beforehand and gave the owner two "
         "small DRL files, which the owner adds with “＋ Add a file…” and deploys (not typed).",
+        "",
+        steps_markdown(done),
     ])
 
 

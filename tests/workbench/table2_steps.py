@@ -535,3 +535,13 @@ def markdown(done: list[Done], image_dir: str = "img/table2") -> str:
     total_s = sum(d.seconds for d in done)
     rows.append(f"| | **all {len(done)}** | | | | **{total_steps}** | **{total_s:.1f}** | |")
     return "\n".join(rows)
+
+
+def steps_markdown(done: list[Done]) -> str:
+    """Every change's steps, one line each, as the owner made them (folded)."""
+    out = ["<details><summary>The owner's steps, change by change</summary>", ""]
+    for d in done:
+        out.append(f"**#{d.id}** ({d.steps} steps): " + " · ".join(f"`{step}`" for step in d.log))
+        out.append("")
+    out.append("</details>")
+    return "\n".join(out)

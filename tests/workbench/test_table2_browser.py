@@ -45,13 +45,19 @@ def setup(gateway, tmp_path: Path) -> Iterator[Setup]:
         probes.close()
 
 
+PROBED_RUNS = (("show_to_seat", None), ("prepare_drinks", {"orders": []}), ("take_order", None),
+               ("settle_bill", None), ("greeting", {"tables": TABLES}),
+               ("serving", {"cups": [{"table": "table1", "empty_for_s": 20}]}))
+PROBED_INDIVIDUALS = [{"id": "kid6", "types": ["Customer"], "properties": {"age": 6}},
+                      {"id": "cup200", "types": ["Cup"], "properties": {"cupCapacity": 200}}]
+
+
 def teahouse_behaviour(gw: OwnerClient) -> dict[str, list[str]]:
-    """What the robots do in every workflow the changes touch (with the probes' inputs)."""
-    return {name: behaviour(gw.run(name, inputs)) for name, inputs in (
-        ("show_to_seat", None), ("prepare_drinks", {"orders": []}), ("take_order", None), ("settle_bill", None),
-        ("greeting", {"tables": TABLES}), ("serving", {"cups": [{"table": "table1", "empty_for_s": 20}]}))} | {
-        "reason": sorted(str(f) for f in gw.reason([{"id": "kid6", "types": ["Customer"], "properties": {"age": 6}},
-                                  {"id": "cup200", "types": ["Cup"], "properties": {"cupCapacity": 200}}])["inferred"])}
+    """What the robots do in every workflow the changes touch, and what Pellet infers for a child and
+    a cup (the probes' inputs)."""
+    seen = {name: behaviour(gw.run(name, inputs)) for name, inputs in PROBED_RUNS}
+    seen["reason"] = sorted(str(fact) for fact in gw.reason(PROBED_INDIVIDUALS)["inferred"])
+    return seen
 
 
 @pytest.fixture()
