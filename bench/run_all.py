@@ -30,6 +30,7 @@ def benches(quick: bool) -> dict[str, list[str]]:
         "stream": ["bench/stream_bench.py", *(["--quick", "--rdflib-timeout", "0"] if quick else []), "--write-docs"],
         "sessions": ["bench/session_bench.py", "--seconds", seconds, "--write-docs"],
         "agile": ["bench/agile_loop.py", "--repeat", "1" if quick else "3", "--write", "docs/agile-loop.md"],
+        "table2-browser": ["bench/table2_browser.py", "--write", "docs/agile-loop.md"],
         # the longest (10,000 rules, peers included): last, so the others are not held up
         "growth": ["bench/growth_bench.py", *(["--sizes", "100,1000"] if quick else []), "--write"],
     }
