@@ -97,9 +97,10 @@ def section(done: list[Done], image_dir: str) -> str:
         markdown(done, image_dir),
         "",
         f"Slowest: #{slowest.id}, {slowest.seconds:.1f} s; all {len(done)} verified live on the gateway, no restart.",
-        "\\* The workbench cannot create a rule set: for #8 and #11 the engineer deployed an empty "
-        "`seat_info` rule set (the `Table` fact type) through REST beforehand and gave the owner two "
-        "small DRL files, which the owner adds with “＋ Add a file…” and deploys (not typed).",
+        "\\* #8 and #11 need DRL the owner does not write: the owner creates the `seat_info` rule set in "
+        "the workbench (“+ New rule set”) and adds three small files the engineer wrote (the `Table` fact "
+        "type and the two rules) with “+ Add a file…”, then deploys (nothing typed; writing the files "
+        "is not counted).",
         "",
         steps_markdown(done),
     ])

@@ -142,7 +142,8 @@ class KnowledgeEditor:
             raise NotFound(f"there is no rule {number} (rules 1-{count})")
         rule_no = number if number is not None else count + 1
         candidate = replace_rule(current, number, text) if number is not None else append_rule(current, text, comment)
-        line = rule_lines(candidate)[rule_no - 1][0]
+        lines = rule_lines(candidate)
+        line = lines[rule_no - 1][0] if rule_no <= len(lines) else len(candidate.splitlines()) + 1
         where = {"rule": rule_no, "line": line, "field": "text"}
         if not text.strip() or "\n" in text.strip():
             return [{**where, "column": 0, "atom": "", "message": "a rule is one line: body atoms -> head atoms"}], candidate

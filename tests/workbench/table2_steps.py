@@ -14,9 +14,9 @@ gateway) and the benchmark (``bench/table2_browser.py``, on a fresh gateway); no
 or stops a gateway.
 
 Two suggestions need a rule set the teahouse does not have (#8 and #11: seat information in DRL).
-The workbench cannot create a rule set, so the engineer deploys an empty ``seat_info`` rule set
-(just the ``Table`` fact type) through REST beforehand and hands the owner two small rule files; the
-owner adds them with "＋ Add a file…" and deploys. That preparation is not counted.
+The owner creates it in the workbench ("+ New rule set"); the engineer hands over three small rule
+files (the ``Table`` fact type and the two rules), which the owner adds with "+ Add a file…" and
+deploys. Writing those files is the engineer's part and is not counted.
 """
 
 from __future__ import annotations
@@ -282,7 +282,7 @@ def open_ruleset(owner: Owner, name: str) -> None:
 
 def add_rule_file(owner: Owner, path: Path) -> None:
     page = owner.page
-    owner.upload(page.get_by_test_id("add-file"), path)  # what "＋ Add a file…" opens
+    owner.upload(page.get_by_test_id("add-file"), path)  # what "+ Add a file…" opens
     expect(page.get_by_test_id("add-file-result")).to_contain_text(f"Added {path.name}")
 
 
@@ -296,8 +296,14 @@ def deploy(owner: Owner, comment: str) -> None:
 
 def change_8(owner: Owner, setup: Setup) -> None:
     page = owner.page
-    # the rules: the engineer's file added to the seat_info rule set, deployed
-    open_ruleset(owner, setup.seat_info)
+    # the rules: a new rule set, the engineer's files added to it, deployed
+    owner.open("/workbench#/rules/reception")
+    owner.click(page.get_by_role("button", name="+ New rule set"), "+ New rule set")
+    owner.fill(page.get_by_test_id("new-ruleset-name"), setup.seat_info, "name")
+    owner.click(page.get_by_test_id("create-ruleset"), "Create")
+    expect(page.locator("section.ruleset h1")).to_have_text(setup.seat_info)  # the new rule set is open
+    expect(page.get_by_test_id("check-status")).to_have_text("✓ No problems")
+    add_rule_file(owner, setup.files / "tables.drl")
     add_rule_file(owner, setup.files / "free_tables.drl")
     deploy(owner, "Table 2 #8: tell how many tables are free")
     # the workflow: fire them after the welcome
@@ -417,7 +423,8 @@ CHANGES: dict[int, tuple[str, Callable[[Owner, Setup], None]]] = {
     5: ("workflow editor: a Wait step (0.2 s) before confirm_order", change_5),
     6: ("workflow editor: Pepper: say before go_to_table", change_6),
     7: ("workflow editor: move to + say before settle_bill", change_7),
-    8: ("rules: add the engineer's file to seat_info*, deploy; workflow editor: Fire business rules", change_8),
+    8: ("rules: + New rule set seat_info, add the engineer's files*, deploy; workflow editor: Fire business rules",
+        change_8),
     9: ("rules editor: search and replace all (sentences), deploy", change_9),
     10: ("rules editor: a new rule in sentences (DSL), deploy", change_10),
     11: ("rules: add the engineer's file to seat_info*, deploy", change_11),
@@ -450,13 +457,11 @@ FRAMES: dict[int, Callable[[Page], None]] = {9: show_a_deep_bow, 12: show_the_sa
 
 
 def prepare(client: httpx.Client, setup: Setup) -> None:
-    """The engineer's part for #8/#11: the empty seat_info rule set, and the two rule files."""
+    """The engineer's part for #8/#11: three small rule files (the owner creates the rule set)."""
     setup.files.mkdir(parents=True, exist_ok=True)
+    (setup.files / "tables.drl").write_text(SEAT_INFO_TYPES, encoding="utf-8")
     (setup.files / "free_tables.drl").write_text(FREE_TABLES_DRL, encoding="utf-8")
     (setup.files / "dirty_table.drl").write_text(DIRTY_TABLE_DRL, encoding="utf-8")
-    answer = client.put(f"/api/rulesets/{setup.seat_info}",
-                        json={"files": {"tables.drl": SEAT_INFO_TYPES}, "comment": "the Table type (engineer)"})
-    assert answer.status_code == 201, answer.text
 
 
 def verified(gw: OwnerClient, scenario: Scenario) -> Observation:

@@ -28,7 +28,7 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture()
 def setup(gateway, tmp_path: Path) -> Iterator[Setup]:
-    """The engineer's preparation (the empty seat_info rule set, two rule files); afterwards every
+    """The engineer's preparation (three rule files for seat_info); afterwards every
     workflow, rule set and knowledge version the changes made is rolled back."""
     setup = Setup(files=tmp_path / "from-the-engineer", seat_info=f"seat_info_{os.getpid()}")
     probes = OwnerClient(gateway.base_url, token=CALLER_TOKEN)

@@ -57,7 +57,7 @@ def recorder() -> MemoryRecorder:
 @pytest.fixture()
 def executor(robots: SimulatedRobots, recorder: MemoryRecorder) -> Executor:
     values = {"pepper1.robotToHumanDistance": 1.2, "pepper1.robotToTableDistance": 0.5,
-              "serving1.emptyCupReactionTime": 30}
+              "serving1.emptyCupReactionTime": 30, "cup1.pourQuantity": 160.0}  # the last one inferred by SWRL
     ex = Executor({"ros_service": robots, "ros_topic": robots, "wait": WaitAdapter(),
                    "manual": ManualBoard(simulate=True), "ontology_value": OntologyValueAdapter(values.get)},
                   recorder, default_timeout=5.0)

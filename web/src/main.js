@@ -154,7 +154,48 @@ function renderList() {
     h("a", { href: ctx.href(target, r.name), "data-ruleset": r.name },
       h("span", { class: "name" }, r.name),
       h("span", { class: "meta" }, `version ${r.version} · ${when(r.deployed_at)}`),
-      r.comment ? h("span", { class: "meta comment" }, r.comment) : null))));
+      r.comment ? h("span", { class: "meta comment" }, r.comment) : null))),
+  ctx.isAuthor() ? h("li", { class: "new-ruleset" }, newRulesetForm()) : null);
+}
+
+const RULESET_NAME = /^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$/;
+
+/** "+ New rule set": a name, then an empty rule set (one starter file) that opens in the editor,
+ * ready for sentences, rules or a decision table added from the desktop. */
+function newRulesetForm() {
+  const nameEl = h("input", { type: "text", "aria-label": "Name of the new rule set", placeholder: "e.g. seat_info",
+    "data-testid": "new-ruleset-name", maxlength: "64" });
+  const resultEl = h("div", { "aria-live": "polite", "data-testid": "new-ruleset-result" });
+  const problem = () => {
+    const name = nameEl.value.trim();
+    if (!name) return "Give the rule set a name.";
+    if (!RULESET_NAME.test(name)) return "A name starts with a letter or digit and holds only letters, digits, '.', '_' and '-' (64 at most).";
+    if (ctx.rulesets.some((r) => r.name === name)) return `There is already a rule set named “${name}”.`;
+    return "";
+  };
+  nameEl.addEventListener("input", () => fill(resultEl, nameEl.value && problem() ? h("span", { class: "message error inline" }, problem()) : null));
+  const create = async (event) => {
+    event.preventDefault();
+    const wrong = problem();
+    if (wrong) return fill(resultEl, h("span", { class: "message error inline", role: "alert" }, wrong));
+    const name = nameEl.value.trim();
+    const starter = `package org.printeps.${name.replace(/[^A-Za-z0-9_]/g, "_")};\n\n// The rules of ${name}: write them here, or add .dslr sentences or a decision table (+ Add a file…).\n`;
+    try {
+      await api("PUT", `/api/rulesets/${encodeURIComponent(name)}`, { files: { [`${name}.drl`]: starter }, comment: "created in the workbench", base_version: 0 });
+    } catch (err) {
+      return fill(resultEl, h("span", { class: "message error inline", role: "alert" }, `Cannot create “${name}”: ${err.message}`));
+    }
+    await loadRulesets();
+    ctx.navigate(ctx.href("rules", name));
+  };
+  const formEl = h("form", { class: "new-ruleset-form", hidden: true, onsubmit: create }, nameEl,
+    h("button", { class: "primary", type: "submit", "data-testid": "create-ruleset" }, "Create"), resultEl);
+  const open = h("button", { class: "link", type: "button", "aria-expanded": "false", onclick: () => {
+    formEl.hidden = !formEl.hidden;
+    open.setAttribute("aria-expanded", String(!formEl.hidden));
+    if (!formEl.hidden) nameEl.focus();
+  } }, "+ New rule set");
+  return h("div", {}, open, formEl);
 }
 
 function renderUser() {

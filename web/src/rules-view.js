@@ -517,7 +517,7 @@ class RulesView {
         if (file) fill(this.addResultEl, await this.addFile(file));
       } });
     return h("span", { class: "add-file" },
-      h("button", { class: "secondary", type: "button", onclick: () => input.click() }, "＋ Add a file…"), input, this.addResultEl);
+      h("button", { class: "secondary", type: "button", onclick: () => input.click() }, "+ Add a file…"), input, this.addResultEl);
   }
 
   /** Read `file` into the draft; the message says what happened or what is wrong with the file. */
