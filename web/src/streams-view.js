@@ -45,7 +45,7 @@ async function loadLists() {
 // ---------------------------------------------------------------- the sidebar
 
 function sidebar(ctx, lists, kind, item) {
-  const entry = (href, label, meta, active, testid) => h("li", { class: active ? "active" : "" },
+  const entry = (href, label, meta, active, testid) => h("li", { class: active ? "streams-item active" : "streams-item" },
     h("a", { href, "data-testid": testid, "aria-current": active ? "page" : null },
       h("span", { class: "name" }, label), h("span", { class: "meta" }, meta)));
   ctx.setSidebar("Streams", [
@@ -98,6 +98,23 @@ function describeReport(report) {
   if (!report) return "—";
   const text = { window_close: "on window close", content_change: "on content change", periodic: `every ${ms(report.period_ms)}` }[report.trigger] || report.trigger;
   return text + (report.non_empty ? ", non-empty only" : "");
+}
+
+/** The gateway's default prefixes (gateway/rdf/terms.py DEFAULT_PREFIXES): IRIs read as prefix:local. */
+const PREFIXES = [
+  ["printeps:", "http://printeps.org/cafe/entrance/"],
+  ["rdf:", "http://www.w3.org/1999/02/22-rdf-syntax-ns#"],
+  ["rdfs:", "http://www.w3.org/2000/01/rdf-schema#"],
+  ["owl:", "http://www.w3.org/2002/07/owl#"],
+  ["xsd:", "http://www.w3.org/2001/XMLSchema#"],
+];
+
+/** "<http://printeps.org/cafe/entrance/c1>" -> "printeps:c1"; "42"^^<…#integer> -> "42"^^xsd:integer. */
+export function compact(term) {
+  return String(term).replace(/<([^<>\s]+)>/g, (whole, iri) => {
+    const hit = PREFIXES.find(([, ns]) => iri.startsWith(ns) && /^[\w.-]*$/.test(iri.slice(ns.length)));
+    return hit ? hit[0] + iri.slice(hit[1].length) : whole;
+  });
 }
 
 function ms(value) {
@@ -305,10 +322,10 @@ async function showQuery(main, ctx, name) {
       h("div", { class: "streams-side" },
         h("div", { class: "card" }, h("div", { class: "title-row" }, h("h2", {}, "Latest windows with results"),
           h("button", { class: "secondary", onclick: () => loadResults(name, resultsEl), "data-testid": "results-refresh" }, "Refresh")),
-        resultsEl),
-        h("div", { class: "card" }, h("h2", {}, "Versions"),
-          versions.length ? versionsTable(ctx, versions, info.version, rollback, "query-versions")
-            : h("p", { class: "muted" }, "Registered on this gateway only (not stored): save it to keep it."))))));
+        resultsEl))),
+    h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
+      versions.length ? versionsTable(ctx, versions, info.version, rollback, "query-versions")
+        : h("p", { class: "muted" }, "Registered on this gateway only (not stored): save it to keep it."))));
   await loadResults(name, resultsEl);
   const timer = setInterval(() => loadResults(name, resultsEl), RESULTS_REFRESH_MS);
   return { dispose: () => { clearInterval(timer); view.destroy(); bindingView.destroy(); } };
@@ -430,7 +447,7 @@ async function showMapping(main, ctx, name, params) {
       fill(previewEl, h("p", {}, `${result.triples.length} triples (with the text in the editor; nothing is saved or sent):`),
         h("table", { class: "triples", "data-testid": "triples" },
           h("thead", {}, h("tr", {}, ["Subject", "Predicate", "Object"].map((t) => h("th", { scope: "col" }, t)))),
-          h("tbody", {}, result.triples.map((t) => h("tr", {}, t.map((term) => h("td", {}, term)))))));
+          h("tbody", {}, result.triples.map((t) => h("tr", {}, t.map((term) => h("td", { title: term }, compact(term))))))));
     } catch (err) {
       const problems = problemsOf(err);
       markInEditor(view, problems, ["text"]);
@@ -468,10 +485,10 @@ async function showMapping(main, ctx, name, params) {
         h("div", { class: "card" }, h("h2", {}, "Preview on a sample message"),
           h("span", { class: "editor-label" }, "Message (JSON)"), sampleHost,
           h("div", { class: "buttons" }, h("button", { class: "secondary", onclick: preview, "data-testid": "mapping-preview" }, "Preview the triples")),
-          previewEl),
-        h("div", { class: "card" }, h("h2", {}, "Versions"),
-          versions.length ? versionsTable(ctx, versions, mapping.version, rollback, "mapping-versions")
-            : h("p", { class: "muted" }, "Built into the gateway: saving it makes version 1."))))));
+          previewEl))),
+    h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
+      versions.length ? versionsTable(ctx, versions, mapping.version, rollback, "mapping-versions")
+        : h("p", { class: "muted" }, "Built into the gateway: saving it makes version 1."))));
   view.contentDOM.addEventListener("keydown", (e) => {
     if (author && e.key === "s" && (e.ctrlKey || e.metaKey)) { e.preventDefault(); save(); }
   });
