@@ -7,7 +7,9 @@ from __future__ import annotations
 import itertools
 import os
 import re
+from collections.abc import Iterator
 
+import pytest
 from playwright.sync_api import Page, expect
 
 from wb_helpers import CALLER_TOKEN, new_page
@@ -15,6 +17,15 @@ from wb_helpers import CALLER_TOKEN, new_page
 _ids = itertools.count(1)
 STREAM = "http://example.org/wb-streams"
 RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
+
+
+@pytest.fixture()
+def console_errors(author_page) -> Iterator[list[str]]:
+    """What the page logs as errors (a failed request included); each test ends with none."""
+    errors: list[str] = []
+    author_page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+    yield errors
+    assert errors == []
 
 
 def _unique(stem: str) -> str:
@@ -49,7 +60,7 @@ def _editor_text(page: Page, editor: str) -> str:
         "el => Array.from(el.querySelectorAll('.cm-line')).map((line) => line.textContent).join('\\n')")
 
 
-def test_open_the_entrance_mapping_and_the_seeded_query(author_page, gateway):
+def test_open_the_entrance_mapping_and_the_seeded_query(author_page, gateway, console_errors):
     page = author_page
     page.goto("/workbench#/streams")
     expect(page.locator("main h1")).to_have_text("Streams")
@@ -69,7 +80,7 @@ def test_open_the_entrance_mapping_and_the_seeded_query(author_page, gateway):
     expect(page.get_by_test_id("check-ok")).to_contain_text("Valid: query CustomerDetectionQuery")
 
 
-def test_results_show_the_last_windows_with_their_bounds(author_page, gateway):
+def test_results_show_the_last_windows_with_their_bounds(author_page, gateway, console_errors):
     name = _unique("ViewCount")
     _register(gateway, name)
     with gateway.rest() as client:
@@ -85,7 +96,7 @@ def test_results_show_the_last_windows_with_their_bounds(author_page, gateway):
     expect(table.locator("tbody tr").first).to_contain_text("ms")
 
 
-def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, gateway):
+def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, gateway, console_errors):
     name = _unique("BadEdit")
     original = _register(gateway, name)
     page = author_page
@@ -110,7 +121,7 @@ def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, 
     expect(message).to_contain_text("the rule binding is not JSON")
 
 
-def test_save_a_copy_then_a_new_version_then_roll_back(author_page, gateway):
+def test_save_a_copy_then_a_new_version_then_roll_back(author_page, gateway, console_errors):
     name = _unique("EditMe")
     original = _register(gateway, name)
     copy = _unique("EditCopy")
@@ -144,7 +155,7 @@ def test_save_a_copy_then_a_new_version_then_roll_back(author_page, gateway):
         assert client.get(f"/api/queries/{copy}").json()["windows"][0]["range_ms"] == 2000
 
 
-def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author_page, gateway):
+def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author_page, gateway, console_errors):
     page = author_page
     page.goto("/workbench#/streams/mappings/entrance")
     expect(page.get_by_test_id("mapping-editor")).to_contain_text("printeps:hasCustomer")
@@ -189,7 +200,26 @@ def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author
         assert client.get("/api/mappings/entrance").json()["version"] == 1  # the seeded one is untouched
 
 
-def test_a_path_deep_link_opens_a_mapping(author_page):
+def test_a_save_over_a_newer_version_is_refused_and_keeps_the_text(author_page, gateway):
+    name = _unique("Race")
+    original = _register(gateway, name)
+    page = author_page
+    page.goto(f"/workbench#/streams/queries/{name}")
+    expect(page.get_by_test_id("query-version")).to_have_text("version 1 live")
+    with gateway.rest() as client:  # another author saves version 2 meanwhile
+        r = client.post("/api/queries", json={"query": original.replace("RANGE 2s", "RANGE 3s"), "replace": True,
+                                              "base_version": 1, "comment": "someone else"})
+        assert r.status_code == 201, r.text
+    mine = original.replace("RANGE 2s", "RANGE 9s")
+    _set_text(page, "query-editor", mine)
+    page.get_by_test_id("query-save").click()
+    expect(page.get_by_test_id("conflict")).to_contain_text("someone saved version 2 of this query")
+    assert _editor_text(page, "query-editor") == mine
+    with gateway.rest() as client:
+        assert client.get(f"/api/queries/{name}").json()["windows"][0]["range_ms"] == 3000
+
+
+def test_a_path_deep_link_opens_a_mapping(author_page, console_errors):
     page = author_page
     page.goto("/workbench/streams/mappings/entrance")
     expect(page).to_have_url(re.compile(r"/workbench#/streams/mappings/entrance$"))
@@ -200,6 +230,8 @@ def test_a_path_deep_link_opens_a_mapping(author_page):
 
 def test_callers_see_read_only_pages(browser, gateway):
     page = new_page(browser, gateway, CALLER_TOKEN)
+    console: list[str] = []
+    page.on("console", lambda msg: console.append(msg.text) if msg.type == "error" else None)
     page.goto("/workbench#/streams/queries/CustomerDetectionQuery")
     expect(page.get_by_test_id("read-only")).to_be_visible()
     expect(page.locator("[data-testid=query-editor] .cm-content")).to_have_attribute("contenteditable", "false")
@@ -211,4 +243,4 @@ def test_callers_see_read_only_pages(browser, gateway):
     page.get_by_test_id("mapping-preview").click()  # previewing changes nothing: callers may
     expect(page.get_by_test_id("triples")).to_contain_text("hasCustomer")
     page.context.close()
-    assert page.js_errors == []
+    assert page.js_errors == [] and console == []

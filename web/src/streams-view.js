@@ -415,6 +415,7 @@ async function showMapping(main, ctx, name, params) {
     if (!/^[A-Za-z][A-Za-z0-9_.:-]{0,63}$/.test(target)) {
       return showRefused("Not saved:", [{ message: "the name must start with a letter and hold only letters, digits, _ . : - (at most 64)" }]);
     }
+    if (!(await validate())) return; // refused before anything is sent: the text stays, marked
     const copy = target !== name;
     fill(messageEl, h("p", { class: "muted" }, "Saving…"));
     try {
