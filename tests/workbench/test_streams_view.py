@@ -219,6 +219,33 @@ def test_a_save_over_a_newer_version_is_refused_and_keeps_the_text(author_page, 
         assert client.get(f"/api/queries/{name}").json()["windows"][0]["range_ms"] == 3000
 
 
+def test_new_query_and_new_mapping_from_the_templates(author_page, gateway, console_errors):
+    page = author_page
+    page.goto("/workbench#/streams")
+    page.get_by_test_id("new-query").click()
+    expect(page.locator("main h1")).to_have_text("New query")
+    name = _unique("Fresh")
+    _set_text(page, "query-editor", _editor_text(page, "query-editor").replace("CustomersNow", name))
+    page.get_by_test_id("query-check").click()
+    expect(page.get_by_test_id("check-ok")).to_contain_text(f"Save registers it as query {name}")
+    page.get_by_test_id("query-save").click()
+    expect(page.locator("main h1")).to_have_text(f"Query · {name}")
+    expect(page.get_by_test_id("query-version")).to_have_text("version 1 live")
+    page.goto("/workbench#/streams/new/mapping")
+    expect(page.locator("main h1")).to_have_text("New mapping")
+    page.get_by_test_id("mapping-preview").click()
+    expect(page.get_by_test_id("triples")).to_contain_text("printeps:reading_1")
+    page.get_by_test_id("mapping-save").click()  # no name yet: refused, nothing sent
+    expect(page.get_by_test_id("mapping-message")).to_contain_text("the name must start with a letter")
+    mapping = _unique("fresh_mapping")
+    page.get_by_test_id("mapping-name").fill(mapping)
+    page.get_by_test_id("mapping-save").click()
+    expect(page.locator("main h1")).to_have_text(f"Mapping · {mapping}")
+    expect(page.get_by_test_id("mapping-version")).to_have_text("version 1 live")
+    with gateway.rest() as client:
+        assert client.get(f"/api/mappings/{mapping}").json()["spec"]["type"] == "printeps:Reading"
+
+
 def test_a_path_deep_link_opens_a_mapping(author_page, console_errors):
     page = author_page
     page.goto("/workbench/streams/mappings/entrance")
@@ -242,5 +269,10 @@ def test_callers_see_read_only_pages(browser, gateway):
     expect(page.get_by_test_id("mapping-save")).to_have_count(0)
     page.get_by_test_id("mapping-preview").click()  # previewing changes nothing: callers may
     expect(page.get_by_test_id("triples")).to_contain_text("hasCustomer")
+    page.goto("/workbench#/streams")
+    expect(page.locator("main h1")).to_have_text("Streams")
+    expect(page.get_by_test_id("new-query")).to_have_count(0)
+    page.goto("/workbench#/streams/new/query")
+    expect(page.locator("main")).to_contain_text("Only authors can add queries")
     page.context.close()
     assert page.js_errors == [] and console == []

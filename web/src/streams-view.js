@@ -4,6 +4,7 @@
 // author's text and leaves what runs untouched. Callers (non-authors) see the same pages read-only.
 //
 // Routes: #/streams (overview) · #/streams/queries/<name> · #/streams/mappings/<name>
+//         #/streams/new/query · #/streams/new/mapping (authors: a new one from a template)
 
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
@@ -11,6 +12,18 @@ import { createEditor, showProblems, reveal } from "./editor.js";
 import "./streams-view.css";
 
 const RESULTS_SHOWN = 10;
+const NEW_QUERY = `REGISTER QUERY CustomersNow AS
+PREFIX printeps: <http://printeps.org/cafe/entrance/>
+SELECT (COUNT(DISTINCT ?s) AS ?customers)
+FROM STREAM <http://printeps.org/cafe/entrance> [RANGE 5s STEP 1s]
+WHERE { ?s a printeps:Customer . }
+`;
+const NEW_MAPPING = `# How one message becomes RDF; the fields named here must be in the message.
+subject: "printeps:reading_{id}"
+type: printeps:Reading
+fields:
+  value: printeps:value
+`;
 const RESULTS_REFRESH_MS = 5000;
 
 export async function showStreams(main, ctx, name, params) {
@@ -19,6 +32,8 @@ export async function showStreams(main, ctx, name, params) {
   sidebar(ctx, lists, kind, item);
   if (kind === "queries" && item) return showQuery(main, ctx, item);
   if (kind === "mappings" && item) return showMapping(main, ctx, item, params);
+  if (kind === "new" && item === "query") return showQuery(main, ctx, null);
+  if (kind === "new" && item === "mapping") return showMapping(main, ctx, null, params);
   return showOverview(main, ctx, lists);
 }
 
@@ -63,7 +78,9 @@ function sidebar(ctx, lists, kind, item) {
 
 function showOverview(main, ctx, lists) {
   fill(main, h("section", { class: "streams" },
-    h("div", { class: "title-row" }, h("h1", {}, "Streams")),
+    h("div", { class: "title-row" }, h("h1", {}, "Streams"),
+      ctx.isAuthor() ? [h("a", { class: "button secondary", href: `${ctx.href("streams")}/new/query`, "data-testid": "new-query" }, "New query"),
+        h("a", { class: "button secondary", href: `${ctx.href("streams")}/new/mapping`, "data-testid": "new-mapping" }, "New mapping")] : null),
     h("p", { class: "hint" }, "Sensor messages become RDF through the mappings; the continuous queries watch windows of those streams and feed their results to the rules. Open one to read or change it: every save is checked first and kept as a version."),
     lists.error ? h("div", { class: "message error", role: "alert" }, lists.error) : null,
     h("h2", {}, "Continuous queries"),
@@ -198,17 +215,24 @@ function conflictText(what, err, base) {
 
 // ---------------------------------------------------------------- a continuous query
 
+/** A query's info, its current definition and versions; a template for a new one (name null). */
+async function loadQuery(name) {
+  if (name === null) return { info: { version: null, windows: [] }, definition: { text: NEW_QUERY, binding: null, report: null, params: null }, versions: [] };
+  const info = await api("GET", `/api/queries/${encodeURIComponent(name)}`);
+  if (!info.version) return { info, definition: { text: info.text, binding: info.binding, report: null, params: null }, versions: [] };
+  const [definition, versions] = await Promise.all([api("GET", `/api/queries/${encodeURIComponent(name)}/versions/${info.version}`),
+    api("GET", `/api/queries/${encodeURIComponent(name)}/versions`)]);
+  return { info, definition, versions };
+}
+
 async function showQuery(main, ctx, name) {
-  fill(main, h("p", { class: "muted" }, `Loading query ${name}…`));
+  if (name === null && !ctx.isAuthor()) return onlyAuthors(main, ctx, "queries");
+  fill(main, h("p", { class: "muted" }, name === null ? "Opening a new query…" : `Loading query ${name}…`));
   let info;
   let definition;
   let versions;
   try {
-    info = await api("GET", `/api/queries/${encodeURIComponent(name)}`);
-    [definition, versions] = info.version
-      ? await Promise.all([api("GET", `/api/queries/${encodeURIComponent(name)}/versions/${info.version}`),
-        api("GET", `/api/queries/${encodeURIComponent(name)}/versions`)])
-      : [{ text: info.text, binding: info.binding, report: null, params: null }, []];
+    ({ info, definition, versions } = await loadQuery(name));
   } catch (err) {
     fill(main, h("div", { class: "message error", role: "alert" }, `Cannot open query “${name}”: ${err.message}`),
       h("a", { href: ctx.href("streams") }, "All queries and mappings"));
@@ -222,7 +246,7 @@ async function showQuery(main, ctx, name) {
     placeholder: "as the query says (REPORT clause), else on window close", "data-testid": "query-report" });
   const comment = h("input", { id: "query-comment", class: "text-input", placeholder: "what did you change?", "data-testid": "query-comment" });
   const resultsEl = h("div", { class: "results", "aria-live": "off", "data-testid": "query-results" });
-  const view = createEditor(editorHost, { doc: definition.text, fileName: `${name}.rq`, readOnly: !author, label: "C-SPARQL query text" });
+  const view = createEditor(editorHost, { doc: definition.text, fileName: `${name || "new"}.rq`, readOnly: !author, label: "C-SPARQL query text" });
   const bindingView = createEditor(bindingHost, { doc: definition.binding ? JSON.stringify(definition.binding, null, 2) : "",
     fileName: "binding.json", readOnly: !author, label: "Rule binding (JSON)" });
   const state = { base: info.version || 0 };
@@ -258,7 +282,7 @@ async function showQuery(main, ctx, name) {
       result.query.fast_path ? ", fast path" : "", ". ",
       result.name === name ? "Save makes it a new version." : result.exists
         ? `A query named ${result.name} already exists: open it to change it.`
-        : `Save registers it as a new query ${result.name} (this one stays).`));
+        : name === null ? `Save registers it as query ${result.name}.` : `Save registers it as a new query ${result.name} (this one stays).`));
     return result;
   };
   const showRefused = (prefix, problems) => {
@@ -298,13 +322,15 @@ async function showQuery(main, ctx, name) {
     if (author && e.key === "s" && (e.ctrlKey || e.metaKey)) { e.preventDefault(); save(); }
   });
 
+  const fresh = name === null;
   fill(main, h("section", { class: "streams query-page" },
-    h("div", { class: "title-row" }, h("h1", {}, `Query · ${name}`),
-      h("span", { class: "badge live", "data-testid": "query-version" }, info.version ? `version ${info.version} live` : "live, not stored"),
+    h("div", { class: "title-row" }, h("h1", {}, fresh ? "New query" : `Query · ${name}`),
+      fresh ? null : h("span", { class: "badge live", "data-testid": "query-version" }, info.version ? `version ${info.version} live` : "live, not stored"),
       info.fast_path ? h("span", { class: "badge" }, "fast path") : null),
-    h("p", { class: "hint" }, `Windows: ${describeWindows(info.windows)} · reported ${describeReport(info.report)}`,
-      info.binding ? ` · feeds rule set ${info.binding.ruleset} as ${info.binding.fact_type} facts` : "",
-      info.output_stream ? ` · produces stream <${info.output_stream}>` : ""),
+    fresh ? h("p", { class: "hint" }, "Name it after REGISTER QUERY, choose its stream and window, then Check and Save: it runs at once.")
+      : h("p", { class: "hint" }, `Windows: ${describeWindows(info.windows)} · reported ${describeReport(info.report)}`,
+        info.binding ? ` · feeds rule set ${info.binding.ruleset} as ${info.binding.fact_type} facts` : "",
+        info.output_stream ? ` · produces stream <${info.output_stream}>` : ""),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change queries."),
     messageEl,
     h("div", { class: "streams-columns" },
@@ -319,16 +345,23 @@ async function showQuery(main, ctx, name) {
         author ? h("div", { class: "buttons" },
           h("button", { class: "secondary", onclick: check, "data-testid": "query-check" }, "Check"),
           h("button", { class: "primary", onclick: save, "data-testid": "query-save" }, "Save")) : null),
-      h("div", { class: "streams-side" },
+      fresh ? null : h("div", { class: "streams-side" },
         h("div", { class: "card" }, h("div", { class: "title-row" }, h("h2", {}, "Latest windows with results"),
           h("button", { class: "secondary", onclick: () => loadResults(name, resultsEl), "data-testid": "results-refresh" }, "Refresh")),
         resultsEl))),
-    h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
+    fresh ? null : h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
       versions.length ? versionsTable(ctx, versions, info.version, rollback, "query-versions")
         : h("p", { class: "muted" }, "Registered on this gateway only (not stored): save it to keep it."))));
+  if (fresh) return { dispose: () => { view.destroy(); bindingView.destroy(); } };
   await loadResults(name, resultsEl);
   const timer = setInterval(() => loadResults(name, resultsEl), RESULTS_REFRESH_MS);
   return { dispose: () => { clearInterval(timer); view.destroy(); bindingView.destroy(); } };
+}
+
+function onlyAuthors(main, ctx, what) {
+  fill(main, h("div", { class: "message info", role: "status" }, `Only authors can add ${what}.`),
+    h("a", { href: ctx.href("streams") }, "All queries and mappings"));
+  return {};
 }
 
 /** The stored params ([{name, sparql, value}]) as the registration body takes them. */
@@ -367,11 +400,12 @@ function formatValue(value) {
 // ---------------------------------------------------------------- an RDF mapping
 
 async function showMapping(main, ctx, name, params) {
-  fill(main, h("p", { class: "muted" }, `Loading mapping ${name}…`));
-  let mapping;
+  if (name === null && !ctx.isAuthor()) return onlyAuthors(main, ctx, "mappings");
+  fill(main, h("p", { class: "muted" }, name === null ? "Opening a new mapping…" : `Loading mapping ${name}…`));
+  let mapping = { version: null, spec: { subject: "printeps:reading_{id}", fields: { value: "" } }, text: NEW_MAPPING };
   let versions = [];
   try {
-    mapping = await api("GET", `/api/mappings/${encodeURIComponent(name)}`);
+    if (name !== null) mapping = await api("GET", `/api/mappings/${encodeURIComponent(name)}`);
     if (mapping.version) versions = await api("GET", `/api/mappings/${encodeURIComponent(name)}/versions`);
   } catch (err) {
     fill(main, h("div", { class: "message error", role: "alert" }, `Cannot open mapping “${name}”: ${err.message}`),
@@ -383,10 +417,10 @@ async function showMapping(main, ctx, name, params) {
   const editorHost = h("div", { class: "editor-host streams-editor", "data-testid": "mapping-editor" });
   const sampleHost = h("div", { class: "editor-host streams-sample", "data-testid": "sample-editor" });
   const previewEl = h("div", { class: "preview", "aria-live": "polite", "data-testid": "preview" });
-  const saveAs = h("input", { id: "mapping-name", class: "text-input", value: name, "data-testid": "mapping-name",
+  const saveAs = h("input", { id: "mapping-name", class: "text-input", value: name || "", "data-testid": "mapping-name", required: true,
     pattern: "[A-Za-z][A-Za-z0-9_.:\\-]{0,63}" });
   const comment = h("input", { id: "mapping-comment", class: "text-input", placeholder: "what did you change?", "data-testid": "mapping-comment" });
-  const view = createEditor(editorHost, { doc: mapping.text, fileName: `${name}.yaml`, readOnly: !author, label: "Mapping (YAML)" });
+  const view = createEditor(editorHost, { doc: mapping.text, fileName: `${name || "new"}.yaml`, readOnly: !author, label: "Mapping (YAML)" });
   const sampleView = createEditor(sampleHost, { doc: JSON.stringify(sampleMessage(mapping.spec), null, 2), fileName: "message.json",
     label: "Sample message (JSON)" });
   const text = () => view.state.doc.toString();
@@ -443,7 +477,7 @@ async function showMapping(main, ctx, name, params) {
     }
     fill(previewEl, h("p", { class: "muted" }, "Mapping…"));
     try {
-      const result = await api("POST", `/api/mappings/${encodeURIComponent(name)}/preview`,
+      const result = await api("POST", `/api/mappings/${encodeURIComponent(name || "draft")}/preview`,
         { message, timestamp: Number(params.get("timestamp")) || 1000, text: text() });
       fill(previewEl, h("p", {}, `${result.triples.length} triples (with the text in the editor; nothing is saved or sent):`),
         h("table", { class: "triples", "data-testid": "triples" },
@@ -466,8 +500,8 @@ async function showMapping(main, ctx, name, params) {
   };
 
   fill(main, h("section", { class: "streams mapping-page" },
-    h("div", { class: "title-row" }, h("h1", {}, `Mapping · ${name}`),
-      h("span", { class: "badge live", "data-testid": "mapping-version" }, mapping.version ? `version ${mapping.version} live` : "built-in"),
+    h("div", { class: "title-row" }, h("h1", {}, name === null ? "New mapping" : `Mapping · ${name}`),
+      name === null ? null : h("span", { class: "badge live", "data-testid": "mapping-version" }, mapping.version ? `version ${mapping.version} live` : "built-in"),
       mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null),
     h("p", { class: "hint" }, "How one message becomes RDF: subject (an IRI template filled from the message's fields), type, fields → predicates, timed fields (one reading node per message), children (nested lists). Validate and Preview change nothing; Save makes a new version, live at once for every message that arrives."),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change mappings."),
@@ -477,7 +511,7 @@ async function showMapping(main, ctx, name, params) {
         h("span", { class: "editor-label" }, "Mapping (YAML)"),
         editorHost,
         author ? h("div", { class: "streams-fields" },
-          h("label", { for: "mapping-name" }, "Save as (change the name to save a copy)"), saveAs,
+          h("label", { for: "mapping-name" }, name === null ? "Name" : "Save as (change the name to save a copy)"), saveAs,
           h("label", { for: "mapping-comment" }, "Comment"), comment) : null,
         h("div", { class: "buttons" },
           author ? h("button", { class: "secondary", onclick: validate, "data-testid": "mapping-validate" }, "Validate") : null,
@@ -487,7 +521,7 @@ async function showMapping(main, ctx, name, params) {
           h("span", { class: "editor-label" }, "Message (JSON)"), sampleHost,
           h("div", { class: "buttons" }, h("button", { class: "secondary", onclick: preview, "data-testid": "mapping-preview" }, "Preview the triples")),
           previewEl))),
-    h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
+    name === null ? null : h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
       versions.length ? versionsTable(ctx, versions, mapping.version, rollback, "mapping-versions")
         : h("p", { class: "muted" }, "Built into the gateway: saving it makes version 1."))));
   view.contentDOM.addEventListener("keydown", (e) => {
