@@ -96,7 +96,7 @@ def test_results_show_the_last_windows_with_their_bounds(author_page, gateway, c
     expect(table.locator("tbody tr").first).to_contain_text("ms")
 
 
-def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, gateway, console_errors):
+def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, gateway, console_errors, screenshots):
     name = _unique("BadEdit")
     original = _register(gateway, name)
     page = author_page
@@ -109,6 +109,7 @@ def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, 
     expect(message.get_by_test_id("problem-at")).to_have_text("line 6, column 3")
     expect(message).to_contain_text("SERVICE (federated query) is not supported")
     expect(page.locator("[data-testid=query-editor] .cm-lintRange-error")).to_have_count(1)
+    page.screenshot(path=str(screenshots / "streams-query-error.png"))
     assert _editor_text(page, "query-editor") == broken  # the author's text is kept
     with gateway.rest() as client:
         live = client.get(f"/api/queries/{name}").json()
@@ -155,7 +156,8 @@ def test_save_a_copy_then_a_new_version_then_roll_back(author_page, gateway, con
         assert client.get(f"/api/queries/{copy}").json()["windows"][0]["range_ms"] == 2000
 
 
-def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author_page, gateway, console_errors):
+def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author_page, gateway, console_errors,
+                                                                          screenshots):
     page = author_page
     page.goto("/workbench#/streams/mappings/entrance")
     expect(page.get_by_test_id("mapping-editor")).to_contain_text("printeps:hasCustomer")
@@ -164,6 +166,7 @@ def test_a_mapping_is_previewed_saved_as_a_copy_versioned_and_rolled_back(author
     expect(triples).to_contain_text("printeps:hasCustomer")
     expect(triples).to_contain_text("printeps:distance")
     expect(triples).to_contain_text("rdf:type")
+    page.screenshot(path=str(screenshots / "streams-mapping-preview.png"))
     copy = _unique("entrance_copy")
     page.get_by_test_id("mapping-name").fill(copy)
     page.get_by_test_id("mapping-comment").fill("a copy to play with")

@@ -300,6 +300,7 @@ async function showQuery(main, ctx, name) {
     try {
       const saved = await api("POST", "/api/queries", request);
       ctx.flash("ok", `✓ Query ${saved.name} saved: version ${saved.version} is live.`);
+      window.scrollTo(0, 0);
       ctx.navigate(queryHref(ctx, saved.name), true);
     } catch (err) {
       if (err.status === 409 && err.body && err.body.current !== undefined) {
@@ -313,6 +314,7 @@ async function showQuery(main, ctx, name) {
     try {
       await api("POST", `/api/queries/${encodeURIComponent(name)}/rollback`, { version });
       ctx.flash("ok", `✓ Rolled back: version ${version} of ${name} is live again.`);
+      window.scrollTo(0, 0);
       ctx.navigate(queryHref(ctx, name), true);
     } catch (err) {
       fill(messageEl, h("div", { class: "message error", role: "alert" }, `Not rolled back: ${err.message}`));
@@ -332,16 +334,16 @@ async function showQuery(main, ctx, name) {
         info.binding ? ` · feeds rule set ${info.binding.ruleset} as ${info.binding.fact_type} facts` : "",
         info.output_stream ? ` · produces stream <${info.output_stream}>` : ""),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change queries."),
-    messageEl,
     h("div", { class: "streams-columns" },
       h("div", { class: "streams-main" },
-        h("label", { class: "editor-label", id: "query-text-label" }, "C-SPARQL"),
+        h("span", { class: "editor-label" }, "C-SPARQL"),
         editorHost,
         h("div", { class: "streams-fields" },
           h("label", { for: "query-report" }, "Report policy (overrides the query's REPORT clause)"), report,
           h("span", { class: "editor-label", id: "binding-label" }, "Rule binding (JSON: ruleset, fact_type, fields…; empty: feeds no rules)"),
           bindingHost,
           author ? [h("label", { for: "query-comment" }, "Comment"), comment] : null),
+        messageEl,
         author ? h("div", { class: "buttons" },
           h("button", { class: "secondary", onclick: check, "data-testid": "query-check" }, "Check"),
           h("button", { class: "primary", onclick: save, "data-testid": "query-save" }, "Save")) : null),
@@ -456,6 +458,7 @@ async function showMapping(main, ctx, name, params) {
       const saved = await api("PUT", `/api/mappings/${encodeURIComponent(target)}`,
         { text: text(), comment: comment.value, base_version: copy ? 0 : mapping.version || 0 });
       ctx.flash("ok", `✓ Mapping ${saved.name} saved: version ${saved.version} is live.`);
+      window.scrollTo(0, 0);
       ctx.navigate(mappingHref(ctx, saved.name), true);
     } catch (err) {
       if (err.status === 409 && err.body && err.body.current !== undefined) {
@@ -493,6 +496,7 @@ async function showMapping(main, ctx, name, params) {
     try {
       await api("POST", `/api/mappings/${encodeURIComponent(name)}/rollback`, { version });
       ctx.flash("ok", `✓ Rolled back: version ${version} of mapping ${name} is live again.`);
+      window.scrollTo(0, 0);
       ctx.navigate(mappingHref(ctx, name), true);
     } catch (err) {
       fill(messageEl, h("div", { class: "message error", role: "alert" }, `Not rolled back: ${err.message}`));
@@ -505,7 +509,6 @@ async function showMapping(main, ctx, name, params) {
       mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null),
     h("p", { class: "hint" }, "How one message becomes RDF: subject (an IRI template filled from the message's fields), type, fields → predicates, timed fields (one reading node per message), children (nested lists). Validate and Preview change nothing; Save makes a new version, live at once for every message that arrives."),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change mappings."),
-    messageEl,
     h("div", { class: "streams-columns" },
       h("div", { class: "streams-main" },
         h("span", { class: "editor-label" }, "Mapping (YAML)"),
@@ -513,6 +516,7 @@ async function showMapping(main, ctx, name, params) {
         author ? h("div", { class: "streams-fields" },
           h("label", { for: "mapping-name" }, name === null ? "Name" : "Save as (change the name to save a copy)"), saveAs,
           h("label", { for: "mapping-comment" }, "Comment"), comment) : null,
+        messageEl,
         h("div", { class: "buttons" },
           author ? h("button", { class: "secondary", onclick: validate, "data-testid": "mapping-validate" }, "Validate") : null,
           author ? h("button", { class: "primary", onclick: save, "data-testid": "mapping-save" }, "Save") : null)),
