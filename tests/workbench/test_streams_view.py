@@ -103,7 +103,9 @@ def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, 
     page.goto(f"/workbench#/streams/queries/{name}")
     expect(page.get_by_test_id("query-editor")).to_contain_text(f"REGISTER QUERY {name}")
     broken = original.replace("WHERE { ?s a ex:Thing . }", "WHERE { ?s a ex:Thing .\n  SERVICE <http://example.org/x> { ?s ?p ?o } }")
+    expect(page.get_by_test_id("unsaved")).to_be_hidden()
     _set_text(page, "query-editor", broken)
+    expect(page.get_by_test_id("unsaved")).to_be_visible()
     page.get_by_test_id("query-save").click()
     message = page.get_by_test_id("query-message")
     expect(message.get_by_test_id("problem-at")).to_have_text("line 6, column 3")
@@ -111,6 +113,7 @@ def test_a_bad_query_shows_its_line_and_column_and_changes_nothing(author_page, 
     expect(page.locator("[data-testid=query-editor] .cm-lintRange-error")).to_have_count(1)
     page.screenshot(path=str(screenshots / "streams-query-error.png"))
     assert _editor_text(page, "query-editor") == broken  # the author's text is kept
+    expect(page.get_by_test_id("unsaved")).to_be_visible()
     with gateway.rest() as client:
         live = client.get(f"/api/queries/{name}").json()
         assert live["version"] == 1 and live["text"] == original

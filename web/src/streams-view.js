@@ -208,6 +208,18 @@ function rollbackButton(version, onRollback) {
   return cell;
 }
 
+/** An "unsaved changes" badge kept current, and the browser's leave-page warning while it shows. */
+function unsavedGuard(isDirty) {
+  const badge = h("span", { class: "badge dirty", hidden: true, "data-testid": "unsaved" }, "unsaved changes");
+  const warn = (e) => {
+    if (!isDirty()) return;
+    e.preventDefault();
+    e.returnValue = "";
+  };
+  window.addEventListener("beforeunload", warn);
+  return { badge, update: () => { badge.hidden = !isDirty(); }, dispose: () => window.removeEventListener("beforeunload", warn) };
+}
+
 function conflictText(what, err, base) {
   const current = err.body && err.body.current;
   return `Not saved: someone saved version ${current ?? "?"} of this ${what} while you were editing (you started from version ${base}). Your text is kept here; reload the page to see theirs.`;
@@ -246,9 +258,14 @@ async function showQuery(main, ctx, name) {
     placeholder: "as the query says (REPORT clause), else on window close", "data-testid": "query-report" });
   const comment = h("input", { id: "query-comment", class: "text-input", placeholder: "what did you change?", "data-testid": "query-comment" });
   const resultsEl = h("div", { class: "results", "aria-live": "off", "data-testid": "query-results" });
-  const view = createEditor(editorHost, { doc: definition.text, fileName: `${name || "new"}.rq`, readOnly: !author, label: "C-SPARQL query text" });
-  const bindingView = createEditor(bindingHost, { doc: definition.binding ? JSON.stringify(definition.binding, null, 2) : "",
-    fileName: "binding.json", readOnly: !author, label: "Rule binding (JSON)" });
+  const initialBinding = definition.binding ? JSON.stringify(definition.binding, null, 2) : "";
+  const guard = unsavedGuard(() => view.state.doc.toString() !== definition.text
+    || bindingView.state.doc.toString() !== initialBinding || report.value !== (definition.report || ""));
+  const view = createEditor(editorHost, { doc: definition.text, fileName: `${name || "new"}.rq`, readOnly: !author,
+    label: "C-SPARQL query text", onChange: () => guard.update() });
+  const bindingView = createEditor(bindingHost, { doc: initialBinding, fileName: "binding.json", readOnly: !author,
+    label: "Rule binding (JSON)", onChange: () => guard.update() });
+  report.addEventListener("input", () => guard.update());
   const state = { base: info.version || 0 };
 
   const body = () => {
@@ -328,7 +345,7 @@ async function showQuery(main, ctx, name) {
   fill(main, h("section", { class: "streams query-page" },
     h("div", { class: "title-row" }, h("h1", {}, fresh ? "New query" : `Query · ${name}`),
       fresh ? null : h("span", { class: "badge live", "data-testid": "query-version" }, info.version ? `version ${info.version} live` : "live, not stored"),
-      info.fast_path ? h("span", { class: "badge" }, "fast path") : null),
+      info.fast_path ? h("span", { class: "badge" }, "fast path") : null, guard.badge),
     fresh ? h("p", { class: "hint" }, "Name it after REGISTER QUERY, choose its stream and window, then Check and Save: it runs at once.")
       : h("p", { class: "hint" }, `Windows: ${describeWindows(info.windows)} · reported ${describeReport(info.report)}`,
         info.binding ? ` · feeds rule set ${info.binding.ruleset} as ${info.binding.fact_type} facts` : "",
@@ -354,10 +371,10 @@ async function showQuery(main, ctx, name) {
     fresh ? null : h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
       versions.length ? versionsTable(ctx, versions, info.version, rollback, "query-versions")
         : h("p", { class: "muted" }, "Registered on this gateway only (not stored): save it to keep it."))));
-  if (fresh) return { dispose: () => { view.destroy(); bindingView.destroy(); } };
+  if (fresh) return { dispose: () => { guard.dispose(); view.destroy(); bindingView.destroy(); } };
   await loadResults(name, resultsEl);
   const timer = setInterval(() => loadResults(name, resultsEl), RESULTS_REFRESH_MS);
-  return { dispose: () => { clearInterval(timer); view.destroy(); bindingView.destroy(); } };
+  return { dispose: () => { clearInterval(timer); guard.dispose(); view.destroy(); bindingView.destroy(); } };
 }
 
 function onlyAuthors(main, ctx, what) {
@@ -422,7 +439,9 @@ async function showMapping(main, ctx, name, params) {
   const saveAs = h("input", { id: "mapping-name", class: "text-input", value: name || "", "data-testid": "mapping-name", required: true,
     pattern: "[A-Za-z][A-Za-z0-9_.:\\-]{0,63}" });
   const comment = h("input", { id: "mapping-comment", class: "text-input", placeholder: "what did you change?", "data-testid": "mapping-comment" });
-  const view = createEditor(editorHost, { doc: mapping.text, fileName: `${name || "new"}.yaml`, readOnly: !author, label: "Mapping (YAML)" });
+  const guard = unsavedGuard(() => view.state.doc.toString() !== mapping.text);
+  const view = createEditor(editorHost, { doc: mapping.text, fileName: `${name || "new"}.yaml`, readOnly: !author,
+    label: "Mapping (YAML)", onChange: () => guard.update() });
   const sampleView = createEditor(sampleHost, { doc: JSON.stringify(sampleMessage(mapping.spec), null, 2), fileName: "message.json",
     label: "Sample message (JSON)" });
   const text = () => view.state.doc.toString();
@@ -506,7 +525,7 @@ async function showMapping(main, ctx, name, params) {
   fill(main, h("section", { class: "streams mapping-page" },
     h("div", { class: "title-row" }, h("h1", {}, name === null ? "New mapping" : `Mapping · ${name}`),
       name === null ? null : h("span", { class: "badge live", "data-testid": "mapping-version" }, mapping.version ? `version ${mapping.version} live` : "built-in"),
-      mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null),
+      mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null, guard.badge),
     h("p", { class: "hint" }, "How one message becomes RDF: subject (an IRI template filled from the message's fields), type, fields → predicates, timed fields (one reading node per message), children (nested lists). Validate and Preview change nothing; Save makes a new version, live at once for every message that arrives."),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change mappings."),
     h("div", { class: "streams-columns" },
@@ -531,7 +550,7 @@ async function showMapping(main, ctx, name, params) {
   view.contentDOM.addEventListener("keydown", (e) => {
     if (author && e.key === "s" && (e.ctrlKey || e.metaKey)) { e.preventDefault(); save(); }
   });
-  return { dispose: () => { view.destroy(); sampleView.destroy(); } };
+  return { dispose: () => { guard.dispose(); view.destroy(); sampleView.destroy(); } };
 }
 
 /** A message the mapping can read: its subject's {placeholders}, fields, timed fields and one
