@@ -282,3 +282,17 @@ def test_callers_see_read_only_pages(browser, gateway):
     expect(page.locator("main")).to_contain_text("Only authors can add queries")
     page.context.close()
     assert page.js_errors == [] and console == []
+
+
+def test_tablet_width_keeps_the_pages_on_screen(author_page, console_errors):
+    page = author_page
+    page.set_viewport_size({"width": 768, "height": 1024})
+    for address, ready in (("/workbench#/streams/queries/CustomerDetectionQuery", "query-versions"),
+                           ("/workbench#/streams/mappings/entrance", "mapping-versions")):
+        page.goto(address)
+        expect(page.get_by_test_id(ready)).to_be_visible()
+        if "mappings" in address:
+            page.get_by_test_id("mapping-preview").click()
+            expect(page.get_by_test_id("triples")).to_be_visible()
+        width = page.evaluate("document.documentElement.scrollWidth")
+        assert width <= 768, f"{address} scrolls sideways at tablet width ({width} px)"
