@@ -61,9 +61,10 @@ class QueryService:
     # ---- changing -------------------------------------------------------------------------------
     def register(self, text: str, params: list[ParamSpec] | None = None, replace: bool = False,
                  binding: RuleBinding | None = None, *, report: str | None = None, author: str = "anonymous",
-                 comment: str = "") -> dict[str, Any]:
+                 comment: str = "", base_version: int | None = None) -> dict[str, Any]:
         """Check, store and serve a query (``replace``: a new version of an existing one;
-        ``report``: a report policy overriding the query's own)."""
+        ``report``: a report policy overriding the query's own; ``base_version``: the version the
+        edit started from, 0 for a new query — CatalogConflict when someone saved meanwhile)."""
         name = parse_query(text, params).name
         with self._lock:
             head = self.catalog.head(QUERY, name)
@@ -72,7 +73,8 @@ class QueryService:
             self._check(text, params, binding, report)
             payload = {"text": text, "params": _params_payload(params),
                        "binding": binding.to_dict() if binding else None, "report": report}
-            info, seq = self.catalog.save(QUERY, name, payload, author=author, comment=comment, hash=_hash(payload))
+            info, seq = self.catalog.save(QUERY, name, payload, author=author, comment=comment, hash=_hash(payload),
+                                          base_version=base_version)
             result = self._serve(name, payload, info.version, seq)
         return {**result, "version": info.version}
 
@@ -115,14 +117,44 @@ class QueryService:
             raise QueryNotFound(f"no query named {name!r}")
         return self.catalog.load(QUERY, name, head.current).payload  # type: ignore[arg-type]
 
+    def validate(self, text: str, params: list[ParamSpec] | None = None, binding: RuleBinding | None = None,
+                 report: str | None = None) -> dict[str, Any]:
+        """The checks of :meth:`register` without storing or serving anything: the query as it would
+        run (windows, report policy, fast path) and whether its name is taken (a save would then be
+        a new version of it). Raises what registering would raise."""
+        name = parse_query(text, params).name
+        info = self._check(text, params, binding, report)
+        head = self.catalog.head(QUERY, name)
+        live = head is not None and head.live
+        return {"name": name, "exists": live, "version": head.current if live else None, "query": info}
+
+    def current_version(self, name: str) -> int | None:
+        head = self.catalog.head(QUERY, name)
+        return head.current if head is not None and head.live else None
+
+    def version(self, name: str, version: int | None = None) -> dict[str, Any]:
+        """One stored version (the current one when ``version`` is None): its info, its definition
+        (``text``, ``params``, ``binding``, ``report``) and whether it is current."""
+        current = self.current_version(name)
+        wanted = current if version is None else int(version)
+        if wanted is None:
+            raise QueryNotFound(f"no query named {name!r}")
+        try:
+            stored = self.catalog.load(QUERY, name, wanted)
+        except VersionMissing:
+            raise QueryNotFound(f"query {name!r} has no version {wanted}") from None
+        return {**stored.info.to_dict(), "text": stored.payload["text"], "params": stored.payload.get("params"),
+                "binding": stored.payload.get("binding"), "report": stored.payload.get("report"),
+                "current": wanted == current}
+
     def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None,
-               report: str | None = None) -> None:
+               report: str | None = None) -> dict[str, Any]:
         """Register on a scratch engine with the same rules, ontology and providers: the same checks
-        as the real registration, nothing live touched."""
+        as the real registration, nothing live touched. Returns the query's info there."""
         scratch = StreamEngine(self.engine.settings, rules_engine=self.engine.rules_engine,
                                ontology=self.engine.ontology, providers=self.engine.providers)
         scratch.share_static_graphs(self.engine)
-        scratch.register(text, params, replace=True, binding=binding, report=report)
+        return scratch.register(text, params, replace=True, binding=binding, report=report)
 
     # ---- serving --------------------------------------------------------------------------------
     def _serve(self, name: str, payload: dict[str, Any], version: int, seq: int) -> dict[str, Any]:
@@ -253,6 +285,29 @@ class MappingService:
 
     def versions(self, name: str) -> list[VersionInfo]:
         return self.catalog.versions(MAPPING, name)
+
+    def version(self, name: str, version: int) -> dict[str, Any]:
+        """One stored version: its info, its spec and whether it is the current one."""
+        try:
+            stored = self.catalog.load(MAPPING, name, int(version))
+        except VersionMissing:
+            raise MappingError("mapping", f"mapping {name!r} has no version {version}") from None
+        head = self.catalog.head(MAPPING, name)
+        return {**stored.info.to_dict(), "spec": stored.payload,
+                "current": bool(head and head.live and head.current == stored.info.version)}
+
+    def rollback(self, name: str, version: int, *, author: str = "anonymous") -> VersionInfo:
+        """Make a stored version current again (checked first, like a change)."""
+        with self._lock:
+            try:
+                spec = self.catalog.load(MAPPING, name, int(version)).payload
+            except VersionMissing:
+                raise MappingError("mapping", f"mapping {name!r} has no version {version}") from None
+            node = self.check(name, spec)
+            info, seq = self.catalog.set_current(MAPPING, name, int(version), author=author,
+                                                 comment=f"rollback to version {version}")
+            self._serve(name, spec, node, info.version, seq)
+            return info
 
     def _serve(self, name: str, spec: dict[str, Any], node: NodeMap, version: int, seq: int) -> None:
         if not self._served.set(name, version, seq):

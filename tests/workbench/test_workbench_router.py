@@ -42,6 +42,7 @@ def test_trailing_slash_goes_to_the_page():
 
 def test_sections_and_items_have_deep_links_to_the_one_page():
     for path in ("/workbench/workflows", "/workbench/workflows/show_to_seat", "/workbench/knowledge",
+                 "/workbench/streams", "/workbench/streams/mappings/entrance",
                  "/workbench/live", "/workbench/decisions/abc-123", "/workbench/rules/reception"):
         response = client.get(path)
         assert response.status_code == 200, path

@@ -5,11 +5,14 @@ The stream engine is the gateway's one stream engine: the ROS node feeds the sam
 windows of ROS-fed streams show here too. Queries and their rule bindings are stored in the
 Information State and followed by every gateway process (:mod:`gateway.stream.services`).
 
-    POST   /api/queries                 C-SPARQL (text/plain, or JSON {"query", "params", "replace", "rules"})
-    GET    /api/queries                 registered queries with their counters
-    GET    /api/queries/{name}          one query
+    POST   /api/queries                 C-SPARQL (text/plain, or JSON {"query", "params", "replace", "rules",
+                                        "report", "comment", "base_version"}); 409 when base_version is stale
+    POST   /api/queries/validate        the same checks, nothing stored or served -> {"ok", "errors", …}
+    GET    /api/queries                 registered queries with their counters (and current version)
+    GET    /api/queries/{name}          one query (and its current version)
     DELETE /api/queries/{name}
     GET    /api/queries/{name}/versions every stored version
+    GET    /api/queries/{name}/versions/{version}  its text, params, binding and report policy
     POST   /api/queries/{name}/rollback {"version"}
     PUT    /api/queries/{name}/rules    a rule binding (see gateway.stream.rules) — rows become facts
     DELETE /api/queries/{name}/rules
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from dataclasses import dataclass
 from typing import Any, AsyncIterator
 
 from fastapi import APIRouter, Query, Request
@@ -36,9 +40,12 @@ from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, read_json
 from gateway.rdf.mapping import MappingError
 from gateway.rdf.terms import parse_triple
-from gateway.stream.query import ParamSpec
+from gateway.stream.engine import StreamError
+from gateway.stream.lexer import QueryParseError
+from gateway.stream.query import ParamSpec, ReportPolicy
 from gateway.stream.results import report_to_sparql_json, to_sparql_json
-from gateway.stream.rules import RuleBinding
+from gateway.stream.rules import BindingError, RuleBinding
+from gateway.versions import CatalogConflict
 
 router = APIRouter(tags=["streams"])
 MAX_BATCH = 10_000
@@ -69,38 +76,94 @@ def _params(raw: Any) -> list[ParamSpec] | None:
 # -- queries ------------------------------------------------------------------------------------
 
 
+@dataclass
+class Registration:
+    """What a registration (or a validation) asks for, read from the request body."""
+
+    text: str
+    params: list[ParamSpec] | None = None
+    replace: bool = False
+    rules: Any = None
+    report: str | None = None
+    comment: str = ""
+    base_version: int | None = None
+
+    def binding(self) -> RuleBinding | None:
+        return None if self.rules is None else RuleBinding.from_dict(self.rules)
+
+    def check_report(self) -> None:
+        """A bad report policy is named as such (its line/column are in the policy, not the query)."""
+        if self.report is None:
+            return
+        try:
+            ReportPolicy.parse(self.report)
+        except QueryParseError as exc:
+            raise ApiError(422, f"report: {exc.message}", field="report", line=exc.line, column=exc.column) from None
+
+
+async def _registration(request: Request) -> Registration:
+    if not _is_json(request):
+        return Registration((await request.body()).decode("utf-8", errors="replace"))
+    body = await read_json(request)
+    if not isinstance(body, dict) or not isinstance(body.get("query"), str):
+        raise ApiError(422, "expected {\"query\": \"REGISTER QUERY …\"}", field="query")
+    report = body.get("report")
+    if report is not None and not isinstance(report, str):
+        raise ApiError(422, "report must be a policy such as \"content change\"", field="report")
+    comment = body.get("comment", "")
+    if not isinstance(comment, str) or len(comment) > 2000:
+        raise ApiError(422, "comment must be a text of at most 2000 characters", field="comment")
+    base = body.get("base_version")
+    if base is not None and (isinstance(base, bool) or not isinstance(base, int) or base < 0):
+        raise ApiError(422, "base_version must be a version number (0: a new query)", field="base_version")
+    return Registration(body["query"], _params(body.get("params")), bool(body.get("replace", False)),
+                        body.get("rules"), report, comment, base)
+
+
 @router.post("/api/queries", status_code=201)
 async def register_query(request: Request, queries: QueriesDep, who: Author) -> JSON:
-    """Register a C-SPARQL query (text, or JSON with params/replace/rules); 422 with line/column."""
-    replace, binding, params, report = False, None, None, None
-    if _is_json(request):
-        body = await read_json(request)
-        if not isinstance(body, dict) or not isinstance(body.get("query"), str):
-            raise ApiError(422, "expected {\"query\": \"REGISTER QUERY …\"}", field="query")
-        text = body["query"]
-        replace = bool(body.get("replace", False))
-        params = _params(body.get("params"))
-        if body.get("rules") is not None:
-            binding = RuleBinding.from_dict(body["rules"])
-        if body.get("report") is not None:
-            if not isinstance(body["report"], str):
-                raise ApiError(422, "report must be a policy such as \"content change\"", field="report")
-            report = body["report"]
-    else:
-        text = (await request.body()).decode("utf-8", errors="replace")
-    info = await run_in_threadpool(lambda: queries.register(text, params, replace, binding, report=report,
-                                                            author=who.name))
+    """Register a C-SPARQL query (text, or JSON with params/replace/rules/report/comment/base_version);
+    422 with line/column; 409 when the name is taken or ``base_version`` is not current any more."""
+    reg = await _registration(request)
+    reg.check_report()
+    binding = reg.binding()
+    try:
+        info = await run_in_threadpool(lambda: queries.register(
+            reg.text, reg.params, reg.replace, binding, report=reg.report, author=who.name, comment=reg.comment,
+            base_version=reg.base_version))
+    except CatalogConflict as exc:
+        raise ApiError(409, "base version changed: someone saved this query meanwhile", current=exc.current) from None
     return JSON(info, status_code=201)
 
 
+@router.post("/api/queries/validate")
+async def validate_query(request: Request, queries: QueriesDep, _: Caller) -> JSON:
+    """Every check of a registration, nothing stored or served: ``{"ok": true, "name", "exists",
+    "version", "query": info}`` or ``{"ok": false, "errors": [{"field", "message", "line"?, "column"?}]}``."""
+    reg = await _registration(request)
+    try:
+        reg.check_report()
+        binding = reg.binding()
+        checked = await run_in_threadpool(lambda: queries.validate(reg.text, reg.params, binding, reg.report))
+    except ApiError as exc:
+        return JSON({"ok": False, "errors": [{"message": exc.message, **exc.extra}]})
+    except QueryParseError as exc:
+        return JSON({"ok": False, "errors": [{"field": "query", **exc.to_dict()}]})
+    except BindingError as exc:
+        return JSON({"ok": False, "errors": [{"field": "rules", "message": str(exc)}]})
+    except StreamError as exc:
+        return JSON({"ok": False, "errors": [{"field": "query", "message": str(exc)}]})
+    return JSON({"ok": True, "errors": [], **checked})
+
+
 @router.get("/api/queries")
-async def list_queries(streams: StreamsDep, _: Caller) -> JSON:
-    return JSON({"queries": streams.queries()})
+async def list_queries(streams: StreamsDep, queries: QueriesDep, _: Caller) -> JSON:
+    return JSON({"queries": [{**q, "version": queries.current_version(q["name"])} for q in streams.queries()]})
 
 
 @router.get("/api/queries/{name}")
-async def get_query(name: str, streams: StreamsDep, _: Caller) -> JSON:
-    return JSON(streams.query_info(name))
+async def get_query(name: str, streams: StreamsDep, queries: QueriesDep, _: Caller) -> JSON:
+    return JSON({**streams.query_info(name), "version": queries.current_version(name)})
 
 
 @router.delete("/api/queries/{name}", status_code=204, response_model=None, response_class=Response)
@@ -112,6 +175,11 @@ async def delete_query(name: str, queries: QueriesDep, who: Author) -> Response:
 @router.get("/api/queries/{name}/versions")
 async def query_versions(name: str, queries: QueriesDep, _: Caller) -> JSON:
     return JSON([i.to_dict() for i in await run_in_threadpool(queries.versions, name)])
+
+
+@router.get("/api/queries/{name}/versions/{version}")
+async def query_version(name: str, version: int, queries: QueriesDep, _: Caller) -> JSON:
+    return JSON(await run_in_threadpool(lambda: queries.version(name, version)))
 
 
 @router.post("/api/queries/{name}/rollback")
