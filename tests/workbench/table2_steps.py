@@ -30,7 +30,10 @@ from pathlib import Path
 import httpx
 from playwright.sync_api import Locator, Page, expect
 
-from gateway.workflow.agile import BLANKET_DSLR, TABLES, OwnerClient, Observation, Scenario, scenarios
+from gateway.workflow.agile import DIRTY_TABLE_DRL as AGILE_DIRTY_TABLE_DRL
+from gateway.workflow.agile import (
+    BLANKET_DSLR, SEAT_INFO_DRL, TABLES, Observation, OwnerClient, Scenario, scenarios,
+)
 
 EDITOR = ".editor-host:not([hidden]) .cm-content"
 SAVED = re.compile(r"Saved: version \d+ is live")
@@ -42,52 +45,15 @@ WORKFLOWS = ("show_to_seat", "prepare_drinks", "take_order", "settle_bill", "gre
 RULESETS = ("reception",)
 KNOWLEDGE = ("ontology", "swrl")
 
-# The engineer's preparation for #8/#11: the rule set with its fact type, then two rule files.
-SEAT_INFO_TYPES = '''\
-package org.printeps.seatinfo;
-
-import org.printeps.gateway.Actions;
-
-global Actions actions;
-
-// A table of the teahouse as the seat sensing sees it.
-declare Table
-    id : String
-    seats : int
-    free : boolean
-    dirty : boolean
-end
-'''
-
-FREE_TABLES_DRL = '''\
-package org.printeps.seatinfo;
-
-import org.printeps.gateway.Actions;
-
-global Actions actions;
-
-rule "Tell the party how many tables are free"
-when
-    accumulate(Table(free == true); $n : count(1))
-then
-    actions.say("pepper", "We have " + $n + " free tables for you today.");
-end
-'''
-
-DIRTY_TABLE_DRL = '''\
-package org.printeps.seatinfo;
-
-import org.printeps.gateway.Actions;
-
-global Actions actions;
-
-rule "Tell the party that a dirty table is being cleaned"
-when
-    Table(free == true, dirty == true, $id : id)
-then
-    actions.say("pepper", "Table " + $id + " is being cleaned for you. Please wait a moment.");
-end
-'''
+# The engineer's files for #8/#11, cut from the agile scenarios' seat-info rules: the fact type,
+# the free-tables rule, and the dirty-table rule (each file with the package header).
+_HEADER, _RULES = SEAT_INFO_DRL.split("declare Table", 1)
+_RULES = "declare Table" + _RULES
+_TYPES_END = _RULES.index("end\n") + len("end\n")
+_HEAD = _HEADER.split("// A table")[0]
+SEAT_INFO_TYPES = _HEADER + _RULES[:_TYPES_END]
+FREE_TABLES_DRL = _HEAD + _RULES[_TYPES_END:].lstrip("\n")
+DIRTY_TABLE_DRL = _HEAD + AGILE_DIRTY_TABLE_DRL.lstrip("\n")
 
 
 # ---------------------------------------------------------------- the owner's hands, counted
