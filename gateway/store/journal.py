@@ -141,7 +141,8 @@ class Journal:
     """
 
     def __init__(self, folder: Path, ship: Ship, *, max_docs: int = 200_000, fsync: bool = False,
-                 retry_interval_s: float = 1.0, batch: int = 500, adopt_interval_s: float = 10.0) -> None:
+                 retry_interval_s: float = 1.0, batch: int = 500, adopt_interval_s: float = 10.0,
+                 linger_s: float = 0.0) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.ship = ship
@@ -149,6 +150,8 @@ class Journal:
         self.fsync = fsync
         self.retry_interval_s = retry_interval_s
         self.batch = batch
+        self.linger_s = linger_s  # wait this long for a batch to fill: fewer, larger inserts under load
+        self._flushing = 0
         self.adopt_interval_s = adopt_interval_s
         self.dropped = 0
         self.set_aside_count = 0
@@ -209,6 +212,13 @@ class Journal:
                 if self._stop and not self._pending and not self._adopted:
                     self._idle.notify_all()
                     return
+                deadline = time.monotonic() + self.linger_s
+                while (self.linger_s and not self._stop and not self._flushing
+                       and 0 < len(self._pending) < self.batch):
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._wake.wait(timeout=left)
                 batch = [self._pending.popleft() for _ in range(min(self.batch, len(self._pending)))]
                 self._inflight = len(batch)
             if batch and not self._ship_batch(batch):
@@ -328,12 +338,20 @@ class Journal:
         """Wait until everything appended so far is in the database; False on timeout/outage."""
         deadline = time.monotonic() + timeout_s
         with self._lock:
+            self._flushing += 1  # the shipper does not linger while someone waits
             self._wake.notify()
-            while self._pending or self._inflight or self._adopted:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._idle.wait(timeout=min(remaining, 0.05))
+            try:
+                return self._wait_shipped(deadline)
+            finally:
+                self._flushing -= 1
+
+    def _wait_shipped(self, deadline: float) -> bool:
+        """(lock held) Wait until nothing is pending, in flight or adopted."""
+        while self._pending or self._inflight or self._adopted:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self._idle.wait(timeout=min(remaining, 0.05))
         return True
 
     def close(self, timeout_s: float = 5.0) -> None:

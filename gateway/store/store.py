@@ -97,7 +97,7 @@ class InformationState:
 
     def __init__(self, uri: str, database: str, journal_dir: Path, *, backend: str = "external",
                  timeout_ms: int = 1000, spool_max_docs: int = 200_000, retry_interval_s: float = 1.0,
-                 fsync: bool = False) -> None:
+                 fsync: bool = False, linger_s: float = 0.0) -> None:
         self.uri = uri
         self.backend = backend
         self.database = database
@@ -107,7 +107,7 @@ class InformationState:
         self.db = self.client[database]
         self._indexed: set[tuple[str, str]] = set()
         self.journal = Journal(Path(journal_dir), self._ship, max_docs=spool_max_docs, fsync=fsync,
-                               retry_interval_s=retry_interval_s)
+                               retry_interval_s=retry_interval_s, linger_s=linger_s)
 
     # ---- writes -------------------------------------------------------------------------------
     def record(self, collection: str, doc: Mapping[str, Any], *, stored_type: str,
