@@ -172,10 +172,6 @@ class JobService:
             self._finish(job, "cancelled", error={"kind": "cancelled", "error": f"cancelled by {by}"})
             return dict(job)
 
-    def running(self) -> int:
-        with self._cond:
-            return sum(1 for j in self._jobs.values() if j["status"] in ("queued", "running"))
-
     def close(self, timeout_s: float = 5.0) -> None:
         """Refuse new jobs, cancel the queued ones, and give the running build a moment to end."""
         with self._cond:

@@ -16,6 +16,8 @@ from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gateway.api.jsonio import JSON, BadBody
+from gateway.jobs import JobError
+from gateway.ontology.editor import NotFound as KnowledgeItemNotFound
 from gateway.rdf.mapping import MappingError
 from gateway.rdf.terms import TermError
 from gateway.store.store import StoreUnavailable
@@ -126,13 +128,19 @@ def install_error_handlers(app: FastAPI) -> None:
             log.error("engine error on %s %s: %s", request.method, request.url.path, exc)
         return JSON(body, status_code=status)
 
+    @app.exception_handler(JobError)  # a build job refused: unknown, not cancellable, queue full
+    async def _job_error(request: Request, exc: JobError) -> JSON:
+        count(f"http_{exc.status}")
+        return JSON(error_body(exc.message), status_code=exc.status)
+
     @app.exception_handler(QueryParseError)
     async def _query_parse(request: Request, exc: QueryParseError) -> JSON:
         count("query_parse")
         return JSON(error_body(exc.message, line=exc.line, column=exc.column), status_code=422)
 
     @app.exception_handler(QueryNotFound)
-    async def _query_not_found(request: Request, exc: QueryNotFound) -> JSON:
+    @app.exception_handler(KnowledgeItemNotFound)  # no such individual, property or SWRL rule
+    async def _not_found(request: Request, exc: Exception) -> JSON:
         count("http_404")
         return JSON(error_body(str(exc)), status_code=404)
 

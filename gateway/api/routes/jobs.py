@@ -13,18 +13,10 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from gateway.api.deps import Author, Caller, JobsDep
-from gateway.api.errors import ApiError, engine_error_status
+from gateway.api.errors import engine_error_status
 from gateway.api.jsonio import JSON
-from gateway.jobs import JobError
 
 router = APIRouter(tags=["build jobs"])
-
-
-def _answer(call):
-    try:
-        return call()
-    except JobError as exc:
-        raise ApiError(exc.status, exc.message) from None
 
 
 def _with_status(job: dict) -> dict:
@@ -38,7 +30,7 @@ def _with_status(job: dict) -> dict:
 def list_jobs(jobs: JobsDep, _: Caller, ruleset: str | None = None,
               limit: Annotated[int, Query(ge=1, le=500)] = 50) -> JSON:
     """The latest build jobs, newest first (``?ruleset=`` for one rule set's)."""
-    return JSON({"jobs": [_with_status(j) for j in _answer(lambda: jobs.list(ruleset, limit))]})
+    return JSON({"jobs": [_with_status(j) for j in jobs.list(ruleset, limit)]})
 
 
 @router.get("/api/jobs/{job_id}")
@@ -46,10 +38,10 @@ def get_job(job_id: str, jobs: JobsDep, _: Caller) -> JSON:
     """One job: ``status`` (queued, running, succeeded, failed, cancelled), ``progress``
     (``{stage, done, total}``), ``result`` or ``error`` (with the ``status`` the synchronous call
     would have answered: 422 compile errors, 409 conflict, 503 resources...)."""
-    return JSON(_with_status(_answer(lambda: jobs.get(job_id))))
+    return JSON(_with_status(jobs.get(job_id)))
 
 
 @router.delete("/api/jobs/{job_id}")
 def cancel_job(job_id: str, jobs: JobsDep, who: Author) -> JSON:
     """Cancel a queued job (409 once it runs: a build cannot be stopped half-way)."""
-    return JSON(_with_status(_answer(lambda: jobs.cancel(job_id, who.name))))
+    return JSON(_with_status(jobs.cancel(job_id, who.name)))

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from gateway.api.deps import Author, Caller, KnowledgeDep
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON
-from gateway.ontology.editor import KnowledgeEditor, NotFound
+from gateway.ontology.editor import KnowledgeEditor
 from gateway.ontology.knowledge import KnowledgeConflict, KnowledgeInvalid
 from gateway.ontology.reasoner import ReasonerError
 from gateway.ontology.values import ValueInvalid
@@ -78,10 +78,7 @@ def individuals(knowledge: KnowledgeDep, _: Caller) -> JSON:
 
 @router.get("/api/knowledge/individuals/{name}")
 def individual(name: Name, knowledge: KnowledgeDep, _: Caller) -> JSON:
-    try:
-        return JSON(KnowledgeEditor(knowledge).individual(name))
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
+    return JSON(KnowledgeEditor(knowledge).individual(name))
 
 
 @router.put("/api/knowledge/individuals/{name}/values/{prop}")
@@ -91,8 +88,6 @@ def put_value(name: Name, prop: Name, body: ValueBody, knowledge: KnowledgeDep, 
     try:
         info, value = KnowledgeEditor(knowledge).set_value(name, prop, body.value, author=who.name,
                                                            comment=body.comment, base_hash=body.base_hash)
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
     except ValueInvalid as exc:
         raise ApiError(422, exc.message, field=exc.field, errors=[exc.to_dict()]) from None
     except KnowledgeInvalid as exc:
@@ -106,10 +101,7 @@ def put_value(name: Name, prop: Name, body: ValueBody, knowledge: KnowledgeDep, 
 @router.get("/api/knowledge/individuals/{name}/inferred")
 def inferred(name: Name, knowledge: KnowledgeDep, _: Caller) -> JSON:
     """What Pellet infers for an individual: types and values, each with the rule (or axiom) behind it."""
-    try:
-        return JSON(KnowledgeEditor(knowledge).explain(name))
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
+    return JSON(KnowledgeEditor(knowledge).explain(name))
 
 
 @router.post("/api/knowledge/try")
@@ -146,10 +138,7 @@ def add_rule(body: RuleBody, knowledge: KnowledgeDep, who: Author) -> JSON:
 
 @router.get("/api/knowledge/swrl/rules/{number}")
 def rule(number: RuleNumber, knowledge: KnowledgeDep, _: Caller) -> JSON:
-    try:
-        return JSON(KnowledgeEditor(knowledge).rule(number))
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
+    return JSON(KnowledgeEditor(knowledge).rule(number))
 
 
 @router.post("/api/knowledge/swrl/rules/{number}/check")
@@ -158,10 +147,7 @@ def check_rule(number: RuleNumber, body: RuleCheckBody, knowledge: KnowledgeDep,
     nothing. Errors name the rule, line, column and atom; ``changes`` lists the inferred values of the
     ontology's individuals the rule would change (``{"value", "before", "after"}``)."""
     editor = KnowledgeEditor(knowledge)
-    try:
-        errors, _text = editor.check_rule(number, body.text)
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
+    errors, _text = editor.check_rule(number, body.text)
     return JSON({"ok": not errors, "errors": errors, "changes": editor.last_changes})
 
 
@@ -176,8 +162,6 @@ def _save_rule(knowledge: Any, number: int | None, body: RuleBody, author: str) 
     try:
         info, saved_number = editor.save_rule(number, body.text, author=author, comment=body.comment,
                                               base_hash=body.base_hash)
-    except NotFound as exc:
-        raise ApiError(404, str(exc)) from None
     except KnowledgeInvalid as exc:
         raise ApiError(422, exc.errors[0]["message"], errors=exc.errors) from None
     except KnowledgeConflict as exc:
