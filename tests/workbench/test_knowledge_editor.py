@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import pytest
 from playwright.sync_api import Page, expect
 
-from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, new_page
+from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, REFUSED_REQUEST, console_errors, new_page
 
 
 @pytest.fixture()
@@ -34,13 +34,10 @@ def knowledge_restored(gateway) -> Iterator[None]:
 @pytest.fixture()
 def page(browser, gateway, knowledge_restored) -> Iterator[Page]:
     page = new_page(browser, gateway, AUTHOR_TOKEN)
-    console: list[str] = []
-    # the browser logs every refused request ("Failed to load resource: 422") — expected here, not a script error
-    page.on("console", lambda m: console.append(m.text)
-            if m.type == "error" and not m.text.startswith("Failed to load resource") else None)
     yield page
     page.context.close()
-    assert page.js_errors == [] and console == []
+    # refused requests (a 422 check) are the editor's to show, not script errors
+    assert page.js_errors == [] and console_errors(page, REFUSED_REQUEST) == []
 
 
 def _run(gateway, workflow: str, inputs: dict | None = None) -> list[dict]:

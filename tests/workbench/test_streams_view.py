@@ -22,10 +22,8 @@ RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 @pytest.fixture()
 def console_errors(author_page) -> Iterator[list[str]]:
     """What the page logs as errors (a failed request included); each test ends with none."""
-    errors: list[str] = []
-    author_page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
-    yield errors
-    assert errors == []
+    yield author_page.console_errors
+    assert author_page.console_errors == []
 
 
 def _unique(stem: str) -> str:
@@ -263,8 +261,6 @@ def test_a_path_deep_link_opens_a_mapping(author_page, console_errors):
 
 def test_callers_see_read_only_pages(browser, gateway):
     page = new_page(browser, gateway, CALLER_TOKEN)
-    console: list[str] = []
-    page.on("console", lambda msg: console.append(msg.text) if msg.type == "error" else None)
     page.goto("/workbench#/streams/queries/CustomerDetectionQuery")
     expect(page.get_by_test_id("read-only")).to_be_visible()
     expect(page.locator("[data-testid=query-editor] .cm-content")).to_have_attribute("contenteditable", "false")
@@ -281,7 +277,7 @@ def test_callers_see_read_only_pages(browser, gateway):
     page.goto("/workbench#/streams/new/query")
     expect(page.locator("main")).to_contain_text("Only authors can add queries")
     page.context.close()
-    assert page.js_errors == [] and console == []
+    assert page.js_errors == [] and page.console_errors == []
 
 
 def test_tablet_width_keeps_the_pages_on_screen(author_page, console_errors):

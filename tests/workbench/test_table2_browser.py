@@ -21,7 +21,7 @@ from playwright.sync_api import Page
 from gateway.config import PROJECT_ROOT
 from gateway.workflow.agile import TABLES, OwnerClient, behaviour
 from table2_steps import Setup, make_all, markdown, prepare, restore, snapshot
-from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, new_page
+from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, REFUSED_REQUEST, console_errors, new_page
 
 pytestmark = pytest.mark.browser
 
@@ -63,13 +63,10 @@ def teahouse_behaviour(gw: OwnerClient) -> dict[str, list[str]]:
 @pytest.fixture()
 def page(browser, gateway) -> Iterator[Page]:
     page = new_page(browser, gateway, AUTHOR_TOKEN)
-    console: list[str] = []
-    # refused requests the views handle themselves (a 404 probe, a 422 check) are logged by the browser
-    page.on("console", lambda m: console.append(m.text)
-            if m.type == "error" and not m.text.startswith("Failed to load resource") else None)
     yield page
     page.context.close()
-    assert page.js_errors == [] and console == []
+    # refused requests the views handle themselves (a 404 probe, a 422 check) are not script errors
+    assert page.js_errors == [] and console_errors(page, REFUSED_REQUEST) == []
 
 
 def test_all_sixteen_change_requests_by_the_owner_in_the_browser(page: Page, gateway, setup: Setup, tmp_path):

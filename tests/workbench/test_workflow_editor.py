@@ -18,7 +18,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from gateway.config import PROJECT_ROOT
-from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, OTHER_AUTHOR_TOKEN
+from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, OTHER_AUTHOR_TOKEN, REFUSED_REQUEST, console_errors
 
 pytestmark = pytest.mark.browser
 
@@ -60,12 +60,8 @@ def step_ids(result: dict) -> list[str]:
 def author_page(author_page: Page) -> Page:
     """The signed-in author's page, also failing on console errors (HTTP answers the editor
     handles itself, such as a 409 conflict or a 422 check, are not errors of the page)."""
-    errors: list[str] = []
-    author_page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error"
-                   and not msg.text.startswith("Failed to load resource: the server responded with a status of 4")
-                   else None)
     yield author_page
-    assert errors == []
+    assert console_errors(author_page, f"{REFUSED_REQUEST}: the server responded with a status of 4") == []
 
 
 def open_workflow(page: Page, name: str) -> None:

@@ -39,7 +39,20 @@ def new_page(browser, gateway, token: str | None):
     errors: list[str] = []
     page.on("pageerror", lambda exc: errors.append(str(exc)))
     page.js_errors = errors  # checked by the tests: a script error is a failure
+    logged: list[str] = []
+    page.on("console", lambda msg: logged.append(msg.text) if msg.type == "error" else None)
+    page.console_errors = logged  # what the page logs as errors (refused requests included)
     return page
+
+
+#: How the browser logs a refused request (a 404 probe, a 409 conflict, a 422 check) that a view
+#: handles itself: not an error of the page.
+REFUSED_REQUEST = "Failed to load resource"
+
+
+def console_errors(page, allowed: str | None = None) -> list[str]:
+    """The page's logged errors, without those starting with ``allowed`` (e.g. :data:`REFUSED_REQUEST`)."""
+    return [e for e in page.console_errors if not (allowed and e.startswith(allowed))]
 
 EDITOR = ".editor-host:not([hidden]) .cm-content"
 
