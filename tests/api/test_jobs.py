@@ -133,3 +133,25 @@ def test_queued_jobs_can_be_cancelled_and_a_full_queue_refuses(api_gateway):
     finally:
         gate.set()
         service.close()
+
+
+def test_a_full_job_queue_is_told_as_429_over_rest(client, api_gateway, monkeypatch):
+    import threading
+
+    gate = threading.Event()
+
+    class SlowEngine:
+        def deploy(self, *args, **kwargs):
+            gate.wait(30)
+            raise AssertionError("not reached in this test")
+
+    service = JobService(SlowEngine(), JobRecords(), "process-d", max_queued=1)
+    monkeypatch.setattr(api_gateway, "jobs", service)
+    try:
+        answers = [client.put("/api/rulesets/jobs-g", json={"files": files("g")}, headers=ASYNC) for _ in range(3)]
+        assert [a.status_code for a in answers[:1]] == [202]
+        refused = answers[-1]
+        assert refused.status_code == 429 and "engine.max_queued_jobs" in refused.json()["error"]
+    finally:
+        gate.set()
+        service.close()
