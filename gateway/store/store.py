@@ -139,6 +139,11 @@ class InformationState:
                       exc, len(lines), stored_type, collection, self.journal.dropped)
         return ids
 
+    def keeps_own_indexes(self, collection: str) -> None:
+        """``collection`` is indexed by its owner (e.g. the decisions): the shipper adds no generic
+        ``_meta`` index to it (every index is a write per document)."""
+        self._indexed.add((self.database, collection))
+
     def flush(self, timeout_s: float = 10.0) -> bool:
         """Wait until every write made so far is in the database; False if it is not reachable."""
         return self.journal.flush(timeout_s)

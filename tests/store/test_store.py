@@ -219,3 +219,22 @@ def test_a_document_the_database_refuses_is_set_aside_and_holds_up_nothing(store
     assert store.health()["set_aside"] == 1
     refused = (store.journal.folder / "refused.jsonl").read_text()
     assert "DocumentTooLarge" in refused or "too large" in refused.lower()
+
+
+def test_decisions_keep_one_secondary_index_and_retire_the_old_ones(store: InformationState) -> None:
+    """Every index is a write per recorded fire: decisions keep (ruleset, _id) only; indexes an
+    earlier version made are dropped at start, and filters still answer without them."""
+    from gateway.store.decisions import DecisionRecord
+
+    coll = store.db["decisions"]
+    coll.create_index([("origin", 1), ("_id", -1)])
+    coll.create_index([("fired", 1), ("_id", -1)])
+    record = DecisionRecord(store)
+    for i in range(3):
+        record.on_engine_event("fire", {"decision_id": str(__import__("bson").ObjectId()), "ruleset": f"r{i % 2}",
+                                        "version": 1, "origin": "rest" if i else "kie", "fired": [f"rule {i}"]})
+    assert store.flush(10)
+    assert sorted(coll.index_information()) == ["_id_", "ruleset_1__id_-1"]
+    assert [d["ruleset"] for d in record.find(origin="rest")[0]] == ["r0", "r1"]
+    assert [d["origin"] for d in record.find(rule="rule 0")[0]] == ["kie"]
+    assert len(record.find(ruleset="r0")[0]) == 2
