@@ -399,6 +399,10 @@ def _follow_job(server: str, location: str, token: Optional[str]) -> tuple[int, 
                 error = job.get("error") or {}
                 return int(error.get("status", 500)), error
             time.sleep(0.2)
+    except KeyboardInterrupt:  # Ctrl-C: stop the build on the server too, as the user means
+        answer = httpx.delete(f"{server}{location}", headers=_headers(token), timeout=30)
+        said = "cancelling the build" if answer.status_code in (200, 202) else _json_or_text(answer)
+        _fail(f"interrupted: {said} ({location})")
     finally:
         if progress is not None:
             progress.close()

@@ -25,13 +25,16 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from typing import Any
 
-from gateway.engine.errors import EngineError
+from gateway.engine.errors import BuildCancelled, EngineError
 
 log = logging.getLogger(__name__)
 
 JOBS = "jobs"
 KINDS = ("deploy", "validate")
 FINISHED = ("succeeded", "failed", "cancelled")
+# a running build stops at its next progress report while it is still in one of these stages
+# (later, the version is being tested, stored and swapped in: that finishes)
+CANCELLABLE_STAGES = ("parse", "compile", "load", "assemble")
 PROGRESS_WRITE_INTERVAL_S = 0.5  # progress reaches the store at most twice a second
 LOST_AFTER_S = 30.0  # an unfinished job of a process that is gone, untouched this long, is lost
 
@@ -154,20 +157,24 @@ class JobService:
         return [self._maybe_lost(j) for j in self.records.recent(ruleset, max(1, min(limit, 500)))]
 
     def cancel(self, job_id: str, by: str = "anonymous") -> dict[str, Any]:
-        """Cancels a queued job of this process. A running build cannot be stopped half-way (the
-        compiler holds the JVM); a finished job stays as it ended."""
+        """Cancels a job of this process. A queued job ends ``cancelled`` at once; a running build
+        is asked to stop (``cancel_requested``): it stops at its next progress report (within
+        about half a second) while it is still compiling, and ends ``cancelled``; past compiling
+        (testing, storing, swapping in) it finishes. A finished job stays as it ended."""
         with self._cond:
             job = self._jobs.get(job_id)
             if job is None:
                 other = self.records.read(job_id)
                 if other is None:
                     raise JobError(404, f"no job {job_id!r}")
-                if other.get("process") == self.process:
-                    raise JobError(409, f"job {job_id} is {other['status']}: only a queued job can be cancelled")
+                if other.get("process") == self.process or other.get("status") in FINISHED:
+                    raise JobError(409, f"job {job_id} is {other['status']}: a finished job cannot be cancelled")
                 raise JobError(409, f"job {job_id} belongs to gateway process {other['process']}; "
                                     "cancel it there")
-            if job["status"] != "queued":
-                raise JobError(409, f"job {job_id} is {job['status']}: only a queued job can be cancelled")
+            if job["status"] == "running":
+                job.update(cancel_requested=True, cancel_requested_by=by, updated_at=_now())
+                self.records.write(job)
+                return dict(job)
             self._queue = deque((j, f) for j, f in self._queue if j["id"] != job_id)
             self._finish(job, "cancelled", error={"kind": "cancelled", "error": f"cancelled by {by}"})
             return dict(job)
@@ -206,6 +213,10 @@ class JobService:
             else:
                 errors = self.engine.validate(job["ruleset"], files, on_progress=progress)
                 outcome = {"valid": not errors, "errors": [e.to_dict() for e in errors]}
+        except BuildCancelled as exc:
+            with self._cond:
+                self._finish(job, "cancelled", error=exc.to_dict())
+            return
         except EngineError as exc:
             with self._cond:
                 self._finish(job, "failed", error=exc.to_dict())
@@ -223,6 +234,9 @@ class JobService:
 
         def report(done: int, total: int, stage: str) -> None:
             with self._cond:
+                if job.get("cancel_requested") and stage in CANCELLABLE_STAGES:
+                    raise BuildCancelled(f"cancelled by {job.get('cancel_requested_by', 'anonymous')} "
+                                         f"while {stage}: nothing was deployed")
                 job["progress"] = {"stage": stage, "done": done, "total": total}
                 job["updated_at"] = _now()
                 now = time.monotonic()

@@ -81,6 +81,15 @@ class CompileFailed(EngineError):
         return {"error": str(self), "kind": self.kind, "errors": [e.to_dict() for e in self.errors]}
 
 
+class BuildCancelled(EngineError):
+    """Someone cancelled the build (a build job) before it finished; nothing was deployed.
+
+    Raised by a progress callback between units: the build stops starting units, a unit that is
+    compiling finishes unused, and what serves is untouched."""
+
+    kind = "cancelled"
+
+
 class CompileResourceError(EngineError):
     """Compiling ran out of memory or time: a server-side limit, not a fault of the rule text.
 

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 from gateway import jvm
 from gateway.engine import drl_items
 from gateway.engine.drl_items import RuleSetItems, SourceItems
-from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError
+from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError
 from gateway.engine.unit_cache import UnitArtifact, UnitCache
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -318,9 +318,10 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             pending = set(futures)
             while pending:
                 finished, pending = concurrent.futures.wait(
-                    pending, timeout=_wait_timeout(deadline), return_when=concurrent.futures.FIRST_COMPLETED)
+                    pending, timeout=_heartbeat_timeout(deadline), return_when=concurrent.futures.FIRST_COMPLETED)
                 if not finished:
                     deadline.check()
+                    _progress(on_progress, min(done, total), total, "compile")  # heartbeat: a cancel is heard
                     continue
                 for future in finished:
                     _, rules = futures[future]
@@ -345,6 +346,14 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
     if errors:
         raise CompileFailed(compiler._sorted(errors))
     return _Plan(decl_id, [(found[key], src.package, item.name) for key, src, item in order])
+
+
+HEARTBEAT_S = 0.5  # how often a long unit's wait reports progress (and hears a cancel)
+
+
+def _heartbeat_timeout(deadline: _Deadline) -> float:
+    remaining = _wait_timeout(deadline)
+    return HEARTBEAT_S if remaining is None else min(remaining, HEARTBEAT_S)
 
 
 def _wait_timeout(deadline: _Deadline) -> float | None:
@@ -405,9 +414,12 @@ def _check_duplicates(items: RuleSetItems, sources: list[_Source]) -> None:
 
 
 def _progress(on_progress: Progress | None, done: int, total: int, stage: str) -> None:
+    """Report progress; the callback may stop the build by raising BuildCancelled."""
     if on_progress is not None:
         try:
             on_progress(done, total, stage)
+        except BuildCancelled:
+            raise
         except Exception:  # a broken progress display must not break the build
             log.debug("progress callback failed", exc_info=True)
 

@@ -3,13 +3,18 @@ to the same result the synchronous call gives (real JVM, real MongoDB-protocol s
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from gateway.jobs import JobRecords, JobService
 
 from api_helpers import BROKEN, FACTS, files
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench" / "peers"))
+import growth_rules  # noqa: E402
 
 ASYNC = {"Prefer": "respond-async"}
 
@@ -126,13 +131,38 @@ def test_queued_jobs_can_be_cancelled_and_a_full_queue_refuses(api_gateway):
         with pytest.raises(JobError) as full:
             service.submit("validate", "x", {"a.drl": ""})
         assert full.value.status == 429
-        with pytest.raises(JobError) as running:
-            service.cancel(first["id"])
-        assert running.value.status == 409
+        asked = service.cancel(first["id"], "bob")  # running: asked to stop at its next progress report
+        assert asked["status"] == "running" and asked["cancel_requested"] is True
         assert service.cancel(second["id"], "alice")["status"] == "cancelled"
     finally:
         gate.set()
         service.close()
+    # it never reported progress again (past compiling): it finished as it would have
+    assert service.get(first["id"])["status"] == "succeeded"
+    with pytest.raises(JobError) as finished:
+        service.cancel(first["id"])
+    assert finished.value.status == 409
+
+
+def test_a_running_build_is_cancelled_while_compiling_and_nothing_changes(client):
+    """A real 400-rule deploy job, cancelled once it reports compiling: it ends ``cancelled``
+    (202 when asked), nothing is deployed, and the next deploy works."""
+    big = growth_rules.drl_files(400)
+    response = client.put("/api/rulesets/jobs-h", json={"files": big}, headers=ASYNC)
+    location = response.headers["location"]
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        job = client.get(location).json()
+        if (job.get("progress") or {}).get("stage") == "compile" or job["status"] not in ("queued", "running"):
+            break
+        time.sleep(0.02)
+    asked = client.delete(location)
+    assert asked.status_code == 202 and asked.json()["cancel_requested"] is True, asked.json()
+    done = follow(client, location)
+    assert done["status"] == "cancelled" and done["error"]["kind"] == "cancelled", done
+    assert "nothing was deployed" in done["error"]["error"]
+    assert client.get("/api/rulesets/jobs-h").status_code == 404
+    assert client.put("/api/rulesets/jobs-h", json={"files": files("h")}).status_code == 201
 
 
 def test_a_full_job_queue_is_told_as_429_over_rest(client, api_gateway, monkeypatch):

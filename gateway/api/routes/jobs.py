@@ -43,5 +43,8 @@ def get_job(job_id: str, jobs: JobsDep, _: Caller) -> JSON:
 
 @router.delete("/api/jobs/{job_id}")
 def cancel_job(job_id: str, jobs: JobsDep, who: Author) -> JSON:
-    """Cancel a queued job (409 once it runs: a build cannot be stopped half-way)."""
-    return JSON(_with_status(jobs.cancel(job_id, who.name)))
+    """Cancel a job: a queued one at once (200, ``cancelled``); a running build is asked to stop
+    (202, ``cancel_requested``: it ends ``cancelled`` if it was still compiling, else it finishes);
+    409 for a finished job or one another gateway process runs."""
+    job = _with_status(jobs.cancel(job_id, who.name))
+    return JSON(job, status_code=202 if job["status"] == "running" else 200)
