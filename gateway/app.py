@@ -174,6 +174,12 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
         members = Membership(store.db, name, heartbeat_s=settings.sessions.member_heartbeat_s)
         closers.append(("the member record", members.close))
+        if settings.engine.compile_shared_cache:  # followers on other hosts assemble, not compile
+            from gateway.engine import incremental
+            from gateway.store.unit_store import SharedUnitStore
+
+            incremental.share_units(SharedUnitStore(store.db, settings.engine.compile_shared_cache_days))
+            closers.append(("the shared rule units", lambda: incremental.share_units(None)))
     else:
         catalog = MemoryCatalog(name)
     start_seq = catalog.last_seq()  # follow from here: nothing changed after loading is missed

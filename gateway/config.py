@@ -47,6 +47,11 @@ class EngineSettings(BaseModel):
         "(~/.cache/printeps/rule-units), shared by every gateway process of the user on the host.")
     compile_memory_cache_mb: int = Field(default=256, description="Compiled rule units kept in memory (zipped).")
     compile_disk_cache_mb: int = Field(default=2048, description="Bound of the on-disk rule unit cache.")
+    compile_shared_cache: bool = Field(
+        default=True, description="Also keep compiled rule units and plans in the Information State (rule_units, "
+        "rule_plans), so gateways on other hosts assemble a deployed version instead of compiling it.")
+    compile_shared_cache_days: float = Field(
+        default=30.0, description="Shared rule units not used for this long are removed (TTL).")
     warm_budget_s: float = Field(
         default=0.25, description="Time spent firing a new version on sample facts before it serves.")
     max_queued_jobs: int = Field(

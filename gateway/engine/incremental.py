@@ -95,6 +95,7 @@ class _Plan:
 
 _cache: UnitCache | None = None
 _cache_config: tuple[Any, ...] | None = None
+_shared: Any = None  # the tier shared with other hosts (share_units)
 _loaded: OrderedDict[tuple[str, str], _Loaded] = OrderedDict()
 _loaded_lock = threading.RLock()
 MAX_LOADED_RULES = 60_000  # loaded units kept for the next build (their classes live on in KieBases anyway)
@@ -122,7 +123,16 @@ def unit_cache(options: CompileOptions) -> UnitCache:
     if _cache is None or _cache_config != config:
         _cache = UnitCache(root, env_key(), options.memory_cache_mb, options.disk_cache_mb)
         _cache_config = config
+    _cache.shared = _shared
     return _cache
+
+
+def share_units(shared: Any) -> None:
+    """Share compiled units and plans with other hosts through ``shared`` (a
+    :class:`gateway.store.unit_store.SharedUnitStore`; None: this host only). The composition
+    root sets it when the gateway runs on an Information State."""
+    global _shared
+    _shared = shared
 
 
 def reset() -> None:

@@ -7,7 +7,10 @@ unit's class bytes are kept under its content hash, with the keys of the rules i
 build takes each rule from wherever it was compiled before. Several gateway processes on one host
 share the disk cache: files are written whole under a temporary name and renamed into place, so a
 reader sees a complete unit or none; a unit that vanished (evicted by another process) is simply
-compiled again.
+compiled again. Gateways on other hosts share units through an optional third tier, ``shared``
+(the Information State: :class:`gateway.store.unit_store.SharedUnitStore`, set by the composition
+root): a unit or plan missing in memory and on disk is looked up there, and every unit and plan
+written to disk is written there too.
 
 Layout of ``<root>/<env>/`` (``env`` = Drools version + Java helpers + format, so classes made by
 another Drools are never loaded):
@@ -64,6 +67,7 @@ class UnitArtifact:
 class CacheStats:
     memory_hits: int = 0
     disk_hits: int = 0
+    shared_hits: int = 0
     misses: int = 0
     written: int = 0
     evicted: int = 0
@@ -73,7 +77,10 @@ class UnitCache:
     """Units by id and rules by key, in memory (bounded, least recently used first out) and on disk
     (bounded by size, oldest first out). Thread-safe."""
 
-    def __init__(self, root: Path | None, env: str, memory_mb: int = 256, disk_mb: int = 2048):
+    def __init__(self, root: Path | None, env: str, memory_mb: int = 256, disk_mb: int = 2048,
+                 shared: Any = None):
+        self.env = env
+        self.shared = shared  # units and plans of other hosts (see the module's docstring), or None
         self.dir = (Path(root) / env) if root is not None else None
         self.memory_bytes = memory_mb * 1024 * 1024
         self.disk_bytes = disk_mb * 1024 * 1024
@@ -104,12 +111,34 @@ class UnitCache:
         if unit is not None:
             self.stats.disk_hits += 1
             self._remember(unit)
+            return unit
+        unit = self._read_shared(unit_id)
+        if unit is None:
+            self.stats.misses += 1
+            return None
+        self.stats.shared_hits += 1
+        self._remember(unit)
+        self._write(unit)  # this host's other processes find it on disk from now on
         return unit
 
     def put(self, unit: UnitArtifact, persist: bool = True) -> None:
         self._remember(unit)
         if persist:
             self._write(unit)
+            if self.shared is not None:
+                self.shared.put_unit(self.env, unit.manifest(), unit.data)
+
+    def _read_shared(self, unit_id: str) -> UnitArtifact | None:
+        if self.shared is None or self.dir is None:
+            return None
+        found = self.shared.get_unit(self.env, unit_id)
+        if found is None:
+            return None
+        manifest, data = found
+        if manifest.get("format") != FORMAT or manifest.get("size") != len(data) or manifest.get("id") != unit_id:
+            log.warning("shared rule unit %s is not usable here (format or size differs); compiling it", unit_id)
+            return None
+        return UnitArtifact.from_manifest(manifest, data)
 
     def find_rule(self, rule_key: str) -> str | None:
         """The id of a unit holding the rule with this key, if any (as of the last :meth:`refresh`)."""
@@ -152,17 +181,14 @@ class UnitCache:
 
     def _read(self, unit_id: str) -> UnitArtifact | None:
         if self.dir is None:
-            self.stats.misses += 1
             return None
         data_path, manifest_path = self._unit_paths(unit_id)
         try:
             manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
             data = data_path.read_bytes()
         except (OSError, ValueError):
-            self.stats.misses += 1
             return None
         if manifest.get("format") != FORMAT or manifest.get("size") != len(data):
-            self.stats.misses += 1
             return None
         _touch(manifest_path)
         return UnitArtifact.from_manifest(manifest, data)
@@ -250,15 +276,31 @@ class UnitCache:
         try:
             plan = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
-            return None
+            return self._shared_plan(content_hash)
         if plan.get("format") != FORMAT:
-            return None
+            return self._shared_plan(content_hash)
         _touch(path)
+        return plan
+
+    def _shared_plan(self, content_hash: str) -> dict[str, Any] | None:
+        """The plan another host wrote (kept on this host's disk from now on)."""
+        if self.shared is None:
+            return None
+        plan = self.shared.get_plan(self.env, content_hash)
+        if plan is None or plan.get("format") != FORMAT:
+            return None
+        self._write_plan(content_hash, plan)
         return plan
 
     def put_plan(self, content_hash: str, plan: dict[str, Any]) -> None:
         if self.dir is None:
             return
+        self._write_plan(content_hash, plan)
+        if self.shared is not None:
+            self.shared.put_plan(self.env, content_hash, {**plan, "format": FORMAT})
+
+    def _write_plan(self, content_hash: str, plan: dict[str, Any]) -> None:
+        assert self.dir is not None
         try:
             _atomic_write(self.dir / "sets" / f"{content_hash}.json", json.dumps({**plan, "format": FORMAT}).encode("utf-8"))
         except OSError as exc:

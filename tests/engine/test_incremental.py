@@ -357,6 +357,55 @@ def test_the_disk_cache_serves_another_process_without_compiling(options, tmp_pa
     assert edited["mode"] == "incremental" and edited["rules_compiled"] == 1
 
 
+def test_another_host_assembles_from_the_shared_units_without_compiling(options, tmp_path, store):
+    """Units and plans go to the Information State too: a gateway on another host (its own empty
+    disk cache, a fresh memory) assembles the set from them, and a one-rule edit there compiles
+    one rule. A real MongoDB-protocol server."""
+    from gateway.store.unit_store import SharedUnitStore
+
+    files = growth_rules.drl_files(120)
+    facts = growth_rules.sample_facts(2)
+    incremental.share_units(SharedUnitStore(store.db))
+    try:
+        first = compiler.compile_files(files, "hosts", options)
+        assert store.db["rule_units"].count_documents({}) == first.stats.units_compiled
+        incremental.reset()  # another host: nothing in memory, and another disk
+        other = CompileOptions(cache_dir=str(tmp_path / "other-host"))
+        there = compiler.compile_files(files, "hosts", other)
+        assert there.stats.mode == "plan" and there.stats.rules_compiled == 0 and there.rule_count == 120
+        fire = lambda c: json.loads(str(c.runner.fire(encode_facts(facts, 100), 1000, False, True)))["actions"]  # noqa: E731
+        assert fire(there) == fire(first)
+        edited = dict(files, **{"rules_000.drl": files["rules_000.drl"].replace("r00007", "r00007 edited")})
+        again = compiler.compile_files(edited, "hosts", other)
+        assert again.stats.mode == "incremental" and again.stats.rules_compiled == 1
+        assert list((tmp_path / "other-host").rglob("units/*.zip"))  # kept on that host's disk too
+    finally:
+        incremental.share_units(None)
+
+
+def test_the_shared_tier_failing_never_fails_a_build(options):
+    """The database away: every shared lookup and write fails, the build compiles locally."""
+    from gateway.store.unit_store import SharedUnitStore
+
+    class DownDb(dict):
+        def __missing__(self, name):
+            from pymongo.errors import ServerSelectionTimeoutError
+
+            class Coll:
+                def __getattr__(self, _):
+                    def fail(*a, **k):
+                        raise ServerSelectionTimeoutError("no server")
+                    return fail
+            return Coll()
+
+    incremental.share_units(SharedUnitStore(DownDb()))
+    try:
+        built = compiler.compile_files(growth_rules.drl_files(20), "down", options)
+        assert built.rule_count == 20 and built.stats.rules_compiled == 20
+    finally:
+        incremental.share_units(None)
+
+
 def test_export_and_load_a_compiled_set_in_another_process(options, tmp_path):
     files = growth_rules.drl_files(150)
     compiled = compiler.compile_files(files, "moved", options)
