@@ -261,6 +261,12 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
                       members=members, jobs=jobs, live=live, _closers=closers)
+    if store is not None and settings.sync.live_relay:  # the Live view shows every process's teahouse
+        from gateway.store.live_relay import LiveRelay
+
+        relay = LiveRelay(store.db, live, store.process, change_streams=settings.sync.change_streams,
+                          poll_interval_s=max(settings.sync.poll_interval_s, 0.25))
+        closers.append(("the live relay", relay.close))
     closers.append(("the live feed", live.close))  # first: open event streams end, the server can stop
     if rest:
         from gateway.api.main import create_app

@@ -291,6 +291,9 @@ class SyncSettings(BaseModel):
     change_streams: bool = Field(default=True, description="Wake on MongoDB change streams where the server has them.")
     poll_interval_s: float = Field(default=0.25, description="Polling of the change log where it has none.")
     reconcile_interval_s: float = Field(default=30.0, description="Full comparison with the catalog, as a safety net.")
+    live_relay: bool = Field(
+        default=True, description="Show other processes' decisions, actions and detections in this process's live "
+        "feed (GET /api/live), while someone watches it.")
 
 
 class Settings(BaseModel):

@@ -20,10 +20,10 @@ each kind are kept (``kept`` per kind) and replayed to late joiners, so a browse
 mid-scenario still draws the last minute. Subscribers read from their own bounded queue: a slow or
 stalled browser loses its oldest events (counted) and never blocks the gateway's threads.
 
-One process, one feed: with several worker processes, each feed shows what its process sees (the
-readings it ingests, the decisions it makes). Decisions are also in the Information State
-(``/api/decisions``) for every process; relaying them across processes would need change streams on
-``decisions``, which the embedded store does not have (docs/workbench.md, "Live").
+One process, one feed, showing the whole gateway: with several worker processes or hosts, what
+the *others* decide, do and detect reaches this feed through the Information State while someone
+watches (:mod:`gateway.store.live_relay`, wired by the composition root); readings appear in the
+process that runs the ROS node.
 
 Plain Python, no web framework: the REST route (:mod:`gateway.api.routes.live`) only turns a
 subscription into Server-Sent Events.

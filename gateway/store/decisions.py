@@ -16,8 +16,6 @@ process are also kept in memory for a moment, so one that is not shipped yet is 
 from __future__ import annotations
 
 import logging
-import os
-import socket
 import threading
 from collections import OrderedDict
 from datetime import datetime, timezone
@@ -28,7 +26,7 @@ from bson import ObjectId
 from bson.errors import InvalidId
 from pymongo.errors import PyMongoError
 
-from gateway.store.store import ACTIONS, StoreError, StoreUnavailable
+from gateway.store.store import ACTIONS, StoreError, StoreUnavailable, process_name
 
 log = logging.getLogger(__name__)
 
@@ -37,11 +35,6 @@ RECENT_KEPT = 2000
 MAX_PAGE = 1000
 # indexes earlier versions kept on decisions (see DecisionRecord._indexes)
 RETIRED_INDEXES = {"origin_1__id_-1", "fired_1__id_-1", "correlation_id_1", "_meta.stored_type_1__meta.inserted_at_1"}
-
-
-def process_name() -> str:
-    """host:pid — which gateway process made a decision."""
-    return f"{socket.gethostname()}:{os.getpid()}"
 
 
 class DecisionRecord:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import re
+import socket
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -100,6 +102,7 @@ class InformationState:
                  fsync: bool = False, linger_s: float = 0.0) -> None:
         self.uri = uri
         self.backend = backend
+        self.process = process_name()  # stamped on every write (_meta.process)
         self.database = database
         self.client: pymongo.MongoClient = pymongo.MongoClient(
             uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms, socketTimeoutMS=timeout_ms * 5,
@@ -126,7 +129,7 @@ class InformationState:
         check_collection(collection)
         ids, lines = [], []
         for doc in docs:
-            body = _body(doc, stored_type, inserted_by)
+            body = _body(doc, stored_type, inserted_by, self.process)
             line = encode(self.database, collection, body)
             if check_keys and _BAD_KEY.search(line):
                 _clean(dict(doc), collection)  # raises StoreError naming the field and where it is
@@ -240,13 +243,20 @@ class InformationState:
 _BAD_KEY = re.compile(rb'"(?:\$(?:[^"\\]|\\.)*|(?:[^"\\]|\\.)*\.(?:[^"\\]|\\.)*)":')
 
 
-def _body(doc: Mapping[str, Any], stored_type: str, inserted_by: str) -> dict[str, Any]:
+def process_name() -> str:
+    """host:pid — which gateway process wrote something or made a decision."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _body(doc: Mapping[str, Any], stored_type: str, inserted_by: str, process: str) -> dict[str, Any]:
     """The journalled form: plain JSON (``_id`` as hex text, ``inserted_at`` as epoch seconds);
-    NaN and infinity become null when it is encoded."""
+    NaN and infinity become null when it is encoded. ``process`` (host:pid) tells other gateway
+    processes which writes are not their own (the live relay)."""
     body = dict(doc)
     body.pop("_meta", None)
     body["_id"] = str(body.get("_id") or ObjectId())
-    body["_meta"] = {"stored_type": stored_type, "inserted_at": time.time(), "inserted_by": inserted_by}
+    body["_meta"] = {"stored_type": stored_type, "inserted_at": time.time(), "inserted_by": inserted_by,
+                     "process": process}
     return body
 
 

@@ -4,6 +4,7 @@ killed. One live rule base and one decision record across all of them."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -176,6 +177,36 @@ def test_a_decision_is_answered_by_any_process(cluster):
     decision = httpx.get(f"{a.url}/api/decisions/{answer['decision_id']}").json()
     assert decision["correlation_id"] == "from-b" and decision["origin"] == "rest"
     assert decision["process"].endswith(f":{cluster['B'].proc.pid}")
+
+
+def test_the_live_view_of_one_process_shows_the_decisions_of_the_others(cluster):
+    """The owner's Live feed on B shows what A decides (relayed through the Information State)."""
+    a, b = cluster["A"], cluster["B"]
+    seen: list[str] = []
+    stop = threading.Event()
+
+    def listen() -> None:
+        with httpx.Client(timeout=30) as http, \
+                http.stream("GET", f"{b.url}/api/live", params={"replay": "false", "heartbeat_s": 0.5}) as r:
+            kind = None
+            for line in r.iter_lines():
+                if stop.is_set():
+                    return
+                if line.startswith("event: "):
+                    kind = line[7:]
+                elif line.startswith("data: ") and kind == "decision":
+                    seen.append(json.loads(line[6:])["decision_id"])
+
+    listener = threading.Thread(target=listen, daemon=True)
+    listener.start()
+    fired_on_a: list[str] = []
+    try:
+        def relayed() -> bool:
+            fired_on_a.append(fire(a.url)["decision_id"])
+            return bool(set(seen) & set(fired_on_a))
+        assert wait_for(relayed, 20, step=0.3) is not None, b.output()
+    finally:
+        stop.set()
 
 
 def test_a_restarted_process_serves_the_current_version_at_once(cluster):

@@ -1,0 +1,116 @@
+"""What the other gateway processes see happen, relayed into this process's live feed.
+
+Why: the owner's Live view (``GET /api/live``) is served by whichever process the browser reached;
+with ``--workers N`` or several hosts that process makes only a share of the decisions. Every
+process already writes its decisions, robot action outcomes and stream detections to the
+Information State, each stamped with the process (``_meta.process``); this relay follows those
+inserts made by *other* processes and hands them to the local feed's own hooks, so every process
+shows the whole teahouse.
+
+It costs nothing while nobody watches: the change stream is opened when the feed gets its first
+subscriber and closed when the last one leaves. Where the server has no change streams (a
+standalone ``mongod``) it polls the collections by ``_id`` instead. Events are relayed from the
+moment the stream opens (no back-fill from other processes; the feed replays its own kept events).
+Readings (sensor distances) are not relayed: they arrive where the ROS node runs.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+from bson import ObjectId
+from pymongo.errors import OperationFailure, PyMongoError
+
+log = logging.getLogger(__name__)
+
+DECISIONS, ACTIONS, QUERY_RESULTS = "decisions", "actions", "query_results"
+RELAYED = (DECISIONS, ACTIONS, QUERY_RESULTS)
+IDLE_CHECK_S = 0.5
+
+
+class LiveRelay:
+    """Follows other processes' decisions, actions and detections into ``feed`` (a LiveFeed)."""
+
+    def __init__(self, db: Any, feed: Any, process: str, *, change_streams: bool = True,
+                 poll_interval_s: float = 0.5) -> None:
+        self.db = db
+        self.feed = feed
+        self.process = process
+        self.change_streams = change_streams
+        self.poll_interval_s = poll_interval_s
+        self.relayed = 0
+        self.last_error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="live-relay", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    # ---- the loop ----------------------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            if not self._watched():
+                self._stop.wait(IDLE_CHECK_S)
+                continue
+            try:
+                if self.change_streams:
+                    self._follow_stream()
+                else:
+                    self._poll()
+            except OperationFailure as exc:
+                if self.change_streams and exc.code in (40573, 136, 303):  # no change streams here
+                    log.info("live relay: the server has no change streams (%s); polling instead", exc)
+                    self.change_streams = False
+                    continue
+                self._failed(exc)
+            except PyMongoError as exc:  # the database is away: try again in a moment
+                self._failed(exc)
+
+    def _watched(self) -> bool:
+        return self.feed.stats()["subscribers"] > 0 and not self.feed.closed
+
+    def _failed(self, exc: Exception) -> None:
+        self.last_error = f"{type(exc).__name__}: {exc}"
+        log.warning("live relay: %s; retrying", self.last_error)
+        self._stop.wait(1.0)
+
+    def _follow_stream(self) -> None:
+        """Relay inserts while someone watches; return when nobody does any more."""
+        match = {"operationType": "insert", "ns.coll": {"$in": list(RELAYED)},
+                 "fullDocument._meta.process": {"$ne": self.process}}
+        with self.db.watch([{"$match": match}], max_await_time_ms=int(IDLE_CHECK_S * 1000)) as stream:
+            while not self._stop.is_set() and self._watched():
+                change = stream.try_next()
+                if change is not None:
+                    self.relay(change["ns"]["coll"], change["fullDocument"])
+
+    def _poll(self) -> None:
+        """Without change streams: new documents by ``_id`` (time-ordered ObjectIds) every interval."""
+        since = {name: ObjectId() for name in RELAYED}  # from now on
+        while not self._stop.is_set() and self._watched():
+            for name in RELAYED:
+                for doc in self.db[name].find({"_id": {"$gt": since[name]}, "_meta.process": {"$ne": self.process}}
+                                              ).sort("_id", 1).limit(1000):
+                    since[name] = doc["_id"]
+                    self.relay(name, doc)
+            self._stop.wait(self.poll_interval_s)
+
+    # ---- one document --------------------------------------------------------------------------------
+    def relay(self, collection: str, doc: dict[str, Any]) -> None:
+        """Hand one stored document to the feed hook that made it in its own process."""
+        try:
+            if collection == DECISIONS:
+                self.feed.on_engine_event("fire", doc)
+            elif collection == ACTIONS:
+                self.feed.on_outcome(doc)
+            elif collection == QUERY_RESULTS:
+                self.feed.on_stream_event({**doc, "kind": "result", "solutions": doc.get("solutions")
+                                           or len(doc.get("rows") or [])})
+            self.relayed += 1
+        except Exception:  # a malformed document is skipped, never a dead relay
+            log.warning("live relay: skipped a %s document it could not show", collection, exc_info=True)
