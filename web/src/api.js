@@ -25,9 +25,10 @@ export class ApiError extends Error {
   }
 }
 
-/** One request; resolves with the decoded JSON body or rejects with an ApiError. */
-export async function api(method, path, body) {
-  const headers = { Accept: "application/json" };
+/** One request; resolves with the decoded JSON body or rejects with an ApiError. `extraHeaders`
+ * adds request headers (e.g. `Prefer: respond-async` to get a build job instead of waiting). */
+export async function api(method, path, body, extraHeaders = {}) {
+  const headers = { Accept: "application/json", ...extraHeaders };
   const token = getToken();
   if (token) headers.Authorization = `Bearer ${token}`;
   const init = { method, headers };

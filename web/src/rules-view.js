@@ -10,6 +10,8 @@ import { actionList, firedList } from "./actions.js";
 import { assistFor, declaredTypes, dslEntries } from "./dsl-assist.js";
 import { mountTests } from "./tests-view.js";
 import { mountTableEditor } from "./table-editor.js";
+import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
+import { JobProgress, JobsList } from "./jobs-view.js";
 
 const CHECK_DELAY_MS = 500;
 const ADDABLE = [".xlsx", ".csv", ".dslr", ".dsl", ".drl"];
@@ -117,6 +119,8 @@ class RulesView {
   }
 
   dispose() {
+    this.disposed = true; // stops following a build job (the build itself goes on; see Build jobs)
+    this.jobsList.dispose();
     this.scheduleCheck.cancel();
     this.saveDraft.cancel();
     this.storeDraft();
@@ -167,7 +171,7 @@ class RulesView {
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
           h("h2", { class: "small" }, "Problems"), this.problemsEl),
-        h("div", { class: "right" }, this.buildDeploy(), this.buildTry(), this.buildTests()))));
+        h("div", { class: "right" }, this.buildDeploy(), this.buildJobs(), this.buildTry(), this.buildTests()))));
     this.renderLive();
   }
 
@@ -547,13 +551,20 @@ class RulesView {
     this.commentEl = h("input", { type: "text", class: "comment", maxlength: "500", "aria-label": "What did you change?",
       placeholder: "e.g. Friendlier greeting for groups" });
     this.deployResultEl = h("div", { class: "deploy-result", "data-testid": "deploy-result", "aria-live": "polite" });
+    this.deployButton = h("button", { class: "big primary", "data-testid": "deploy", onclick: () => this.deploy() }, "Deploy to the robot");
     return h("div", { class: "card deploy" },
       h("h2", {}, "Deploy"),
       h("label", { class: "field" }, "What did you change? (shown in the history)", this.commentEl),
       h("div", { class: "buttons" },
-        h("button", { class: "big primary", "data-testid": "deploy", onclick: () => this.deploy() }, "Deploy to the robot"),
+        this.deployButton,
         h("button", { class: "big secondary", onclick: () => this.discard() }, "Undo all my changes")),
       this.deployResultEl);
+  }
+
+  /** The rule set's recent build jobs (collapsed until wanted). */
+  buildJobs() {
+    this.jobsList = new JobsList({ ruleset: this.name, editable: this.editable });
+    return this.jobsList.el;
   }
 
   // ---- Tests ------------------------------------------------------------------------------------
@@ -578,33 +589,90 @@ class RulesView {
   // ---- Deploy ---------------------------------------------------------------------------------
 
   async deploy(force = false) {
-    await this.flushTables();
-    const files = this.files();
-    const comment = this.commentEl.value.trim();
+    if (this.building) return; // one build at a time from this page (the button is disabled meanwhile)
+    this.setBuilding(true);
     fill(this.deployResultEl, h("p", { class: "muted" }, "Deploying…"));
     try {
+      await this.flushTables();
+      const files = this.files();
+      const comment = this.commentEl.value.trim();
       const body = { files, comment, base_version: this.base };
       if (force) body.force = true;
-      const result = await api("PUT", rulesetPath(this.name), body);
-      this.original = files;
-      this.base = result.version;
-      this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
-      localStorage.removeItem(draftKey(this.name));
-      this.commentEl.value = "";
-      this.renderLive();
-      this.updateDirty();
-      fill(this.deployResultEl, h("div", { class: "message ok", role: "status" }, `✓ Deployed. Version ${result.version} is now live.`));
-      this.ctx.refreshRulesets();
+      this.deployed(files, comment, await this.buildAndDeploy(body));
     } catch (err) {
-      if (err.status === 409) this.conflict(err.body && err.body.current);
-      else if (err.body && err.body.kind === "scenarios") this.redScenarios(err.body);
-      else if (err.errors.length) {
-        this.server = normalizeErrors(err.errors);
-        this.renderProblems(false);
-        fill(this.deployResultEl, h("div", { class: "message error", role: "alert" },
-          `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
-      } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
+      this.notDeployed(err);
+    } finally {
+      this.setBuilding(false);
     }
+  }
+
+  /** While a build runs the Deploy button rests, and the result area is busy (screen readers then
+   * announce its end, not every step of the progress). */
+  setBuilding(on) {
+    this.building = on;
+    this.deployButton.disabled = on;
+    if (on) this.deployResultEl.setAttribute("aria-busy", "true");
+    else this.deployResultEl.removeAttribute("aria-busy");
+  }
+
+  /** Deploy `body` through a build job: its progress shows while it builds (after a moment, so a
+   * quick one flashes no bar) and its end becomes what the synchronous deploy answered or threw. */
+  async buildAndDeploy(body) {
+    this.progress = null;
+    const job = await submitJob("PUT", rulesetPath(this.name), body);
+    if (!isJob(job)) return job; // a gateway that deployed at once
+    const progress = new JobProgress(this.deployResultEl, job);
+    this.progress = progress;
+    this.jobsList.refresh();
+    try {
+      const done = await followJob(job, { onUpdate: (j) => progress.update(j), stopped: () => this.disposed });
+      return deployOutcome(done);
+    } finally {
+      progress.dispose();
+      this.jobsList.refresh();
+    }
+  }
+
+  /** The new version is live: the editor's text is now the deployed one. */
+  deployed(files, comment, result) {
+    this.original = files;
+    this.base = result.version;
+    this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
+    localStorage.removeItem(draftKey(this.name));
+    this.commentEl.value = "";
+    this.renderLive();
+    this.updateDirty();
+    fill(this.deployResultEl, h("div", { class: "message ok", role: "status" }, `✓ Deployed. Version ${result.version} is now live.`),
+      this.progress?.cancelRequested ? h("p", { class: "hint" }, "The build was too far along to cancel, so it finished.") : null);
+    this.ctx.refreshRulesets();
+  }
+
+  /** Say why nothing was deployed: compile problems go under the editor, red scenarios and
+   * conflicts get their own choices, a cancelled build keeps the edits. */
+  notDeployed(err) {
+    if (err instanceof FollowStopped) return; // the view was closed while the build ran
+    if (isCancelled(err)) this.buildCancelled(err);
+    else if (err.body && err.body.kind === "untracked") this.lostTrack(err);
+    else if (err.status === 409) this.conflict(err.body && err.body.current);
+    else if (err.body && err.body.kind === "scenarios") this.redScenarios(err.body);
+    else if (err.errors && err.errors.length) {
+      this.server = normalizeErrors(err.errors);
+      this.renderProblems(false);
+      fill(this.deployResultEl, h("div", { class: "message error", role: "alert" },
+        `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
+    } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
+  }
+
+  buildCancelled(err) {
+    const why = /^cancelled\b/.test(err.message) ? err.message : `cancelled (${err.message})`; // "cancelled by alice"
+    fill(this.deployResultEl, h("div", { class: "message info", role: "status", "data-testid": "build-cancelled" },
+      `Not deployed: the build was ${why}. Nothing was changed; your changes are still here.`));
+  }
+
+  /** Following the job failed (the gateway stopped answering): the build may still end either way. */
+  lostTrack(err) {
+    fill(this.deployResultEl, h("div", { class: "message warning", role: "alert" },
+      `Lost track of the build (${err.message}). It may still finish: see Build jobs, or reload the page in a moment.`));
   }
 
   /** The deploy was refused because test scenarios are red: say which, offer to deploy anyway. */
