@@ -248,7 +248,11 @@ class Engine:
         started = time.perf_counter()
         compiled = self._compile(files, name, on_progress)
         if not force:
+            if on_progress is not None:  # a deploy job shows this step too (it can take a moment)
+                on_progress(0, 1, "scenarios")
             scenarios.require_green(self, name, files)
+            if on_progress is not None:
+                on_progress(1, 1, "scenarios")
         try:
             info, seq = self.catalog.save(KIND, name, dict(files), author=author, comment=comment,
                                           hash=compiled.hash, base_version=base_version)

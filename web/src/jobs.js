@@ -19,6 +19,7 @@ const STAGES = {
   compile: "Compiling the rules",
   load: "Loading the compiled rules",
   assemble: "Putting the rule set together",
+  scenarios: "Running the test scenarios",
 };
 
 export function jobPath(id) {
