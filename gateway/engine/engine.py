@@ -347,17 +347,20 @@ class Engine:
         *,
         origin: str = "api",
         correlation_id: str | None = None,
+        record: bool = True,
     ) -> FireResult:
         """Fires the live version of ``name`` on ``facts`` in a fresh session (stateless).
 
         Every fire is a decision: it gets a ``decision_id`` and listeners (the Information State's
         decision record, metrics) hear of it with its ``origin`` (rest, kie, stream, ros,
-        workflow…), the caller's ``correlation_id`` and any ``context``.
+        workflow…), the caller's ``correlation_id`` and any ``context``. ``record=False`` is for
+        trials (a workflow's "try my edits"): no decision, nobody hears of it.
         """
         info, compiled = self._live_entry(name)
         result = self._fire(compiled, name, info.version, facts, fire_limit, return_facts, record_facts)
-        result.decision_id = self.record_decision(result, facts, origin=origin, correlation_id=correlation_id,
-                                                  context=context)
+        if record:
+            result.decision_id = self.record_decision(result, facts, origin=origin, correlation_id=correlation_id,
+                                                      context=context)
         return result
 
     def record_decision(self, result: FireResult, facts: list[dict[str, Any]], *, origin: str,

@@ -29,6 +29,7 @@ class Call:
     actor: str | None
     timeout: float
     cancelled: threading.Event = field(default_factory=threading.Event)
+    trial: bool = False  # a run of unsaved edits (the editor's "try"): its rule firings are no decisions
 
 
 class ModuleFailed(RuntimeError):
@@ -90,7 +91,8 @@ class RulesAdapter:
             raise ModuleFailed(f"'facts' must be a list of fact objects, got {type(facts).__name__}")
         ruleset = call.params.get("ruleset") or call.module.options["ruleset"]
         result = self.engine.fire(ruleset, facts, origin="workflow", correlation_id=f"{call.run_id}/{call.step_id}",
-                                  context={"workflow": call.workflow, "run_id": call.run_id, "step": call.step_id})
+                                  context={"workflow": call.workflow, "run_id": call.run_id, "step": call.step_id},
+                                  record=not call.trial)
         return result.to_dict() if hasattr(result, "to_dict") else dict(result)
 
 

@@ -87,9 +87,10 @@ class RunResult:
 class _Run:
     """The state of one run: its variables and its trace."""
 
-    def __init__(self, workflow: Workflow, run_id: str, inputs: Mapping[str, Any]) -> None:
+    def __init__(self, workflow: Workflow, run_id: str, inputs: Mapping[str, Any], trial: bool = False) -> None:
         self.workflow = workflow
         self.run_id = run_id
+        self.trial = trial
         self.variables: dict[str, Any] = {"input": {**workflow.inputs, **dict(inputs)}, "last": None}
         self.steps: list[StepRecord] = []
         self.cancelled = threading.Event()
@@ -110,9 +111,10 @@ class Executor:
         self._pool.shutdown(wait=False, cancel_futures=True)
 
     def run(self, workflow: Workflow, inputs: Mapping[str, Any] | None = None, *,
-            version: int | None = None, run_id: str | None = None) -> RunResult:
-        """Run the whole route once; never raises for step failures (see ``status``/``error``)."""
-        run = _Run(workflow, run_id or uuid.uuid4().hex[:12], inputs or {})
+            version: int | None = None, run_id: str | None = None, trial: bool = False) -> RunResult:
+        """Run the whole route once; never raises for step failures (see ``status``/``error``).
+        ``trial``: the editor's "try my edits" — rule firings in it are no decisions."""
+        run = _Run(workflow, run_id or uuid.uuid4().hex[:12], inputs or {}, trial)
         started_at = _now()
         t0 = time.perf_counter()
         self._record("workflow_run_started", {"run_id": run.run_id, "workflow": workflow.name,
@@ -261,7 +263,7 @@ class Executor:
         if adapter is None:
             raise LookupError(f"no adapter for module kind {module.kind!r} in this gateway")
         call = Call(workflow=run.workflow.name, run_id=run.run_id, step_id=record.step_id, module=module,
-                    params=params, actor=record.actor, timeout=timeout)
+                    params=params, actor=record.actor, timeout=timeout, trial=run.trial)
         future = self._pool.submit(adapter.call, call)
         try:
             return future.result(timeout=timeout)

@@ -89,7 +89,8 @@ class WorkflowService:
 
         def run() -> None:
             try:
-                self._remember(run_id, self.executor.run(workflow, inputs or {}, version=None, run_id=run_id))
+                self._remember(run_id, self.executor.run(workflow, inputs or {}, version=None, run_id=run_id,
+                                                             trial=True))
             except Exception:  # a background run has nobody to raise to: log it
                 log.exception("trial run %s of %s crashed", run_id, workflow.name)
 

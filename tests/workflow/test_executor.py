@@ -114,9 +114,11 @@ def test_missing_adapter_is_a_clear_step_failure(small):
 class StubEngine:
     def __init__(self) -> None:
         self.fired: list[tuple[str, list]] = []
+        self.recorded: list[bool] = []
 
     def fire(self, ruleset: str, facts: list, **decision: object) -> dict:
         assert decision["origin"] == "workflow" and decision["correlation_id"]  # every fire is a decision
+        self.recorded.append(bool(decision.get("record", True)))  # ...except in a trial of unsaved edits
         self.fired.append((ruleset, facts))
         return {"ruleset": ruleset, "version": 1, "fired": [], "facts": facts, "actions": [
             {"module": "say", "params": {"robot": "pepper", "text": "Welcome. ${not a template}"}},
@@ -156,6 +158,8 @@ route: {services: [s]}
     kinds = [kind for kind, _ in recorder.events]
     assert kinds[0] == "workflow_run_started" and kinds[-1] == "workflow_run_finished"
     assert kinds.count("workflow_step") == 4
+    assert ex.run(wf, {"age": 31}, trial=True).status == "succeeded"  # the editor's "try my edits"
+    assert engine.recorded == [True, False]
 
 
 def test_manual_step_waits_for_a_human_and_times_out():
