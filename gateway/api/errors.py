@@ -25,21 +25,9 @@ from gateway.stream.engine import QueryNotFound, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.rules import BindingError
 from gateway.versions import CatalogUnavailable
-from gateway.engine import (
-    CompileFailed,
-    CompileResourceError,
-    EngineError,
-    FactError,
-    InvalidRuleSet,
-    RuleRuntimeError,
-    RuleSetNotFound,
-    RunawayRules,
-    VersionConflict,
-    VersionNotFound,
-)
-from gateway.engine.errors import ScenariosFailed
+from gateway.engine import EngineError, VersionConflict
 from gateway.engine.session import CommandFailed
-from gateway.engine.sessions import SessionGone, SessionLimit, SessionNotFound, SessionRefused
+from gateway.engine.sessions import SessionNotFound, SessionRefused
 
 log = logging.getLogger(__name__)
 
@@ -66,32 +54,30 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
     body.setdefault("error", str(exc) or type(exc).__name__)
     if isinstance(exc, VersionConflict):
         body["error"] = "base version changed"
-        return 409, body
-    if isinstance(exc, (RuleSetNotFound, VersionNotFound, SessionNotFound)):
-        return 404, body
-    if isinstance(exc, CompileResourceError):  # a server limit (memory, time), not the author's text
-        return 503, body
-    if isinstance(exc, SessionLimit) or (isinstance(exc, CommandFailed) and exc.kind == "limit"):
-        return 429, body
-    if isinstance(exc, SessionGone):
-        return 410, body
-    if isinstance(exc, SessionRefused):
-        return (409 if exc.conflict else 422), body
-    if isinstance(exc, CommandFailed):
-        return 422, body
-    if isinstance(exc, (CompileFailed, InvalidRuleSet, FactError, RunawayRules, RuleRuntimeError, ScenariosFailed)):
-        return 422, body
-    return 500, body
+    return _status_of(exc), body
 
 
-#: The status of an engine error by its ``kind`` (for errors that travel as records, e.g. a build job's).
+#: The status of an engine error by its ``kind`` — one table for errors raised here and for those
+#: that travel as records (a build job's): 503 "resources" is a server limit, not the author's text.
 KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "invalid": 422, "facts": 422,
-               "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503}
+               "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503, "limit": 429,
+               "gone": 410}
 
 
 def engine_error_status(kind: str) -> int:
     """The HTTP status the synchronous call answers for an engine error of ``kind``."""
     return KIND_STATUS.get(kind, 500)
+
+
+def _status_of(exc: EngineError) -> int:
+    """Session errors whose status depends on more than their kind; every other by KIND_STATUS."""
+    if isinstance(exc, SessionNotFound):
+        return 404
+    if isinstance(exc, SessionRefused):
+        return 409 if exc.conflict else 422
+    if isinstance(exc, CommandFailed):
+        return 429 if exc.kind == "limit" else 422
+    return engine_error_status(getattr(exc, "kind", ""))
 
 
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
