@@ -37,6 +37,7 @@ RULES = ROOT / "rules" / "drl"
 EXAMPLE = "family with a baby"
 DOC = ROOT / "docs" / "benchmarks.md"
 SECTION = "## REST gateway"
+NOTES = ROOT / "bench" / "http_bench_notes.md"  # hand-written reading, kept with the generated section
 
 
 def teahouse_facts() -> list[dict]:
@@ -244,6 +245,7 @@ def main() -> None:
         "",
         *goals,
         f"At {conns} connections the workers are saturated: latency there is mostly queueing, the req/s is the capacity.",
+        *(["", NOTES.read_text().rstrip()] if NOTES.exists() else []),
     ])
     print("\n" + text)
     if args.write_docs:
