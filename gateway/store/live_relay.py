@@ -63,8 +63,8 @@ class LiveRelay:
                 else:
                     self._poll()
             except OperationFailure as exc:
-                if self.change_streams and exc.code in (40573, 136, 303):  # no change streams here
-                    log.info("live relay: the server has no change streams (%s); polling instead", exc)
+                if self.change_streams:  # no change streams here, or not for this user: poll instead
+                    log.info("live relay: no change stream on the database (%s); polling instead", exc)
                     self.change_streams = False
                     continue
                 self._failed(exc)
