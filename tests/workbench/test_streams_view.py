@@ -12,7 +12,8 @@ from collections.abc import Iterator
 import pytest
 from playwright.sync_api import Page, expect
 
-from wb_helpers import CALLER_TOKEN, new_page
+from wb_helpers import CALLER_TOKEN, REFUSED_REQUEST, new_page
+from wb_helpers import console_errors as logged_errors
 
 _ids = itertools.count(1)
 STREAM = "http://example.org/wb-streams"
@@ -292,3 +293,115 @@ def test_tablet_width_keeps_the_pages_on_screen(author_page, console_errors):
             expect(page.get_by_test_id("triples")).to_be_visible()
         width = page.evaluate("document.documentElement.scrollWidth")
         assert width <= 768, f"{address} scrolls sideways at tablet width ({width} px)"
+
+
+def test_diff_an_older_version_with_the_live_one(author_page, gateway, console_errors, screenshots):
+    name = _unique("DiffMe")
+    original = _register(gateway, name)
+    with gateway.rest() as client:  # version 2: a wider window
+        r = client.post("/api/queries", json={"query": original.replace("RANGE 2s", "RANGE 7s"), "replace": True,
+                                              "base_version": 1, "comment": "wider"})
+        assert r.status_code == 201, r.text
+    page = author_page
+    page.goto(f"/workbench#/streams/queries/{name}")
+    expect(page.get_by_test_id("query-version")).to_have_text("version 2 live")
+    expect(page.get_by_test_id("diff-2")).to_have_count(0)  # the live version has nothing to compare with
+    page.get_by_test_id("diff-1").click()
+    diff = page.get_by_test_id("version-diff")
+    expect(diff).to_contain_text("Version 1 (left) → live version 2 (right)")
+    expect(diff.locator(".cm-changedLine").first).to_be_visible()
+    expect(diff.locator(".cm-changedLine").filter(has_text="RANGE 2s")).to_have_count(1)
+    expect(diff.locator(".cm-changedLine").filter(has_text="RANGE 7s")).to_have_count(1)
+    page.screenshot(path=str(screenshots / "streams-query-diff.png"))
+
+
+def test_diff_a_mapping_version(author_page, gateway, console_errors):
+    name = _unique("diff_mapping")
+    with gateway.rest() as client:
+        for version, predicate in ((1, "printeps:value"), (2, "printeps:reading")):
+            r = client.put(f"/api/mappings/{name}", json={"text": f"subject: \"printeps:r_{{id}}\"\nfields:\n  value: {predicate}\n",
+                                                          "base_version": version - 1})
+            assert r.status_code == 201, r.text
+    page = author_page
+    page.goto(f"/workbench#/streams/mappings/{name}")
+    expect(page.get_by_test_id("mapping-version")).to_have_text("version 2 live")
+    page.get_by_test_id("diff-1").click()
+    changed = page.get_by_test_id("version-diff").locator(".cm-changedLine")
+    expect(changed.filter(has_text="printeps:value")).to_have_count(1)
+    expect(changed.filter(has_text="printeps:reading")).to_have_count(1)
+
+
+def test_delete_a_query_after_a_confirmation(author_page, gateway, console_errors, screenshots):
+    name = _unique("DeleteMe")
+    _register(gateway, name)
+    page = author_page
+    page.goto(f"/workbench#/streams/queries/{name}")
+    expect(page.get_by_test_id(f"query-link-{name}")).to_be_visible()
+    page.get_by_test_id("delete").click()  # asks first; Cancel keeps it
+    page.get_by_test_id("cancel-delete").click()
+    expect(page.get_by_test_id("confirm-delete")).to_have_count(0)
+    with gateway.rest() as client:
+        assert client.get(f"/api/queries/{name}").status_code == 200
+    page.get_by_test_id("delete").click()
+    page.screenshot(path=str(screenshots / "streams-query-delete.png"))
+    page.get_by_test_id("confirm-delete").click()
+    expect(page.get_by_test_id("deleted")).to_contain_text(f"The query {name} is deleted")
+    expect(page.get_by_test_id(f"query-link-{name}")).to_have_count(0)
+    with gateway.rest() as client:
+        assert client.get(f"/api/queries/{name}").status_code == 404
+    page.get_by_role("link", name="All queries and mappings").click()
+    expect(page.get_by_test_id("queries")).not_to_contain_text(name)
+
+
+def test_delete_a_mapping_and_a_refused_delete_shows_the_server_error(author_page, gateway):
+    name = _unique("delete_mapping")
+    with gateway.rest() as client:
+        r = client.put(f"/api/mappings/{name}", json={"text": NEW_MAPPING_TEXT, "base_version": 0})
+        assert r.status_code == 201, r.text
+    page = author_page
+    page.goto(f"/workbench#/streams/mappings/{name}")
+    expect(page.get_by_test_id("mapping-version")).to_have_text("version 1 live")
+    with gateway.rest() as client:  # someone else deletes it first: this delete is refused
+        assert client.delete(f"/api/mappings/{name}").status_code == 200
+    page.get_by_test_id("delete").click()
+    page.get_by_test_id("confirm-delete").click()
+    expect(page.get_by_test_id("delete-error")).to_contain_text("Not deleted: ")
+    expect(page.get_by_test_id("delete-error")).to_contain_text(name)
+    # stored again, now the delete goes through
+    with gateway.rest() as client:
+        r = client.put(f"/api/mappings/{name}", json={"text": NEW_MAPPING_TEXT, "base_version": 0})
+        assert r.status_code == 201, r.text
+    page.reload()
+    expect(page.get_by_test_id("mapping-version")).to_be_visible()
+    page.get_by_test_id("delete").click()
+    page.get_by_test_id("confirm-delete").click()
+    expect(page.get_by_test_id("deleted")).to_contain_text(f"The mapping {name} is deleted")
+    expect(page.get_by_test_id(f"mapping-link-{name}")).to_have_count(0)
+    with gateway.rest() as client:
+        assert client.get(f"/api/mappings/{name}").status_code == 404
+    # the refused DELETE is logged as a failed request; nothing else is
+    assert logged_errors(page, REFUSED_REQUEST) == []
+
+
+NEW_MAPPING_TEXT = 'subject: "printeps:reading_{id}"\nfields:\n  value: printeps:value\n'
+
+
+def test_callers_see_no_delete_but_may_diff(browser, gateway):
+    name = _unique("ReadOnlyDiff")
+    original = _register(gateway, name)
+    with gateway.rest() as client:
+        r = client.post("/api/queries", json={"query": original.replace("RANGE 2s", "RANGE 4s"), "replace": True,
+                                              "base_version": 1})
+        assert r.status_code == 201, r.text
+    page = new_page(browser, gateway, CALLER_TOKEN)
+    page.goto(f"/workbench#/streams/queries/{name}")
+    expect(page.get_by_test_id("read-only")).to_be_visible()
+    expect(page.get_by_test_id("query-version")).to_have_text("version 2 live")
+    expect(page.get_by_test_id("delete")).to_have_count(0)
+    page.get_by_test_id("diff-1").click()
+    expect(page.get_by_test_id("version-diff").locator(".cm-changedLine").filter(has_text="RANGE 4s")).to_have_count(1)
+    page.goto("/workbench#/streams/mappings/entrance")
+    expect(page.get_by_test_id("read-only")).to_be_visible()
+    expect(page.get_by_test_id("delete")).to_have_count(0)
+    page.context.close()
+    assert page.js_errors == [] and page.console_errors == []

@@ -6,6 +6,9 @@
 // Routes: #/streams (overview) · #/streams/queries/<name> · #/streams/mappings/<name>
 //         #/streams/new/query · #/streams/new/mapping (authors: a new one from a template)
 
+import { MergeView } from "@codemirror/merge";
+import { EditorView, lineNumbers } from "@codemirror/view";
+import { EditorState } from "@codemirror/state";
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
 import { createEditor, showProblems, reveal } from "./editor.js";
@@ -47,6 +50,10 @@ function splitName(name) {
 /** Readable addresses (#/streams/queries/<name>): the kind stays a path step, the name is encoded. */
 const queryHref = (ctx, name) => `${ctx.href("streams")}/queries/${encodeURIComponent(name)}`;
 const mappingHref = (ctx, name) => `${ctx.href("streams")}/mappings/${encodeURIComponent(name)}`;
+
+/** REST paths of one query / mapping; names are always encoded, never trusted as path pieces. */
+const queryPath = (name, rest = "") => `/api/queries/${encodeURIComponent(name)}${rest}`;
+const mappingPath = (name, rest = "") => `/api/mappings/${encodeURIComponent(name)}${rest}`;
 
 async function loadLists() {
   const [queries, mappings] = await Promise.allSettled([api("GET", "/api/queries"), api("GET", "/api/mappings")]);
@@ -187,7 +194,7 @@ function markInEditor(view, problems, fields) {
     .map((p) => ({ line: p.line, column: p.column, message: p.message, severity: "error" })));
 }
 
-function versionsTable(ctx, versions, current, onRollback, testid) {
+function versionsTable(ctx, versions, current, onRollback, onDiff, testid) {
   const rows = versions.slice().sort((a, b) => b.version - a.version);
   return h("table", { class: "versions", "data-testid": testid },
     h("thead", {}, h("tr", {}, ["Version", "Saved", "By", "Comment", ""].map((t) => h("th", { scope: "col" }, t)))),
@@ -195,7 +202,84 @@ function versionsTable(ctx, versions, current, onRollback, testid) {
       h("td", { class: "num" }, String(v.version)), h("td", {}, when(v.deployed_at)), h("td", {}, v.author || "—"),
       h("td", { class: "comment" }, v.comment || ""),
       h("td", {}, v.version === current ? h("span", { class: "badge live" }, "Live now")
-        : ctx.isAuthor() ? rollbackButton(v.version, onRollback) : null)))));
+        : [diffButton(v.version, onDiff), " ", ctx.isAuthor() ? rollbackButton(v.version, onRollback) : null])))));
+}
+
+function diffButton(version, onDiff) {
+  return h("button", { class: "secondary", onclick: () => onDiff(version), "data-testid": `diff-${version}` }, "Diff with live");
+}
+
+/** The Versions card: the table and, under it, where "Diff with live" shows its comparison. */
+function versionsCard(ctx, versions, current, { onRollback, loadText, testid, empty }) {
+  const diffEl = h("div", { class: "diff", "aria-live": "polite", "data-testid": "version-diff" });
+  const onDiff = (version) => showVersionDiff(diffEl, version, current, loadText);
+  return h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
+    versions.length ? [versionsTable(ctx, versions, current, onRollback, onDiff, testid), diffEl] : h("p", { class: "muted" }, empty));
+}
+
+/** A side-by-side line diff of an older version (left) and the live one (right), as History shows
+ * rule sets and knowledge: the same MergeView, unchanged stretches folded. */
+async function showVersionDiff(diffEl, version, live, loadText) {
+  fill(diffEl, h("p", { class: "muted" }, "Loading…"));
+  let older;
+  let current;
+  try {
+    [older, current] = await Promise.all([loadText(version), loadText(live)]);
+  } catch (err) {
+    fill(diffEl, h("div", { class: "message error", role: "alert" }, `Cannot compare: ${err.message}`));
+    return;
+  }
+  if (older === current) {
+    fill(diffEl, h("p", {}, `Version ${version} has the same text as the live version ${live}.`));
+    return;
+  }
+  const host = h("div", { class: "merge-host" });
+  const setup = [lineNumbers(), EditorState.readOnly.of(true), EditorView.editable.of(false), EditorView.lineWrapping];
+  new MergeView({ a: { doc: older, extensions: setup }, b: { doc: current, extensions: setup }, parent: host,
+    collapseUnchanged: { margin: 2, minSize: 4 } });
+  fill(diffEl, h("h3", {}, `Version ${version} (left) → live version ${live} (right)`), host);
+  diffEl.scrollIntoView({ block: "nearest" });
+}
+
+/** fn run at most once: a page is disposed by a delete and again when the router leaves it. */
+function once(fn) {
+  let done = false;
+  return () => {
+    if (!done) fn();
+    done = true;
+  };
+}
+
+/** Delete, confirmed in place like Roll back: one click asks, the second deletes. */
+function deleteButton(what, onDelete) {
+  const cell = h("span", { class: "delete-confirm" });
+  const idle = () => fill(cell, h("button", { class: "danger", onclick: ask, "data-testid": "delete" }, "Delete"));
+  const ask = () => fill(cell, `Delete this ${what}? It stops at once; its versions stay in the catalog. `,
+    h("button", { class: "danger", onclick: onDelete, "data-testid": "confirm-delete" }, "Yes, delete"), " ",
+    h("button", { class: "secondary", onclick: idle, "data-testid": "cancel-delete" }, "Cancel"));
+  idle();
+  return cell;
+}
+
+/** After a delete: the sidebar without it, and a page that says so (the old page is gone). */
+async function showDeleted(main, ctx, what, name) {
+  sidebar(ctx, await loadLists(), "", "");
+  fill(main, h("section", { class: "streams" },
+    h("h1", {}, `${what[0].toUpperCase()}${what.slice(1)} · ${name}`),
+    h("div", { class: "message ok", role: "status", "data-testid": "deleted" }, `✓ The ${what} ${name} is deleted.`),
+    h("p", {}, h("a", { href: ctx.href("streams") }, "All queries and mappings"))));
+}
+
+/** Delete a query or mapping; a refusal (the server's words) shows in the page's message area. */
+async function deleteItem(main, ctx, { what, name, path, messageEl, dispose }) {
+  try {
+    await api("DELETE", path);
+  } catch (err) {
+    fill(messageEl, h("div", { class: "message error", role: "alert", "data-testid": "delete-error" }, `Not deleted: ${err.message}`));
+    return;
+  }
+  dispose(); // the results refresh and the unsaved-changes warning end with the page
+  await showDeleted(main, ctx, what, name);
 }
 
 function rollbackButton(version, onRollback) {
@@ -267,6 +351,8 @@ async function showQuery(main, ctx, name) {
     label: "Rule binding (JSON)", onChange: () => guard.update() });
   report.addEventListener("input", () => guard.update());
   const state = { base: info.version || 0 };
+  let timer = null;
+  const dispose = once(() => { clearInterval(timer); guard.dispose(); view.destroy(); bindingView.destroy(); });
 
   const body = () => {
     const text = bindingView.state.doc.toString().trim();
@@ -345,7 +431,9 @@ async function showQuery(main, ctx, name) {
   fill(main, h("section", { class: "streams query-page" },
     h("div", { class: "title-row" }, h("h1", {}, fresh ? "New query" : `Query · ${name}`),
       fresh ? null : h("span", { class: "badge live", "data-testid": "query-version" }, info.version ? `version ${info.version} live` : "live, not stored"),
-      info.fast_path ? h("span", { class: "badge" }, "fast path") : null, guard.badge),
+      info.fast_path ? h("span", { class: "badge" }, "fast path") : null, guard.badge,
+      // only a stored query can be deleted (the API answers 404 for one registered here only)
+      author && info.version ? deleteButton("query", () => deleteItem(main, ctx, { what: "query", name, path: queryPath(name), messageEl, dispose })) : null),
     fresh ? h("p", { class: "hint" }, "Name it after REGISTER QUERY, choose its stream and window, then Check and Save: it runs at once.")
       : h("p", { class: "hint" }, `Windows: ${describeWindows(info.windows)} · reported ${describeReport(info.report)}`,
         info.binding ? ` · feeds rule set ${info.binding.ruleset} as ${info.binding.fact_type} facts` : "",
@@ -368,13 +456,13 @@ async function showQuery(main, ctx, name) {
         h("div", { class: "card" }, h("div", { class: "title-row" }, h("h2", {}, "Latest windows with results"),
           h("button", { class: "secondary", onclick: () => loadResults(name, resultsEl), "data-testid": "results-refresh" }, "Refresh")),
         resultsEl))),
-    fresh ? null : h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
-      versions.length ? versionsTable(ctx, versions, info.version, rollback, "query-versions")
-        : h("p", { class: "muted" }, "Registered on this gateway only (not stored): save it to keep it."))));
-  if (fresh) return { dispose: () => { guard.dispose(); view.destroy(); bindingView.destroy(); } };
+    fresh ? null : versionsCard(ctx, versions, info.version, { onRollback: rollback, testid: "query-versions",
+      loadText: async (v) => (await api("GET", queryPath(name, `/versions/${v}`))).text,
+      empty: "Registered on this gateway only (not stored): save it to keep it." })));
+  if (fresh) return { dispose };
   await loadResults(name, resultsEl);
-  const timer = setInterval(() => loadResults(name, resultsEl), RESULTS_REFRESH_MS);
-  return { dispose: () => { clearInterval(timer); guard.dispose(); view.destroy(); bindingView.destroy(); } };
+  timer = setInterval(() => loadResults(name, resultsEl), RESULTS_REFRESH_MS);
+  return { dispose };
 }
 
 function onlyAuthors(main, ctx, what) {
@@ -445,6 +533,7 @@ async function showMapping(main, ctx, name, params) {
   const sampleView = createEditor(sampleHost, { doc: JSON.stringify(sampleMessage(mapping.spec), null, 2), fileName: "message.json",
     label: "Sample message (JSON)" });
   const text = () => view.state.doc.toString();
+  const dispose = once(() => { guard.dispose(); view.destroy(); sampleView.destroy(); });
 
   const showRefused = (prefix, problems) => {
     markInEditor(view, problems, ["text"]);
@@ -525,7 +614,9 @@ async function showMapping(main, ctx, name, params) {
   fill(main, h("section", { class: "streams mapping-page" },
     h("div", { class: "title-row" }, h("h1", {}, name === null ? "New mapping" : `Mapping · ${name}`),
       name === null ? null : h("span", { class: "badge live", "data-testid": "mapping-version" }, mapping.version ? `version ${mapping.version} live` : "built-in"),
-      mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null, guard.badge),
+      mapping.spec.message_type ? h("span", { class: "badge" }, mapping.spec.message_type) : null, guard.badge,
+      // a built-in mapping has nothing stored to delete (the API answers 404)
+      author && mapping.version ? deleteButton("mapping", () => deleteItem(main, ctx, { what: "mapping", name, path: mappingPath(name), messageEl, dispose })) : null),
     h("p", { class: "hint" }, "How one message becomes RDF: subject (an IRI template filled from the message's fields), type, fields → predicates, timed fields (one reading node per message), children (nested lists). Validate and Preview change nothing; Save makes a new version, live at once for every message that arrives."),
     author ? null : h("p", { class: "message info", "data-testid": "read-only" }, "Read only: sign in as an author to change mappings."),
     h("div", { class: "streams-columns" },
@@ -544,13 +635,13 @@ async function showMapping(main, ctx, name, params) {
           h("span", { class: "editor-label" }, "Message (JSON)"), sampleHost,
           h("div", { class: "buttons" }, h("button", { class: "secondary", onclick: preview, "data-testid": "mapping-preview" }, "Preview the triples")),
           previewEl))),
-    name === null ? null : h("div", { class: "card streams-versions" }, h("h2", {}, "Versions"),
-      versions.length ? versionsTable(ctx, versions, mapping.version, rollback, "mapping-versions")
-        : h("p", { class: "muted" }, "Built into the gateway: saving it makes version 1."))));
+    name === null ? null : versionsCard(ctx, versions, mapping.version, { onRollback: rollback, testid: "mapping-versions",
+      loadText: async (v) => (await api("GET", mappingPath(name, `/versions/${v}`))).text,
+      empty: "Built into the gateway: saving it makes version 1." })));
   view.contentDOM.addEventListener("keydown", (e) => {
     if (author && e.key === "s" && (e.ctrlKey || e.metaKey)) { e.preventDefault(); save(); }
   });
-  return { dispose: () => { guard.dispose(); view.destroy(); sampleView.destroy(); } };
+  return { dispose };
 }
 
 /** A message the mapping can read: its subject's {placeholders}, fields, timed fields and one
