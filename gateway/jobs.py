@@ -154,7 +154,12 @@ class JobService:
         return self._maybe_lost(job)
 
     def list(self, ruleset: str | None = None, limit: int = 50) -> list[dict[str, Any]]:
-        return [self._maybe_lost(j) for j in self.records.recent(ruleset, max(1, min(limit, 500)))]
+        """The latest jobs; this process's unfinished ones as they are now (their records are
+        written at most twice a second)."""
+        recorded = self.records.recent(ruleset, max(1, min(limit, 500)))
+        with self._cond:
+            live = {job_id: dict(job) for job_id, job in self._jobs.items()}
+        return [self._maybe_lost(live.get(j["id"], j)) for j in recorded]
 
     def cancel(self, job_id: str, by: str = "anonymous") -> dict[str, Any]:
         """Cancels a job of this process. A queued job ends ``cancelled`` at once; a running build
@@ -230,7 +235,7 @@ class JobService:
             self._finish(job, "succeeded", result=outcome)
 
     def _progress_writer(self, job: dict[str, Any]) -> Callable[[int, int, str], None]:
-        last = [0.0]
+        last = [0.0, ""]  # when the record was last written, and at which stage
 
         def report(done: int, total: int, stage: str) -> None:
             with self._cond:
@@ -240,8 +245,8 @@ class JobService:
                 job["progress"] = {"stage": stage, "done": done, "total": total}
                 job["updated_at"] = _now()
                 now = time.monotonic()
-                if now - last[0] >= PROGRESS_WRITE_INTERVAL_S or done >= total:
-                    last[0] = now
+                if now - last[0] >= PROGRESS_WRITE_INTERVAL_S or done >= total or stage != last[1]:
+                    last[0], last[1] = now, stage  # a new stage is always written: other processes see it
                     self.records.write(job)
         return report
 

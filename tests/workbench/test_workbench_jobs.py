@@ -5,6 +5,7 @@ cancelled from either place."""
 
 from __future__ import annotations
 
+import threading
 import time
 import uuid
 
@@ -120,9 +121,36 @@ def test_a_build_that_does_not_compile_shows_its_errors_under_the_editor(author_
     assert console_errors(page) == []
 
 
-def test_a_queued_build_is_cancelled_from_the_deploy_card_and_from_the_list(author_page, gateway, ruleset, screenshots):
+def hold_while_compiling(monkeypatch, engine, comment: str) -> threading.Event:
+    """Keep the build with ``comment`` in its compile stage until the returned event is set: the
+    test's steps then never race the build's real pace (a loaded machine or a warm cache)."""
+    release = threading.Event()
+    deploy = engine.deploy
+
+    def held(name, files, *args, on_progress=None, **kwargs):
+        def progress(done: int, total: int, stage: str) -> None:
+            if on_progress is not None:
+                on_progress(done, total, stage)
+            if stage == "compile" and kwargs.get("comment") == comment:
+                release.wait(120)
+        return deploy(name, files, *args, on_progress=progress, **kwargs)
+
+    monkeypatch.setattr(engine, "deploy", held)
+    return release
+
+
+def test_a_queued_build_is_cancelled_from_the_deploy_card_and_from_the_list(author_page, gateway, ruleset, screenshots,
+                                                                            monkeypatch):
     page = author_page
     open_ruleset(page, ruleset)
+    release = hold_while_compiling(monkeypatch, gateway.engine, "a slow build")
+    try:
+        _queued_builds_are_cancelled(page, gateway, ruleset, screenshots, release)
+    finally:
+        release.set()
+
+
+def _queued_builds_are_cancelled(page, gateway, ruleset, screenshots, release) -> None:
 
     # A slow build over REST takes the (one) build slot of the gateway process...
     slow = submit(gateway, ruleset, generated_files(SLOW_RULES), "a slow build")
@@ -168,6 +196,7 @@ def test_a_queued_build_is_cancelled_from_the_deploy_card_and_from_the_list(auth
     assert job_status(gateway, other["id"])["status"] == "cancelled"
 
     # The slow build ends as version 2; the list follows it there.
+    release.set()
     wait_for(gateway, slow["id"], ("succeeded", "failed"))
     expect(running).to_have_attribute("data-status", "succeeded")
     expect(running).to_contain_text("version 2")
