@@ -60,6 +60,7 @@ def free_port() -> int:
 
 
 WARM_UP_S = 10.0
+WARM_UP_LOAD_S = 5.0  # then the first run's requests, discarded: the JVM's JIT compiles the fire path under load
 
 
 def start_server(tmp: Path, port: int, record_fires: bool = True, workers: int = 1) -> subprocess.Popen:
@@ -174,6 +175,8 @@ def measure(server_dir: Path, runs: list[tuple[str, bytes, int, bytes]], seconds
     server = start_server(server_dir, port, record_fires=record_fires, workers=workers)
     rows: dict[str, dict] = {}
     try:
+        _, first_req, first_conns, first_check = runs[0]
+        asyncio.run(drive(port, first_req, WARM_UP_LOAD_S, first_conns, first_check))
         for name, req, conns, check in runs:
             rows[name] = {**asyncio.run(drive(port, req, seconds, conns, check)), "connections": conns}
             print(name, json.dumps({k: round(v, 3) for k, v in rows[name].items()}), flush=True)
@@ -239,7 +242,9 @@ def main() -> None:
         f"`bench/http_bench.py` ({args.seconds:.0f} s per run, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}; the "
         "load generator runs on the same cores): `POST /api/rulesets/reception/fire` with the 5-fact teahouse "
         f"request (\"{EXAMPLE}\"), `printeps serve --workers N` (uvicorn, httptools + uvloop), loopback, a minimal "
-        "asyncio keep-alive client. Every fire is a recorded decision unless said otherwise.",
+        "asyncio keep-alive client. Each server is first driven for "
+        f"{WARM_UP_LOAD_S:.0f} s (not counted) so the JVM has compiled the fire path. Every fire is a recorded "
+        "decision unless said otherwise.",
         "",
         table(rows, base),
         "",

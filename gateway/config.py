@@ -219,6 +219,11 @@ class ApiSettings(BaseModel):
         description="Run REST fires on the event loop (~0.2 ms faster each); false: in a worker thread, so a "
         "long fire never delays other requests.",
     )
+    fire_fast_path: bool = Field(
+        default=True,
+        description="Answer POST /api/rulesets/{name}/fire in front of FastAPI's routing (same answers, about "
+        "half the CPU per request); false: through FastAPI like every other route.",
+    )
     server_id: str = "printeps-gateway"
 
     @field_validator("tokens", mode="before")

@@ -9,7 +9,7 @@ a sync dependency costs a threadpool hop per request.
 from __future__ import annotations
 
 from datetime import datetime, timezone
-from typing import Annotated, Any
+from typing import Annotated, Any, Mapping
 
 from fastapi import Depends, Request
 
@@ -118,12 +118,14 @@ def wants_async(request: Request) -> bool:
     return "respond-async" in prefer or flag in ("1", "true", "yes")
 
 
-def correlation_id(request: Request) -> str | None:
-    """The caller's id for a request: ``X-Request-ID``, else the trace id of a W3C ``traceparent``."""
-    rid = request.headers.get("x-request-id")
+def correlation_id(request: Request | Mapping[str, str]) -> str | None:
+    """The caller's id for a request (or its headers): ``X-Request-ID``, else the trace id of a W3C
+    ``traceparent``."""
+    headers = request.headers if isinstance(request, Request) else request
+    rid = headers.get("x-request-id")
     if rid:
         return rid[:200]
-    parent = request.headers.get("traceparent")
+    parent = headers.get("traceparent")
     if parent:
         parts = parent.split("-")
         return parts[1] if len(parts) >= 4 else parent[:200]

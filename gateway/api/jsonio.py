@@ -80,11 +80,16 @@ def parse_json(raw: bytes, max_depth: int) -> Any:
     return value
 
 
-async def read_json(request: Request) -> Any:
-    """The request's JSON body, bounded by the app's depth limit."""
-    content_type = request.headers.get("content-type", "application/json")
+def check_content_type(content_type: str | None) -> None:
+    """BadBody 415 unless the body is declared JSON (or plain text, or not declared at all)."""
+    content_type = content_type or "application/json"
     if "json" not in content_type and "text/plain" not in content_type:
         raise BadBody(f"content type {content_type!r} is not supported; send application/json", status=415)
+
+
+async def read_json(request: Request) -> Any:
+    """The request's JSON body, bounded by the app's depth limit."""
+    check_content_type(request.headers.get("content-type"))
     raw = await request.body()
     return parse_json(raw, request.app.state.settings.api.max_json_depth)
 

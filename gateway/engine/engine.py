@@ -247,12 +247,11 @@ class Engine:
         check_name(name)
         started = time.perf_counter()
         compiled = self._compile(files, name, on_progress)
+        progress = on_progress or _no_progress
         if not force:
-            if on_progress is not None:  # a deploy job shows this step too (it can take a moment)
-                on_progress(0, 1, "scenarios")
+            progress(0, 1, "scenarios")  # a deploy job shows this step too (it can take a moment)
             scenarios.require_green(self, name, files)
-            if on_progress is not None:
-                on_progress(1, 1, "scenarios")
+            progress(1, 1, "scenarios")
         try:
             info, seq = self.catalog.save(KIND, name, dict(files), author=author, comment=comment,
                                           hash=compiled.hash, base_version=base_version)
@@ -590,3 +589,7 @@ def _summary(result: FireResult) -> dict[str, Any]:
         "fire_count": result.fire_count,
         "duration_ms": result.duration_ms,
     }
+
+
+def _no_progress(done: int, total: int, stage: str) -> None:
+    """Progress nobody follows."""

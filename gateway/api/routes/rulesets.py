@@ -172,13 +172,19 @@ def delete(name: RuleSetName, engine: EngineDep, who: Author) -> JSON:
 async def fire(name: RuleSetName, request: Request, _: Caller) -> JSON:
     """Fire the current version on ``facts``: ``{"decision_id", "version", "actions", "fired", "facts",
     ...}``; 422 naming the bad fact/field. The decision is recorded with the ``X-Request-ID`` (or
-    ``traceparent``) header as its correlation id."""
-    state = request.app.state
-    body = await read_json(request)
+    ``traceparent``) header as its correlation id.
+
+    Served by :mod:`gateway.api.fire_path` in front of FastAPI (``api.fire_fast_path``, the
+    default); this route documents it and serves it when the fast path is off."""
+    return JSON(await fire_answer(request.app.state, name, await read_json(request), correlation_id(request)))
+
+
+async def fire_answer(state: Any, name: str, body: Any, correlation: str | None) -> dict[str, Any]:
+    """The answer to a fire request with JSON ``body`` on rule set ``name`` (``state``: the app's
+    state). Raises ApiError / EngineError for the app's error handlers."""
     facts = facts_from_body(body, state.settings.engine.max_facts)
     metrics = state.metrics
     engine = state.engine
-    correlation = correlation_id(request)
     start = time.perf_counter()
     try:
         if state.settings.api.inline_fire:  # see ApiSettings.inline_fire
@@ -190,7 +196,7 @@ async def fire(name: RuleSetName, request: Request, _: Caller) -> JSON:
         raise
     out = result.to_dict()
     metrics.observe_fire(name, time.perf_counter() - start, len(out.get("fired") or ()))
-    return JSON(out)
+    return out
 
 
 def facts_from_body(body: Any, max_facts: int) -> list[dict[str, Any]]:

@@ -1,0 +1,86 @@
+"""The REST fire route's fast path: ``POST /api/rulesets/{name}/fire`` answered in front of FastAPI.
+
+Why: a fire is the gateway's hot path (goal: 1,500 recorded fires/s on 2 cores, p99 < 5 ms), and
+FastAPI 0.165 spends more CPU routing a request (matching it against every route of the included
+routers) and solving its dependencies than the engine spends firing it (measured in-process:
+1.02 ms per fire request through FastAPI, of which ``engine.fire`` is 0.27 ms). This small ASGI
+middleware recognises the one path and calls exactly what the FastAPI route calls
+(:func:`gateway.api.routes.rulesets.fire_answer`, the same auth check, body parser and error
+handlers), so both answer byte for byte alike; everything else goes on to FastAPI. The FastAPI
+route stays: it documents the endpoint in OpenAPI and serves it when ``api.fire_fast_path`` is off.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from fastapi.security import HTTPAuthorizationCredentials
+from starlette.datastructures import Headers
+from starlette.requests import Request
+
+from gateway.api.deps import correlation_id
+from gateway.api.jsonio import JSON, check_content_type, parse_json
+from gateway.api.routes.rulesets import NAME_PATTERN, fire_answer
+
+# A name the route's own pattern rejects is left to FastAPI, which answers its usual 422.
+FIRE_PATH = re.compile(r"^/api/rulesets/(" + NAME_PATTERN.strip("^$") + r")/fire$")
+
+
+class FireFastPath:
+    """ASGI middleware: serve ``POST /api/rulesets/{name}/fire`` without FastAPI's routing."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        match = FIRE_PATH.match(scope["path"]) if scope["type"] == "http" and scope["method"] == "POST" else None
+        if match is None:
+            await self.app(scope, receive, send)
+            return
+        raw = await _read_body(receive)  # the body limit outside this answers 413 while reading
+        if raw is None:  # the client went away
+            return
+        app = scope["app"]  # set by Starlette before its middleware runs
+        state = app.state
+        headers = Headers(scope=scope)
+        try:
+            state.auth.check("caller", bearer_of(headers.get("authorization")))
+            check_content_type(headers.get("content-type"))
+            body = parse_json(raw, state.settings.api.max_json_depth)
+            response = JSON(await fire_answer(state, match.group(1), body, correlation_id(headers)))
+        except Exception as exc:  # answered by the app's own handler for it, as the route would be
+            response = await _handled(app, Request(scope, receive), exc)
+        await response(scope, receive, send)
+
+
+def bearer_of(authorization: str | None) -> HTTPAuthorizationCredentials | None:
+    """The bearer credentials of an ``Authorization`` header, as FastAPI's ``HTTPBearer(auto_error=False)``
+    reads them (None when absent or another scheme)."""
+    if not authorization:
+        return None
+    scheme, _, credentials = authorization.partition(" ")
+    if not scheme or not credentials or scheme.lower() != "bearer":
+        return None
+    return HTTPAuthorizationCredentials(scheme=scheme, credentials=credentials)
+
+
+async def _read_body(receive: Any) -> bytes | None:
+    chunks: list[bytes] = []
+    while True:
+        message = await receive()
+        if message["type"] == "http.disconnect":
+            return None
+        chunks.append(message.get("body", b""))
+        if not message.get("more_body", False):
+            return b"".join(chunks)
+
+
+async def _handled(app: Any, request: Request, exc: Exception) -> Any:
+    """The response of ``app``'s exception handler for ``exc`` (its most specific class first)."""
+    handlers = app.exception_handlers
+    for cls in type(exc).__mro__:
+        handler = handlers.get(cls)
+        if handler is not None:
+            return await handler(request, exc)
+    raise exc
