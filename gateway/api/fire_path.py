@@ -34,7 +34,7 @@ class FireFastPath:
         self.app = app
 
     async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
-        match = FIRE_PATH.match(scope["path"]) if scope["type"] == "http" and scope["method"] == "POST" else None
+        match = FIRE_PATH.match(_route_path(scope)) if scope["type"] == "http" and scope["method"] == "POST" else None
         if match is None:
             await self.app(scope, receive, send)
             return
@@ -52,6 +52,12 @@ class FireFastPath:
         except Exception as exc:  # answered by the app's own handler for it, as the route would be
             response = await _handled(app, Request(scope, receive), exc)
         await response(scope, receive, send)
+
+
+def _route_path(scope: dict[str, Any]) -> str:
+    """The path the routes see: without the ``root_path`` a proxy mounts the gateway under."""
+    path, root = scope["path"], scope.get("root_path", "")
+    return path[len(root):] if root and path.startswith(root) else path
 
 
 def bearer_of(authorization: str | None) -> HTTPAuthorizationCredentials | None:

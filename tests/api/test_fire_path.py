@@ -121,3 +121,9 @@ def test_other_methods_and_paths_go_on_to_fastapi(open_apps, fire_set):
                          ("GET", f"/api/rulesets/{fire_set}")):
         a, b = fast.request(method, path, follow_redirects=False), routed.request(method, path, follow_redirects=False)
         assert a.status_code == b.status_code, (method, path)
+
+
+def test_the_fast_path_serves_under_a_proxys_root_path(api_settings, api_gateway, fire_set):
+    with TestClient(create_app(api_gateway, api_settings.api), root_path="/rules") as behind_proxy:
+        r = behind_proxy.post(f"/api/rulesets/{fire_set}/fire", json={"facts": FACTS})
+        assert r.status_code == 200 and r.json()["actions"][0]["params"]["text"] == "Welcome c1 (fp)"
