@@ -2,8 +2,10 @@
 // diagnostics pushed from outside (the checks run on the whole rule set, not one file).
 
 import { basicSetup } from "codemirror";
-import { EditorView, keymap } from "@codemirror/view";
+import { MergeView } from "@codemirror/merge";
+import { EditorView, keymap, lineNumbers } from "@codemirror/view";
 import { EditorState } from "@codemirror/state";
+import { syntaxHighlighting, defaultHighlightStyle } from "@codemirror/language";
 import { indentWithTab } from "@codemirror/commands";
 import { setDiagnostics, lintGutter } from "@codemirror/lint";
 import { snippet } from "@codemirror/autocomplete";
@@ -113,4 +115,17 @@ export function reveal(view, problem) {
   const pos = Math.min(line.from + Math.max(problem.column - 1, 0), line.to);
   view.dispatch({ selection: { anchor: pos }, effects: EditorView.scrollIntoView(pos, { y: "center" }) });
   view.focus();
+}
+
+/** A read-only side-by-side line diff of `older` (left) and `newer` (right) in a new element, as
+ * every history in the workbench shows one (rule files, knowledge, queries and mappings):
+ * CodeMirror's MergeView, unchanged stretches folded. `fileName` adds that file's highlighting. */
+export function textDiff(older, newer, { fileName = null, margin = 2, minSize = 4 } = {}) {
+  const host = document.createElement("div");
+  host.className = "merge-host";
+  const setup = [lineNumbers(), EditorState.readOnly.of(true), EditorView.editable.of(false), EditorView.lineWrapping,
+    ...(fileName ? [syntaxHighlighting(defaultHighlightStyle), languageFor(fileName)] : [])];
+  new MergeView({ a: { doc: older, extensions: setup }, b: { doc: newer, extensions: setup }, parent: host,
+    collapseUnchanged: { margin, minSize } });
+  return host;
 }

@@ -1,13 +1,9 @@
 // History of a rule set: every version with author, time and comment; the differences between
 // any two versions side by side; rollback (author role).
 
-import { MergeView } from "@codemirror/merge";
-import { EditorView, lineNumbers } from "@codemirror/view";
-import { EditorState } from "@codemirror/state";
-import { syntaxHighlighting, defaultHighlightStyle } from "@codemirror/language";
 import { h, fill, when } from "./dom.js";
 import { api, rulesetPath } from "./api.js";
-import { languageFor } from "./lang.js";
+import { textDiff } from "./editor.js";
 import { orderedFiles } from "./rules-view.js";
 
 /** Show the history of rule set `name`; params may hold from/to version numbers to compare. */
@@ -103,16 +99,10 @@ async function showDiff(diffEl, name, from, to) {
   fill(diffEl,
     h("p", {}, changed.length ? `Version ${from} → version ${to}: ${changed.length} file(s) changed.` : `Versions ${from} and ${to} have the same files.`),
     changed.map((n) => {
-      const host = h("div", { class: "merge-host" });
       const status = !(n in filesA) ? " (added)" : !(n in filesB) ? " (removed)" : "";
-      new MergeView({
-        a: { doc: filesA[n] || "", extensions: readOnlySetup(n) },
-        b: { doc: filesB[n] || "", extensions: readOnlySetup(n) },
-        parent: host,
-        collapseUnchanged: { margin: 3, minSize: 6 },
-      });
       return h("div", { class: "file-diff" }, h("h3", {}, n + status,
-        h("span", { class: "muted" }, `  left: version ${from}, right: version ${to}`)), host);
+        h("span", { class: "muted" }, `  left: version ${from}, right: version ${to}`)),
+        textDiff(filesA[n] || "", filesB[n] || "", { fileName: n, margin: 3, minSize: 6 }));
     }),
     same.length ? h("p", { class: "muted" }, `Unchanged: ${same.join(", ")}`) : null);
 }
@@ -133,9 +123,4 @@ async function tablesAsText(files) {
 function tableText(grid) {
   return grid.sheets.map((sheet) => [`# sheet ${sheet.name}`,
     ...sheet.rows.map((row, i) => `${String(i + 1).padStart(3)} | ${row.join(" | ")}`)].join("\n")).join("\n\n");
-}
-
-function readOnlySetup(fileName) {
-  return [lineNumbers(), syntaxHighlighting(defaultHighlightStyle), languageFor(fileName),
-    EditorState.readOnly.of(true), EditorView.editable.of(false), EditorView.lineWrapping];
 }

@@ -5,11 +5,9 @@
 // Routes: #/knowledge (values) · #/knowledge/<individual> · #/knowledge/values?class=<Class>
 //         #/knowledge/rules · #/knowledge/rules/<n> · #/knowledge/history?kind=ontology|swrl
 
-import { MergeView } from "@codemirror/merge";
-import { EditorView, lineNumbers } from "@codemirror/view";
-import { EditorState } from "@codemirror/state";
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
+import { textDiff } from "./editor.js";
 import "./knowledge-view.css";
 
 const SECTIONS = [["values", "Values"], ["rules", "SWRL rules"], ["history", "History"]];
@@ -537,9 +535,5 @@ async function showDiff(diffEl, kind, from, to) {
     fill(diffEl, h("p", {}, `Versions ${from} and ${to} have the same text.`));
     return;
   }
-  const host = h("div", { class: "merge-host" });
-  const setup = [lineNumbers(), EditorState.readOnly.of(true), EditorView.editable.of(false), EditorView.lineWrapping];
-  new MergeView({ a: { doc: a.text, extensions: setup }, b: { doc: b.text, extensions: setup }, parent: host,
-    collapseUnchanged: { margin: 2, minSize: 4 } });
-  fill(diffEl, h("p", {}, `Version ${from} (left) → version ${to} (right):`), host);
+  fill(diffEl, h("p", {}, `Version ${from} (left) → version ${to} (right):`), textDiff(a.text, b.text));
 }

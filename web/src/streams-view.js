@@ -6,12 +6,9 @@
 // Routes: #/streams (overview) · #/streams/queries/<name> · #/streams/mappings/<name>
 //         #/streams/new/query · #/streams/new/mapping (authors: a new one from a template)
 
-import { MergeView } from "@codemirror/merge";
-import { EditorView, lineNumbers } from "@codemirror/view";
-import { EditorState } from "@codemirror/state";
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
-import { createEditor, showProblems, reveal } from "./editor.js";
+import { createEditor, showProblems, reveal, textDiff } from "./editor.js";
 import "./streams-view.css";
 
 const RESULTS_SHOWN = 10;
@@ -218,7 +215,7 @@ function versionsCard(ctx, versions, current, { onRollback, loadText, testid, em
 }
 
 /** A side-by-side line diff of an older version (left) and the live one (right), as History shows
- * rule sets and knowledge: the same MergeView, unchanged stretches folded. */
+ * rule sets and knowledge (textDiff). */
 async function showVersionDiff(diffEl, version, live, loadText) {
   fill(diffEl, h("p", { class: "muted" }, "Loading…"));
   let older;
@@ -233,11 +230,7 @@ async function showVersionDiff(diffEl, version, live, loadText) {
     fill(diffEl, h("p", {}, `Version ${version} has the same text as the live version ${live}.`));
     return;
   }
-  const host = h("div", { class: "merge-host" });
-  const setup = [lineNumbers(), EditorState.readOnly.of(true), EditorView.editable.of(false), EditorView.lineWrapping];
-  new MergeView({ a: { doc: older, extensions: setup }, b: { doc: current, extensions: setup }, parent: host,
-    collapseUnchanged: { margin: 2, minSize: 4 } });
-  fill(diffEl, h("h3", {}, `Version ${version} (left) → live version ${live} (right)`), host);
+  fill(diffEl, h("h3", {}, `Version ${version} (left) → live version ${live} (right)`), textDiff(older, current));
   diffEl.scrollIntoView({ block: "nearest" });
 }
 
@@ -314,10 +307,10 @@ function conflictText(what, err, base) {
 /** A query's info, its current definition and versions; a template for a new one (name null). */
 async function loadQuery(name) {
   if (name === null) return { info: { version: null, windows: [] }, definition: { text: NEW_QUERY, binding: null, report: null, params: null }, versions: [] };
-  const info = await api("GET", `/api/queries/${encodeURIComponent(name)}`);
+  const info = await api("GET", queryPath(name));
   if (!info.version) return { info, definition: { text: info.text, binding: info.binding, report: null, params: null }, versions: [] };
-  const [definition, versions] = await Promise.all([api("GET", `/api/queries/${encodeURIComponent(name)}/versions/${info.version}`),
-    api("GET", `/api/queries/${encodeURIComponent(name)}/versions`)]);
+  const [definition, versions] = await Promise.all([api("GET", queryPath(name, `/versions/${info.version}`)),
+    api("GET", queryPath(name, "/versions"))]);
   return { info, definition, versions };
 }
 
@@ -415,7 +408,7 @@ async function showQuery(main, ctx, name) {
   };
   const rollback = async (version) => {
     try {
-      await api("POST", `/api/queries/${encodeURIComponent(name)}/rollback`, { version });
+      await api("POST", queryPath(name, "/rollback"), { version });
       ctx.flash("ok", `✓ Rolled back: version ${version} of ${name} is live again.`);
       window.scrollTo(0, 0);
       ctx.navigate(queryHref(ctx, name), true);
@@ -480,7 +473,7 @@ async function loadResults(name, el) {
   if (!el.isConnected && el.childNodes.length) return;
   let data;
   try {
-    data = await api("GET", `/api/queries/${encodeURIComponent(name)}/results?nonempty=true&limit=${RESULTS_SHOWN}`);
+    data = await api("GET", queryPath(name, `/results?nonempty=true&limit=${RESULTS_SHOWN}`));
   } catch (err) {
     fill(el, h("div", { class: "message error" }, err.message));
     return;
@@ -512,8 +505,8 @@ async function showMapping(main, ctx, name, params) {
   let mapping = { version: null, spec: { subject: "printeps:reading_{id}", fields: { value: "" } }, text: NEW_MAPPING };
   let versions = [];
   try {
-    if (name !== null) mapping = await api("GET", `/api/mappings/${encodeURIComponent(name)}`);
-    if (mapping.version) versions = await api("GET", `/api/mappings/${encodeURIComponent(name)}/versions`);
+    if (name !== null) mapping = await api("GET", mappingPath(name));
+    if (mapping.version) versions = await api("GET", mappingPath(name, "/versions"));
   } catch (err) {
     fill(main, h("div", { class: "message error", role: "alert" }, `Cannot open mapping “${name}”: ${err.message}`),
       h("a", { href: ctx.href("streams") }, "All queries and mappings"));
@@ -563,7 +556,7 @@ async function showMapping(main, ctx, name, params) {
     const copy = target !== name;
     fill(messageEl, h("p", { class: "muted" }, "Saving…"));
     try {
-      const saved = await api("PUT", `/api/mappings/${encodeURIComponent(target)}`,
+      const saved = await api("PUT", mappingPath(target),
         { text: text(), comment: comment.value, base_version: copy ? 0 : mapping.version || 0 });
       ctx.flash("ok", `✓ Mapping ${saved.name} saved: version ${saved.version} is live.`);
       window.scrollTo(0, 0);
@@ -588,7 +581,7 @@ async function showMapping(main, ctx, name, params) {
     }
     fill(previewEl, h("p", { class: "muted" }, "Mapping…"));
     try {
-      const result = await api("POST", `/api/mappings/${encodeURIComponent(name || "draft")}/preview`,
+      const result = await api("POST", mappingPath(name || "draft", "/preview"),
         { message, timestamp: Number(params.get("timestamp")) || 1000, text: text() });
       fill(previewEl, h("p", {}, `${result.triples.length} triples (with the text in the editor; nothing is saved or sent):`),
         h("table", { class: "triples", "data-testid": "triples" },
@@ -602,7 +595,7 @@ async function showMapping(main, ctx, name, params) {
   };
   const rollback = async (version) => {
     try {
-      await api("POST", `/api/mappings/${encodeURIComponent(name)}/rollback`, { version });
+      await api("POST", mappingPath(name, "/rollback"), { version });
       ctx.flash("ok", `✓ Rolled back: version ${version} of mapping ${name} is live again.`);
       window.scrollTo(0, 0);
       ctx.navigate(mappingHref(ctx, name), true);
