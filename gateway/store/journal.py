@@ -29,13 +29,15 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, BinaryIO, Callable, Iterator
 
 import orjson
 
 log = logging.getLogger(__name__)
 
 SEGMENT_BYTES = 4 * 1024 * 1024
+NEW_SUFFIX = ".new"  # a segment being created (locked, then renamed to ``*.jsonl``)
+STALE_NEW_S = 60.0  # a ``*.new`` file this old was left by a creator that died
 _segment_ids = itertools.count(1)
 
 
@@ -71,9 +73,15 @@ class Segment:
 
     @classmethod
     def create(cls, folder: Path) -> "Segment":
+        """A new segment, locked before it is visible: it is created and locked under a name
+        adopters do not look at (``*.jsonl.new``), then renamed. Created under its final name,
+        another process could lock it first (between our open and flock), take it for an orphan
+        and delete it, and our writes would go to a file nobody can find after we die."""
         path = folder / f"{os.getpid()}-{int(time.time() * 1000)}-{next(_segment_ids)}.jsonl"
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        fresh = path.with_name(path.name + NEW_SUFFIX)
+        fd = os.open(fresh, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         fcntl.flock(fd, fcntl.LOCK_EX)
+        os.rename(fresh, path)
         return cls(path, fd)
 
     def append(self, line: bytes, fsync: bool) -> None:
@@ -116,17 +124,61 @@ def encode(database: str, collection: str, doc: dict[str, Any]) -> bytes:
                         option=orjson.OPT_NON_STR_KEYS) + b"\n"
 
 
-def read_lines(path: Path) -> Iterator[tuple[str, str, dict[str, Any]]]:
-    """The entries of a segment file; a torn last line (a crash mid-write) is skipped."""
-    with open(path, "rb") as fh:
-        for raw in fh:
-            if not raw.strip():
-                continue
-            try:
-                entry = orjson.loads(raw)
-                yield entry["db"], entry["c"], entry["d"]
-            except (orjson.JSONDecodeError, KeyError, TypeError):
-                log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
+def read_entries(fh: BinaryIO, path: Path) -> Iterator[tuple[str, str, dict[str, Any]]]:
+    """The entries of an open segment file (``path`` names it in warnings)."""
+    for raw in fh:
+        if not raw.strip():
+            continue
+        try:
+            entry = orjson.loads(raw)
+            yield entry["db"], entry["c"], entry["d"]
+        except (orjson.JSONDecodeError, KeyError, TypeError):
+            log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
+
+
+def _lock_orphan(path: Path, read: bool = True) -> tuple[int, list[tuple[str, str, dict[str, Any]]]] | None:
+    """(locked fd, entries) of the segment at ``path`` if its writer is gone; None if a live
+    writer holds it or it is no longer there.
+
+    The entries are read through the locked descriptor, and only if ``path`` still names that
+    file: another adopter (or its writer, shipping its last entry) may have deleted or replaced
+    it between our open and our lock, and then its entries are already in the database."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if not _still_named(fd, path):
+            os.close(fd)
+            return None
+        if not read:
+            return fd, []
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            return fd, list(read_entries(fh, path))
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    except OSError:
+        os.close(fd)
+        raise
+
+
+def _still_named(fd: int, path: Path) -> bool:
+    """Whether ``path`` still names the open file ``fd`` (not deleted, not replaced)."""
+    opened = os.fstat(fd)
+    try:
+        named = os.stat(path)
+    except FileNotFoundError:
+        return False
+    return opened.st_nlink > 0 and (named.st_dev, named.st_ino) == (opened.st_dev, opened.st_ino)
+
+
+def _unlink_quietly(path: Path) -> None:
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
 
 
 Ship = Callable[[str, str, list[dict[str, Any]]], None]
@@ -163,6 +215,7 @@ class Journal:
         self._wake = threading.Condition(self._lock)
         self._idle = threading.Condition(self._lock)
         self._inflight = 0
+        self._in_hand: list[Entry] = []  # the batch being shipped (back to the queue if shipping breaks)
         self._stop = False
         self._adopted: deque[tuple[str, str, dict[str, Any]]] = deque()
         self._adopt_pending = 0
@@ -198,6 +251,24 @@ class Journal:
 
     # ---- shipping ------------------------------------------------------------------------------
     def _run(self) -> None:
+        """The shipper thread. It must not die while the process lives (what it has not shipped
+        would wait for the next process on this data dir): an unexpected error is logged, the
+        batch in hand goes back to the front of the queue, and shipping goes on."""
+        while True:
+            try:
+                self._ship_until_stopped()
+                return
+            except Exception as exc:
+                log.exception("Information State journal: shipping failed unexpectedly; retrying in %.1f s",
+                              self.retry_interval_s)
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                with self._lock:
+                    self._pending.extendleft(reversed(self._in_hand))
+                    self._in_hand = []
+                    self._inflight = 0
+                time.sleep(self.retry_interval_s)
+
+    def _ship_until_stopped(self) -> None:
         next_adopt = time.monotonic() + self.adopt_interval_s
         while True:
             if time.monotonic() >= next_adopt:
@@ -221,9 +292,11 @@ class Journal:
                     self._wake.wait(timeout=left)
                 batch = [self._pending.popleft() for _ in range(min(self.batch, len(self._pending)))]
                 self._inflight = len(batch)
+                self._in_hand = batch
             if batch and not self._ship_batch(batch):
                 with self._lock:
                     self._pending.extendleft(reversed(batch))
+                    self._in_hand = []
                     self._inflight = 0
                     stopping = self._stop
                 if stopping:
@@ -232,6 +305,7 @@ class Journal:
                 continue
             with self._lock:
                 self._inflight = 0
+                self._in_hand = []
                 for entry in batch:
                     entry.segment.shipped += 1
                 self._release_segments(batch)
@@ -296,22 +370,32 @@ class Journal:
         for path in sorted(self.folder.glob("*.jsonl")):
             if self._segment is not None and path == self._segment.path:
                 continue
-            try:
-                fd = os.open(path, os.O_RDONLY)
-            except FileNotFoundError:
-                continue
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                os.close(fd)
-                continue  # a live writer holds it
-            entries = list(read_lines(path))
+            adopted = _lock_orphan(path)
+            if adopted is None:
+                continue  # a live writer holds it, or it is gone
+            fd, entries = adopted
             log.info("Information State: adopting %d journalled writes from %s", len(entries), path.name)
             with self._lock:
                 self._adopted.extend(entries)
                 self._adopt_pending += len(entries)
                 self._adopted_files.append((path, fd))
             return  # one file at a time keeps memory bounded
+        self._clear_stale_new()
+
+    def _clear_stale_new(self) -> None:
+        """Remove ``*.jsonl.new`` files whose creator died before renaming them (they hold
+        nothing: a segment is renamed before its first write). Only old ones: a young one may
+        be between its creator's open and lock."""
+        for path in self.folder.glob("*" + NEW_SUFFIX):
+            try:
+                if time.time() - path.stat().st_mtime < STALE_NEW_S:
+                    continue
+            except FileNotFoundError:
+                continue
+            adopted = _lock_orphan(path, read=False)
+            if adopted is not None:
+                _unlink_quietly(path)
+                os.close(adopted[0])
 
     def _ship_adopted(self) -> None:
         while self._adopted:
@@ -326,10 +410,7 @@ class Journal:
             with self._lock:
                 self._adopt_pending -= len(chunk)
         for path, fd in self._adopted_files:
-            try:
-                os.unlink(path)
-            except FileNotFoundError:
-                pass
+            _unlink_quietly(path)
             os.close(fd)
         self._adopted_files = []
 

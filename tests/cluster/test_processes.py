@@ -277,7 +277,8 @@ def test_sigkill_under_load_fails_nothing_on_the_others_and_loses_no_acknowledge
         missing = [d for d in missing if httpx.get(f"{a.url}/api/decisions/{d}", timeout=5).status_code != 200]
         return not missing
 
-    assert wait_for(all_found, 60, step=1.0) is not None, f"{len(missing)} acknowledged decisions missing"
+    assert wait_for(all_found, 60, step=1.0) is not None, (
+        f"{len(missing)} acknowledged decisions missing; A:\n{a.output()}\nB:\n{b.output()}")
     c.start().ready()  # back for the module's other tests
 
 

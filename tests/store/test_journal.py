@@ -1,0 +1,173 @@
+"""The journal's hand-over between processes on one data dir, under races (unit tests: the
+database is replaced by a file each process appends what it "ships" to; the journal's contract
+with the database is tested against a real server in test_store.py)."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import gateway.store.journal as journal_module
+from gateway.store.journal import Journal, encode
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# A writer process: journals numbered writes as fast as it can, writing each id to acked-<pid>
+# once append() returned (what a fire's answer would acknowledge); shipping appends the ids to
+# shipped-<pid>. Small segments and a 10 ms adoption interval make the races frequent.
+WRITER = """
+import os, random, sys, time
+sys.path.insert(0, sys.argv[3])
+import gateway.store.journal as J
+J.SEGMENT_BYTES = 4096
+folder, out = sys.argv[1], sys.argv[2]
+pid = os.getpid()
+shipped = os.open(f"{out}/shipped-{pid}", os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+acked = os.open(f"{out}/acked-{pid}", os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+def ship(db, c, docs):
+    time.sleep(random.random() * 0.003)
+    os.write(shipped, "".join(d["id"] + "\\n" for d in docs).encode())
+j = J.Journal(folder, ship, adopt_interval_s=0.01, batch=20)
+n = 0
+while True:
+    n += 1
+    i = f"{pid}-{n}"
+    j.append("db", "c", [J.encode("db", "c", {"id": i, "pad": "x" * 100})])
+    os.write(acked, (i + "\\n").encode())
+    time.sleep(random.random() * 0.001)
+"""
+
+
+def ids_in(files: list[Path]) -> set[str]:
+    return {line for f in files for line in f.read_text().split()}
+
+
+def test_writers_killed_at_random_lose_no_acknowledged_write_and_no_shipper_dies(tmp_path: Path) -> None:
+    """Three processes write, and are SIGKILLed and restarted at random, while the others adopt
+    what the dead left (the races: two adopters on one file, an adopter on a segment its writer
+    is deleting or creating). Every acknowledged write is shipped, and no shipper thread dies."""
+    folder, out = tmp_path / "journal", tmp_path / "out"
+    folder.mkdir()
+    out.mkdir()
+    logs = [open(tmp_path / f"writer-{k}.log", "ab") for k in range(3)]
+
+    def start(k: int) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-c", WRITER, str(folder), str(out), str(ROOT)],
+                                stdout=logs[k], stderr=subprocess.STDOUT)
+
+    rng = random.Random(7)
+    procs = [start(k) for k in range(3)]
+    try:
+        end = time.monotonic() + 12
+        while time.monotonic() < end:
+            time.sleep(rng.random() * 0.8)
+            k = rng.randrange(3)
+            procs[k].send_signal(signal.SIGKILL)
+            procs[k].wait()
+            procs[k] = start(k)
+        time.sleep(0.5)
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGKILL)
+            p.wait()
+        for log in logs:
+            log.close()
+    final = out / "final"
+
+    def ship(db: str, c: str, docs: list[dict]) -> None:
+        with open(final, "a") as fh:
+            fh.write("".join(d["id"] + "\n" for d in docs))
+
+    last = Journal(folder, ship, adopt_interval_s=0.01)
+    try:
+        deadline = time.monotonic() + 30
+        while list(folder.glob("*.jsonl")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert last.flush(10)
+    finally:
+        last.close()
+    acked = ids_in(list(out.glob("acked-*")))
+    shipped = ids_in(list(out.glob("shipped-*")) + ([final] if final.exists() else []))
+    assert len(acked) > 1000
+    assert not acked - shipped, f"{len(acked - shipped)} acknowledged writes never shipped"
+    output = "".join((tmp_path / f"writer-{k}.log").read_text(errors="replace") for k in range(3))
+    assert "Traceback" not in output and "unexpectedly" not in output, output[-3000:]
+
+
+def test_a_segment_deleted_between_open_and_lock_is_not_adopted(tmp_path: Path, monkeypatch) -> None:
+    """Another adopter (or the segment's own writer, done shipping it) deletes the file after we
+    opened it and before we locked it: it is skipped, not read again by name (which raised and
+    killed the shipper thread)."""
+    segment = tmp_path / "1-1-1.jsonl"
+    segment.write_bytes(encode("db", "c", {"_id": "a"}))
+    real_flock = fcntl.flock
+
+    def flock_after_unlink(fd: int, op: int) -> None:
+        if segment.exists():
+            segment.unlink()
+        real_flock(fd, op)
+
+    monkeypatch.setattr(journal_module.fcntl, "flock", flock_after_unlink)
+    assert journal_module._lock_orphan(segment) is None
+
+
+def test_the_shipper_survives_an_unexpected_error_and_keeps_shipping(tmp_path: Path, monkeypatch, caplog) -> None:
+    shipped: list[str] = []
+    failures = iter([None, OSError("adoption broke")])  # the start's adoption passes, the shipper's breaks
+
+    def adopt_once_broken(self: Journal) -> None:
+        error = next(failures, None)
+        if error is not None:
+            raise error
+
+    monkeypatch.setattr(Journal, "_adopt_orphans", adopt_once_broken)
+    j = Journal(tmp_path, lambda db, c, docs: shipped.extend(d["_id"] for d in docs), adopt_interval_s=0.0,
+                retry_interval_s=0.05)
+    try:
+        j.append("db", "c", [encode("db", "c", {"_id": str(n)}) for n in range(3)])
+        assert j.flush(5)
+        assert shipped == ["0", "1", "2"]
+        assert j._thread.is_alive()
+        assert "shipping failed unexpectedly" in caplog.text and "adoption broke" in caplog.text
+    finally:
+        j.close()
+
+
+def test_a_new_segment_is_locked_before_adopters_can_see_it(tmp_path: Path, monkeypatch) -> None:
+    """A segment is created and locked under ``*.jsonl.new`` and only then renamed: at no moment
+    is an unlocked ``*.jsonl`` of a live writer there for an adopter to take."""
+    seen: list[list[str]] = []
+    real_flock = fcntl.flock
+
+    def watching_flock(fd: int, op: int) -> None:
+        seen.append(sorted(p.name for p in tmp_path.glob("*.jsonl")))
+        real_flock(fd, op)
+
+    j = Journal(tmp_path, lambda db, c, docs: None)
+    try:
+        monkeypatch.setattr(journal_module.fcntl, "flock", watching_flock)
+        j.append("db", "c", [encode("db", "c", {"_id": "x"})])
+        monkeypatch.undo()
+        assert seen == [[]]
+        assert [p.name.endswith(".jsonl") for p in tmp_path.glob("*.jsonl*")] == [True]
+    finally:
+        j.close()
+
+
+def test_a_stale_new_file_is_removed_and_a_young_one_kept(tmp_path: Path) -> None:
+    stale, young = tmp_path / "1-1-1.jsonl.new", tmp_path / "2-2-2.jsonl.new"
+    stale.write_bytes(b"")
+    young.write_bytes(b"")
+    old = time.time() - journal_module.STALE_NEW_S - 5
+    os.utime(stale, (old, old))
+    j = Journal(tmp_path, lambda db, c, docs: None)
+    try:
+        assert not stale.exists() and young.exists()
+    finally:
+        j.close()
