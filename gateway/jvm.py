@@ -22,6 +22,7 @@ import gc
 import hashlib
 import logging
 import os
+import re
 import shutil
 import threading
 from pathlib import Path
@@ -154,6 +155,14 @@ def configure(settings: JvmSettings) -> None:
             _configured = settings
 
 
+def collector(extra_options: list[str]) -> list[str]:
+    """The serial collector (small footprint, no GC threads competing with the serving thread on
+    2 cores), unless ``jvm.extra_options`` chooses another: the JVM refuses to start with two."""
+    if any(re.fullmatch(r"-XX:\+Use\w+GC", option) for option in extra_options):
+        return []
+    return ["-XX:+UseSerialGC"]
+
+
 def unlink_garbage_collectors() -> None:
     """Stop JPype from running Java's garbage collector from Python's.
 
@@ -189,7 +198,7 @@ def start(settings: JvmSettings | None = None) -> None:
             "-Xrs",  # leave SIGINT/SIGTERM to Python, so shutdown hooks (ROS, DB process) run
             "-Xss4m",
             f"-Xmx{settings.max_heap}",
-            "-XX:+UseSerialGC",
+            *collector(settings.extra_options),
             "-Dorg.slf4j.simpleLogger.defaultLogLevel=warn",
             "-Ddrools.dialect.java.compiler=ECLIPSE",
             "-Dfile.encoding=UTF-8",

@@ -92,3 +92,9 @@ def test_python_garbage_collection_never_runs_a_full_java_collection():
         del garbage
         gc.collect()
     assert full_collections() == before
+
+
+def test_a_collector_chosen_in_extra_options_replaces_the_default():
+    assert jvm.collector([]) == ["-XX:+UseSerialGC"]
+    assert jvm.collector(["-XX:TieredStopAtLevel=1"]) == ["-XX:+UseSerialGC"]
+    assert jvm.collector(["-XX:+UseParallelGC"]) == []  # the JVM refuses two collectors
