@@ -15,7 +15,12 @@ Layout: ``<dir>/<pid>-<start>-<n>.jsonl`` segments, one JSON document per line
 ``flock`` on the segments it writes; a segment whose lock can be taken belongs to a process that
 is gone (crashed, killed, restarted) and is adopted: shipped and deleted by whichever process
 finds it first. Shipping is idempotent (every document carries its ``_id`` before it is
-journalled), so a segment shipped twice duplicates nothing.
+journalled), so a segment shipped twice duplicates nothing. The hand-over has races, all handled:
+a segment is created locked under ``*.jsonl.new`` and only then renamed (no adopter sees it
+unlocked); an adopter reads through the descriptor it locked, and only if the path still names
+that file (another adopter, or the writer itself, may have shipped and deleted it meanwhile); and
+the shipper thread outlives any unexpected error (tests/store/test_journal.py kills writers at
+random while others adopt).
 """
 
 from __future__ import annotations
