@@ -233,6 +233,36 @@ def test_a_new_process_in_a_service(author_page: Page, gateway):
     assert step_ids(run(gateway, name))[-1] == "gesture"
 
 
+def test_a_process_is_renamed_and_removed_in_the_process_view(author_page: Page, gateway, screenshots):
+    """Rename keeps the process's place and its service's list; Remove takes its steps too, and
+    Undo brings it back."""
+    name, _ = copy_workflow(gateway, "7_thanking.yaml")
+    page = author_page
+    open_workflow(page, name)
+    page.get_by_role("button", name="Rename process see_off").click()
+    field = page.get_by_label("New name of process see_off")
+    field.fill("2bad")
+    field.press("Enter")
+    expect(page.locator(".wf-rename .wf-field-error")).to_contain_text("letters, digits and _")
+    field.press("Escape")
+    expect(page.get_by_role("button", name="Rename process see_off")).to_be_focused()
+    page.get_by_role("button", name="Rename process see_off").click()
+    page.get_by_label("New name of process see_off").fill("bid_farewell")
+    page.get_by_label("New name of process see_off").press("Enter")
+    expect(page.get_by_role("button", name="Rename process bid_farewell")).to_be_focused()
+    page.screenshot(path=str(screenshots / "workflow-editor-rename.png"))
+    assert steps_of(page, "bid_farewell") == ["go_to_door", "thank", "bow", "back_to_counter"]
+    page.get_by_role("button", name="Remove process bid_farewell").click()
+    expect(page.locator(".wf-process[data-process='bid_farewell']")).to_have_count(0)
+    expect(page.get_by_test_id("wf-problems")).to_contain_text("services.farewell.processes")  # now empty
+    page.get_by_role("button", name="Undo the last change").click()
+    assert steps_of(page, "bid_farewell") == ["go_to_door", "thank", "bow", "back_to_counter"]
+    save(page, "the process says what it does", 2)
+    text = current(gateway, name)["text"]
+    assert "  bid_farewell:\n" in text and "processes: [bid_farewell]" in text and "see_off" not in text
+    assert step_ids(run(gateway, name)) == ["go_to_door", "thank", "bow", "back_to_counter"]
+
+
 def test_the_robot_of_a_step_is_chosen_from_the_robots(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "7_thanking.yaml")
     page = author_page

@@ -279,6 +279,7 @@ class WorkflowEditor {
     this.doc = JSON.parse(from.pop());
     this.lastDoc = JSON.stringify(this.doc);
     this.lastCoalesce = null;
+    this.renaming = null;
     if (this.selected && !getIn(this.doc, this.selected)) this.selected = null;
     if (this.editingModule && !(this.doc.modules || {})[this.editingModule]) this.editingModule = null;
     this.seq += 1;
@@ -444,10 +445,82 @@ class WorkflowEditor {
 
   processBox(name) {
     const process = this.doc.processes[name];
+    const heading = this.renaming === name ? this.renameForm(name)
+      : h("h3", {}, h("span", { class: "wf-tag" }, "Process"), ` ${name}`,
+        h("span", { class: "wf-process-tools" },
+          h("button", { class: "secondary small", "aria-label": `Rename process ${name}`, onclick: () => this.startRename(name) }, "Rename"),
+          h("button", { class: "secondary small", "aria-label": `Remove process ${name}`, onclick: () => this.removeProcess(name) }, "Remove")));
     return h("div", { class: "wf-process", "data-process": name },
-      h("h3", {}, h("span", { class: "wf-tag" }, "Process"), ` ${name}`),
+      heading,
       process.description ? h("p", { class: "hint" }, process.description) : null,
       this.stepList(["processes", name, "steps"], process.steps || []));
+  }
+
+  startRename(name) {
+    this.renaming = name;
+    this.renderProcessView();
+    this.panelEl.querySelector(".wf-rename input")?.select();
+  }
+
+  /** The heading of a process being renamed: its name in a field; Enter renames, Escape cancels. */
+  renameForm(name) {
+    const nameEl = h("input", { type: "text", value: name, "aria-label": `New name of process ${name}` });
+    const errorEl = h("span", { class: "wf-field-error", role: "alert" });
+    const cancel = () => {
+      this.renaming = null;
+      this.renderProcessView();
+      this.panelEl.querySelector(`[aria-label="Rename process ${CSS.escape(name)}"]`)?.focus();
+    };
+    const rename = (event) => {
+      event.preventDefault();
+      const problem = this.renameProblem(name, nameEl.value.trim());
+      if (problem) {
+        errorEl.textContent = problem;
+        return nameEl.focus();
+      }
+      this.renameProcess(name, nameEl.value.trim());
+    };
+    nameEl.addEventListener("keydown", (event) => { if (event.key === "Escape") cancel(); });
+    return h("form", { class: "wf-rename", onsubmit: rename },
+      h("span", { class: "wf-tag" }, "Process"), " ", nameEl,
+      h("button", { class: "secondary small", type: "submit" }, "Rename"),
+      h("button", { class: "secondary small", type: "button", onclick: cancel }, "Cancel"), errorEl);
+  }
+
+  renameProblem(from, to) {
+    if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A process name is letters, digits and _ (not starting with a digit).";
+    if (to !== from && (this.doc.processes || {})[to]) return `There is already a process “${to}”.`;
+    return null;
+  }
+
+  /** Renames a process where it is defined and in every service that lists it, keeping its place. */
+  renameProcess(from, to) {
+    this.renaming = null;
+    if (from === to) return this.renderProcessView();
+    this.doc.processes = Object.fromEntries(Object.entries(this.doc.processes).map(([k, v]) => [k === from ? to : k, v]));
+    for (const service of Object.values(this.doc.services || {})) {
+      if (Array.isArray(service.processes)) service.processes = service.processes.map((p) => (p === from ? to : p));
+    }
+    const moved = (path) => (path && path[0] === "processes" && path[1] === from ? ["processes", to, ...path.slice(2)] : path);
+    this.selected = moved(this.selected);
+    if (this.slot) this.slot = { ...this.slot, list: moved(this.slot.list) };
+    this.say(`Process ${from} renamed to ${to}.`);
+    this.changed();
+    this.panelEl.querySelector(`[aria-label="Rename process ${CSS.escape(to)}"]`)?.focus();
+  }
+
+  /** Removes a process with its steps, and from the services that list it (Ctrl+Z undoes). */
+  removeProcess(name) {
+    const steps = (this.doc.processes[name].steps || []).length;
+    delete this.doc.processes[name];
+    for (const service of Object.values(this.doc.services || {})) {
+      if (Array.isArray(service.processes)) service.processes = service.processes.filter((p) => p !== name);
+    }
+    const inIt = (path) => path && path[0] === "processes" && path[1] === name;
+    if (inIt(this.selected)) this.selected = null;
+    if (this.slot && inIt(this.slot.list)) this.slot = null;
+    this.say(`Process ${name} removed with its ${steps} step${steps === 1 ? "" : "s"}; Undo (Ctrl+Z) brings it back.`);
+    this.changed();
   }
 
   stepList(listPath, steps) {
