@@ -183,6 +183,31 @@ export function locateProblem(doc, problem) {
 
 /** Rename module `from` to `to` everywhere: its key (same place), the steps that use it, the
  *  fire-rules modules that dispatch actions to it. Returns an error sentence, or "" when done. */
+/** Renames process ``from`` to ``to`` where it is defined (keeping its place), in every service
+ *  that lists it and in every step that runs it; "" when done, else why not. */
+export function renameProcess(doc, from, to) {
+  if (from === to) return "";
+  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A process name is letters, digits and _ (not starting with a digit).";
+  if ((doc.processes || {})[to]) return `There is already a process “${to}”.`;
+  doc.processes = Object.fromEntries(Object.entries(doc.processes).map(([name, p]) => [name === from ? to : name, p]));
+  for (const service of Object.values(doc.services || {})) {
+    if (Array.isArray(service.processes)) service.processes = service.processes.map((p) => (p === from ? to : p));
+  }
+  for (const { step } of allSteps(doc)) if (step && step.process === from) step.process = to;
+  return "";
+}
+
+/** Removes process ``name`` with its steps, and from the services that list it; returns how many
+ *  steps it had. Steps that run it stay (the checks name them). */
+export function removeProcess(doc, name) {
+  const steps = ((doc.processes[name] || {}).steps || []).length;
+  delete doc.processes[name];
+  for (const service of Object.values(doc.services || {})) {
+    if (Array.isArray(service.processes)) service.processes = service.processes.filter((p) => p !== name);
+  }
+  return steps;
+}
+
 export function renameModule(doc, from, to) {
   if (from === to) return "";
   if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A module name is letters, digits and _ (not starting with a digit).";

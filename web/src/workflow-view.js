@@ -16,7 +16,7 @@ import { EditorView } from "@codemirror/view";
 import { languageFor } from "./lang.js";
 import {
   getIn, allSteps, findStep, uniqueStepId, insertStep, removeStep, shiftStep, moveStep, listName,
-  moduleFor, addModule, stepSummary, locateProblem, samePath, renameModule,
+  moduleFor, addModule, stepSummary, locateProblem, samePath, renameModule, renameProcess, removeProcess,
 } from "./workflow-model.js";
 
 const CHECK_DELAY_MS = 300;
@@ -473,12 +473,13 @@ class WorkflowEditor {
     };
     const rename = (event) => {
       event.preventDefault();
-      const problem = this.renameProblem(name, nameEl.value.trim());
+      const to = nameEl.value.trim();
+      const problem = renameProcess(this.doc, name, to);
       if (problem) {
         errorEl.textContent = problem;
         return nameEl.focus();
       }
-      this.renameProcess(name, nameEl.value.trim());
+      this.renamed(name, to);
     };
     nameEl.addEventListener("keydown", (event) => { if (event.key === "Escape") cancel(); });
     return h("form", { class: "wf-rename", onsubmit: rename },
@@ -487,20 +488,10 @@ class WorkflowEditor {
       h("button", { class: "secondary small", type: "button", onclick: cancel }, "Cancel"), errorEl);
   }
 
-  renameProblem(from, to) {
-    if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A process name is letters, digits and _ (not starting with a digit).";
-    if (to !== from && (this.doc.processes || {})[to]) return `There is already a process “${to}”.`;
-    return null;
-  }
-
-  /** Renames a process where it is defined and in every service that lists it, keeping its place. */
-  renameProcess(from, to) {
+  /** After :func:`renameProcess`: selection and insertion place follow, the view is redrawn. */
+  renamed(from, to) {
     this.renaming = null;
     if (from === to) return this.renderProcessView();
-    this.doc.processes = Object.fromEntries(Object.entries(this.doc.processes).map(([k, v]) => [k === from ? to : k, v]));
-    for (const service of Object.values(this.doc.services || {})) {
-      if (Array.isArray(service.processes)) service.processes = service.processes.map((p) => (p === from ? to : p));
-    }
     const moved = (path) => (path && path[0] === "processes" && path[1] === from ? ["processes", to, ...path.slice(2)] : path);
     this.selected = moved(this.selected);
     if (this.slot) this.slot = { ...this.slot, list: moved(this.slot.list) };
@@ -511,11 +502,7 @@ class WorkflowEditor {
 
   /** Removes a process with its steps, and from the services that list it (Ctrl+Z undoes). */
   removeProcess(name) {
-    const steps = (this.doc.processes[name].steps || []).length;
-    delete this.doc.processes[name];
-    for (const service of Object.values(this.doc.services || {})) {
-      if (Array.isArray(service.processes)) service.processes = service.processes.filter((p) => p !== name);
-    }
+    const steps = removeProcess(this.doc, name);
     const inIt = (path) => path && path[0] === "processes" && path[1] === name;
     if (inIt(this.selected)) this.selected = null;
     if (this.slot && inIt(this.slot.list)) this.slot = null;
