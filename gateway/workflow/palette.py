@@ -230,6 +230,11 @@ def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[s
         "params": [Param("if", "expression", True, "True", None,
                          "A condition over the inputs and saved values, e.g. len(input.orders) > 0.").to_dict()],
     })
+    entries.append({
+        "id": "set", "group": "Flow", "kind": "set", "label": "Set variables",
+        "description": "Give names to values (texts, numbers, ${…} expressions) that later steps read as ${name}.",
+        "params": [],
+    })
     return {
         "robots": [r.to_dict() for r in robots],
         "rulesets": list(rulesets),

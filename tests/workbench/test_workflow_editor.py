@@ -263,6 +263,39 @@ def test_a_process_is_renamed_and_removed_in_the_process_view(author_page: Page,
     assert step_ids(run(gateway, name)) == ["go_to_door", "thank", "bow", "back_to_counter"]
 
 
+def test_the_variables_of_a_set_step_are_edited_in_its_form(author_page: Page, gateway, screenshots):
+    name, text = copy_workflow(gateway, "7_thanking.yaml")
+    text = text.replace("      - id: thank\n", "      - id: words\n        set: {greeting: Thank you}\n      - id: thank\n", 1)
+    text = text.replace('"Thank you very much. Please come again."', '"${greeting} very much."', 1)
+    with gateway.rest() as client:
+        assert client.put(f"/api/workflows/{name}", json={"text": text, "comment": "a set step"}).status_code == 201
+    page = author_page
+    open_workflow(page, name)
+    step_button(page, "words").click()
+    expect(page.get_by_label("Value of variable greeting")).to_have_value("Thank you")
+    page.get_by_label("Value of variable greeting").fill("Many thanks")
+    page.get_by_role("button", name="+ Add a variable").click()
+    expect(page.get_by_label("Name of variable value")).to_be_focused()
+    page.get_by_label("Name of variable value").fill("greeting")
+    page.get_by_label("Name of variable value").press("Tab")
+    expect(page.locator(".wf-variable .wf-field-error").nth(1)).to_have_text("The step already sets “greeting”.")
+    page.get_by_label("Name of variable value").fill("times")
+    page.get_by_label("Name of variable value").press("Tab")
+    expect(page.get_by_label("Value of variable times")).to_be_focused()
+    page.get_by_label("Value of variable times").fill("2")
+    page.screenshot(path=str(screenshots / "workflow-editor-set-step.png"))
+    save(page, "warmer thanks", 3)
+    assert "set: {greeting: Many thanks, times: 2}" in current(gateway, name)["text"]
+    steps = run(gateway, name)["steps"]
+    assert next(s for s in steps if s["step_id"] == "words")["output"] == {"greeting": "Many thanks", "times": 2}
+    page.get_by_role("button", name="Remove variable times").click()
+    expect(page.get_by_label("Value of variable times")).to_have_count(0)
+    step_button(page, "bow").click()
+    page.get_by_role("button", name="Insert: Set variables").click()  # a new set step from the palette
+    expect(page.get_by_label("Name of variable value")).to_be_focused()
+    assert steps_of(page, "see_off") == ["go_to_door", "words", "thank", "bow", "set", "back_to_counter"]
+
+
 def test_the_robot_of_a_step_is_chosen_from_the_robots(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "7_thanking.yaml")
     page = author_page

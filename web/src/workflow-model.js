@@ -208,6 +208,37 @@ export function removeProcess(doc, name) {
   return steps;
 }
 
+/** The value a set step's field stands for: a number, true/false/null, else the text itself
+ *  (texts and ``${…}`` expressions). */
+export function variableValue(text) {
+  const t = text.trim();
+  if (/^-?\d+(\.\d+)?$/.test(t)) return Number(t);
+  if (t === "true" || t === "false") return t === "true";
+  if (t === "null") return null;
+  return text;
+}
+
+/** The field text of a set step's value (the inverse of :func:`variableValue`). */
+export function variableText(value) {
+  return typeof value === "string" ? value : JSON.stringify(value);
+}
+
+/** Renames variable ``from`` of a set step, keeping its place; "" when done, else why not. */
+export function renameVariable(step, from, to) {
+  if (from === to) return "";
+  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A variable name is letters, digits and _ (not starting with a digit).";
+  if (Object.prototype.hasOwnProperty.call(step.set || {}, to)) return `The step already sets “${to}”.`;
+  step.set = Object.fromEntries(Object.entries(step.set || {}).map(([name, v]) => [name === from ? to : name, v]));
+  return "";
+}
+
+/** A variable name the set step does not set yet: value, value_2, … */
+export function newVariableName(step) {
+  const used = new Set(Object.keys(step.set || {}));
+  if (!used.has("value")) return "value";
+  for (let n = 2; ; n += 1) if (!used.has(`value_${n}`)) return `value_${n}`;
+}
+
 export function renameModule(doc, from, to) {
   if (from === to) return "";
   if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A module name is letters, digits and _ (not starting with a digit).";

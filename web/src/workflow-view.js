@@ -17,6 +17,7 @@ import { languageFor } from "./lang.js";
 import {
   getIn, allSteps, findStep, uniqueStepId, insertStep, removeStep, shiftStep, moveStep, listName,
   moduleFor, addModule, stepSummary, locateProblem, samePath, renameModule, renameProcess, removeProcess,
+  variableValue, variableText, renameVariable, newVariableName,
 } from "./workflow-model.js";
 
 const CHECK_DELAY_MS = 300;
@@ -766,6 +767,8 @@ class WorkflowEditor {
     let step;
     if (what.entry === "branch") {
       step = { id: uniqueStepId(this.doc, "branch"), if: "True", then: [] };
+    } else if (what.entry === "set") {
+      step = { id: uniqueStepId(this.doc, "set"), set: { value: "" } };
     } else {
       let moduleName = what.module;
       let entry = null;
@@ -789,7 +792,7 @@ class WorkflowEditor {
     this.editingModule = null;
     this.say(`Step ${step.id} inserted.`);
     this.changed();
-    const first = this.sideEl.querySelector("[data-field^='with.'], [data-field='if']");
+    const first = this.sideEl.querySelector("[data-field^='with.'], [data-field='if'], [data-field^='set.']");
     (first || this.sideEl.querySelector("[data-field='id']"))?.focus();
   }
 
@@ -843,6 +846,43 @@ class WorkflowEditor {
       h("span", { class: "wf-field-error", id: errId, role: "alert" }));
   }
 
+  /** A set step's variables: a name and a value each (text, number, true/false or ``${…}``). */
+  variablesFields(step, update) {
+    const rows = Object.entries(step.set || {}).map(([name, value]) => {
+      const errorEl = h("span", { class: "wf-field-error", role: "alert" });
+      const nameEl = h("input", { type: "text", value: name, "aria-label": `Name of variable ${name}`, "data-field": `set.${name}`,
+        onchange: (e) => {
+          const problem = renameVariable(step, name, e.target.value.trim());
+          if (problem) {
+            errorEl.textContent = problem;
+            return e.target.focus();
+          }
+          update(() => {});
+          this.renderSide();
+          this.sideEl.querySelector(`[aria-label="Value of variable ${CSS.escape(e.target.value.trim())}"]`)?.focus();
+        } });
+      const valueEl = h("input", { type: "text", value: variableText(value), "aria-label": `Value of variable ${name}`,
+        placeholder: "text, a number, true/false or ${…}",
+        oninput: (e) => {
+          this.coalesce = `${pathKey(this.selected || [])}|set.${name}`;
+          update((s) => { s.set[name] = variableValue(e.target.value); });
+        } });
+      const removeEl = h("button", { class: "secondary small", type: "button", "aria-label": `Remove variable ${name}`,
+        onclick: () => { update((s) => { delete s.set[name]; }); this.renderSide(); } }, "✕");
+      return h("div", { class: "wf-variable", "data-field-box": `set.${name}` }, nameEl, h("span", { "aria-hidden": "true" }, "="),
+        valueEl, removeEl, errorEl);
+    });
+    const add = () => {
+      const name = newVariableName(step);
+      update((s) => { s.set = { ...(s.set || {}), [name]: "" }; });
+      this.renderSide();
+      this.sideEl.querySelector(`[aria-label="Name of variable ${CSS.escape(name)}"]`)?.select();
+    };
+    return h("fieldset", { class: "wf-variables", "data-field-box": "set" }, h("legend", {}, "Variables it sets"), rows,
+      h("button", { class: "secondary small", type: "button", onclick: add }, "+ Add a variable"),
+      h("p", { class: "hint" }, "Later steps read them as ${name}. A value is a text, a number, true/false, or an expression such as ${len(input.orders)}."));
+  }
+
   stepForm(path) {
     const step = getIn(this.doc, path);
     const update = (fn) => { fn(step); this.changed({ keepForm: true }); };
@@ -889,7 +929,7 @@ class WorkflowEditor {
       parts.push(this.field({ name: "process", type: "string", required: true, choices: Object.keys(this.doc.processes || {}) },
         step.process, setKey("process"), "process"));
     } else {
-      parts.push(h("p", { class: "hint" }, `Sets ${Object.keys(step.set || {}).join(", ")}; edit the values in the YAML tab.`));
+      parts.push(this.variablesFields(step, update));
     }
     const common = kind === "module" ? ["label", "save", "on_failure", ...(step.on_failure === "retry" ? ["retries"] : []), "timeout"]
       : kind === "process" ? ["label", "save", "on_failure"] : ["label"];

@@ -1,7 +1,9 @@
 // Unit tests of the workflow document edits (run by tests/workbench/test_workbench_checks.py).
 import { test } from "node:test";
 import assert from "node:assert/strict";
-import { removeProcess, renameProcess } from "../src/workflow-model.js";
+import {
+  newVariableName, removeProcess, renameProcess, renameVariable, variableText, variableValue,
+} from "../src/workflow-model.js";
 
 const doc = () => ({
   processes: {
@@ -35,4 +37,23 @@ test("a removed process leaves the services that listed it; steps that run it st
   assert.deepEqual(Object.keys(d.processes), ["greet", "last"]);
   assert.deepEqual(d.services.reception.processes, ["greet"]);
   assert.equal(d.processes.greet.steps[1].process, "seat");
+});
+
+test("set step values: numbers, true/false and null typed, everything else text", () => {
+  assert.equal(variableValue("2"), 2);
+  assert.equal(variableValue("-1.5"), -1.5);
+  assert.equal(variableValue("true"), true);
+  assert.equal(variableValue("null"), null);
+  assert.equal(variableValue("${len(input.orders)}"), "${len(input.orders)}");
+  assert.equal(variableValue("Thank you"), "Thank you");
+  for (const v of [2, true, null, "text"]) assert.equal(variableValue(variableText(v)), v);
+});
+
+test("a set step's variable is renamed in place, never onto another", () => {
+  const step = { id: "s", set: { a: 1, b: 2 } };
+  assert.equal(renameVariable(step, "a", "b"), "The step already sets “b”.");
+  assert.equal(renameVariable(step, "a", "1x").length > 0, true);
+  assert.equal(renameVariable(step, "a", "c"), "");
+  assert.deepEqual(Object.entries(step.set), [["c", 1], ["b", 2]]);
+  assert.equal(newVariableName({ set: { value: 1 } }), "value_2");
 });
