@@ -4,7 +4,8 @@ Why: YAML stays the storage format, and the visual editor edits the document as 
 writes should look like what a person writes, so the YAML tab and the version diffs stay readable:
 keys in the document's order, small leaf mappings and lists in flow style on one line
 (``say: {kind: ros_service, ...}``, ``with: {text: ...}``), steps and processes in block style,
-and the leading comment block of the previous text kept (comments elsewhere are not kept).
+the leading comment block of the previous text kept as the header, and its other comments put
+back where they stood (:mod:`gateway.workflow.comments`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 import yaml
+
+from gateway.workflow.comments import restore
 
 FLOW_WIDTH = 110  # a leaf mapping longer than this on one line is written as a block
 
@@ -81,7 +84,7 @@ def to_yaml(document: dict[str, Any], previous_text: str = "") -> str:
     """``document`` as workflow YAML, under the leading comments of ``previous_text``."""
     body = yaml.dump(_Block(document), Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=FLOW_WIDTH,
                      default_flow_style=False)
-    return leading_comments(previous_text) + body
+    return leading_comments(previous_text) + restore(body, previous_text)
 
 
 def read_document(text: str) -> dict[str, Any] | None:

@@ -265,7 +265,8 @@ def test_a_process_is_renamed_and_removed_in_the_process_view(author_page: Page,
 
 def test_the_variables_of_a_set_step_are_edited_in_its_form(author_page: Page, gateway, screenshots):
     name, text = copy_workflow(gateway, "7_thanking.yaml")
-    text = text.replace("      - id: thank\n", "      - id: words\n        set: {greeting: Thank you}\n      - id: thank\n", 1)
+    text = text.replace("      - id: thank\n",
+                        "      # the words they hear\n      - id: words\n        set: {greeting: Thank you}\n      - id: thank\n", 1)
     text = text.replace('"Thank you very much. Please come again."', '"${greeting} very much."', 1)
     with gateway.rest() as client:
         assert client.put(f"/api/workflows/{name}", json={"text": text, "comment": "a set step"}).status_code == 201
@@ -285,7 +286,9 @@ def test_the_variables_of_a_set_step_are_edited_in_its_form(author_page: Page, g
     page.get_by_label("Value of variable times").fill("2")
     page.screenshot(path=str(screenshots / "workflow-editor-set-step.png"))
     save(page, "warmer thanks", 3)
-    assert "set: {greeting: Many thanks, times: 2}" in current(gateway, name)["text"]
+    saved = current(gateway, name)["text"]
+    assert "set: {greeting: Many thanks, times: 2}" in saved
+    assert "      # the words they hear\n      - id: words\n" in saved  # a visual save keeps the comments
     steps = run(gateway, name)["steps"]
     assert next(s for s in steps if s["step_id"] == "words")["output"] == {"greeting": "Many thanks", "times": 2}
     page.get_by_role("button", name="Remove variable times").click()
