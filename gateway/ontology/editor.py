@@ -10,12 +10,14 @@ checked by Pellet, versioned, live at once and rolled back exactly like a whole-
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from gateway.ontology.knowledge import KnowledgeBase, KnowledgeInvalid, digest
 from gateway.ontology.model import OntologyModel, local, read_model
 from gateway.ontology.reasoner import ReasonerError
 from gateway.ontology.swrl import (
+    Atom,
     RuleInvalid,
     append_rule,
     describe,
@@ -148,14 +150,18 @@ class KnowledgeEditor:
         if not text.strip() or "\n" in text.strip():
             return [{**where, "column": 0, "atom": "", "message": "a rule is one line: body atoms -> head atoms"}], candidate
         try:
-            parse_rule(text.strip(), self.model())
+            body, head = parse_rule(text.strip(), self.model())
         except RuleInvalid as exc:
             return [{**where, "column": exc.column, "atom": exc.atom, "message": f"rule {rule_no}: {exc.message}"}], candidate
         errors, reasoned = self.knowledge.trial("swrl", candidate)
         self.last_changes = self._changes(reasoned) if reasoned else []
-        return [{**where, "column": e.get("column", 0), "atom": "",
-                 "message": f"rule {rule_no}: {e['message']}" if e.get("line") == line or not e.get("line")
-                 else e["message"]} for e in errors], candidate
+        out = []
+        for e in errors:
+            ours = e.get("line") == line or not e.get("line")
+            atom = pellet_atom(e["message"], body, head) if ours else None
+            out.append({**where, "column": atom.column if atom else e.get("column", 0), "atom": atom.text if atom else "",
+                        "message": f"rule {rule_no}: {e['message']}" if ours else e["message"]})
+        return out, candidate
 
     def _changes(self, reasoned: dict[str, Any]) -> list[dict[str, Any]]:
         """Inferred values of the ontology's individuals that a candidate would change (before → after)."""
@@ -230,3 +236,12 @@ class KnowledgeEditor:
                 out.append({"property": prop, "individual": local(str(fact["object"]), model.base) or fact["object"],
                             "rules": [r.number for r in rules if prop in {a.name for a in r.head}]})
         return out
+
+
+def pellet_atom(message: str, body: list[Atom], head: list[Atom]) -> Atom | None:
+    """Where in a rule a Pellet error points (Pellet names no position): for an inconsistency, the
+    rule's conclusion (the live rules and ontology were consistent without this rule, and its
+    conclusion is all it adds); else the first atom the message names; None when neither."""
+    if "inconsistent" in message:
+        return head[0] if head else None
+    return next((atom for atom in [*body, *head] if re.search(rf"\b{re.escape(atom.name)}\b", message)), None)

@@ -179,6 +179,8 @@ def test_a_rule_pellet_finds_inconsistent_is_refused_with_its_rule(client, gatew
     error = check["errors"][0]
     assert (error["rule"], error["line"]) == (7, 20)
     assert error["message"].startswith("rule 7: Pellet finds the ontology and the rules inconsistent")
+    # Pellet gives no position: the error points at the rule's conclusion, all the rule adds
+    assert (error["column"], error["atom"]) == (text.index("cupCapacity") + 1, 'cupCapacity(?c, "big")')
     assert client.put("/api/knowledge/swrl/rules/7", json={"text": text}).status_code == 422
     assert gateway.knowledge.value("cup1.pourQuantity") == 140.0
 

@@ -267,6 +267,22 @@ def test_keyboard_only_edits_a_value_and_a_rule(page: Page, gateway):
     assert _value(gateway, "cup1.pourQuantity") == pytest.approx(131.25)
 
 
+def test_a_rule_is_checked_as_it_is_typed_and_a_pellet_error_points_at_its_conclusion(page: Page, gateway):
+    page.goto("/workbench/knowledge/rules/7")
+    page.get_by_test_id("edit-7").click()
+    area = page.get_by_test_id("rule-text-7")
+    area.fill("Cup(?c) -> cupCapacity(?c, 300")  # no Check click: typing is enough
+    expect(page.get_by_test_id("verdict-7")).to_contain_text("expected ',' or ')'")
+    expect(area).to_be_focused()  # the cursor stays where the owner types
+    area.fill('Cup(?c) -> cupCapacity(?c, "big")')
+    verdict = page.get_by_test_id("verdict-7")
+    expect(verdict).to_contain_text('column 12, at cupCapacity(?c, "big"): rule 7: Pellet finds the ontology and the rules inconsistent')
+    area.fill("Cup(?c) -> cupCapacity(?c, 300)")
+    expect(verdict).to_contain_text("✓ Pellet: consistent")
+    with gateway.rest() as client:
+        assert "cupCapacity(?c, 300)" not in client.get("/api/knowledge/swrl").json()["text"]  # checked, not saved
+
+
 def test_a_value_the_individual_lacks_is_added(page: Page, gateway):
     page.goto("/workbench/knowledge/hsr1")
     page.get_by_test_id("add-property").select_option("robotToHumanDistance")

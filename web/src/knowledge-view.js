@@ -5,11 +5,12 @@
 // Routes: #/knowledge (values) · #/knowledge/<individual> · #/knowledge/values?class=<Class>
 //         #/knowledge/rules · #/knowledge/rules/<n> · #/knowledge/history?kind=ontology|swrl
 
-import { h, fill, when } from "./dom.js";
+import { h, fill, when, debounce } from "./dom.js";
 import { api } from "./api.js";
 import { textDiff } from "./editor.js";
 import "./knowledge-view.css";
 
+const CHECK_AS_YOU_TYPE_MS = 700; // Pellet checks a rule this long after the last keystroke
 const SECTIONS = [["values", "Values"], ["rules", "SWRL rules"], ["history", "History"]];
 
 const NUMBER = {
@@ -380,8 +381,12 @@ function ruleCard(ctx, rule, state, messageEl, reload) {
     area.value = rule.text;
     const comment = h("input", { class: "comment-input", placeholder: "why? (optional)", "aria-label": `Comment for rule ${rule.number}` });
     const verdict = h("div", { class: "verdict", "aria-live": "polite", "data-testid": `verdict-${rule.number}` });
-    const check = () => runCheck(`/api/knowledge/swrl/rules/${rule.number}/check`, area, verdict);
+    const typed = debounce(() => runCheck(`/api/knowledge/swrl/rules/${rule.number}/check`, area, verdict), CHECK_AS_YOU_TYPE_MS);
+    area.addEventListener("input", typed); // checked as it is typed, as the rule editor checks DRL
+    const check = () => { typed.cancel(); return runCheck(`/api/knowledge/swrl/rules/${rule.number}/check`, area, verdict); };
     const save = async () => {
+      typed.cancel();
+      nextCheck(area); // a check still on its way must not overwrite what the save says
       fill(verdict, h("p", { class: "muted" }, "Pellet is checking and saving…"));
       try {
         const saved = await api("PUT", `/api/knowledge/swrl/rules/${rule.number}`, { text: area.value, comment: comment.value, base_hash: state.hash });
@@ -413,7 +418,11 @@ function newRuleCard(ctx, state, messageEl, reload) {
     placeholder: "Customer(?c), age(?c, ?a), greaterThan(?a, 64) -> …" });
   const comment = h("input", { class: "comment-input", placeholder: "what the rule is for", "aria-label": "Comment for the new rule" });
   const verdict = h("div", { class: "verdict", "aria-live": "polite" });
+  const typed = debounce(() => runCheck("/api/knowledge/swrl/rules/check", area, verdict), CHECK_AS_YOU_TYPE_MS);
+  area.addEventListener("input", typed);
   const add = async () => {
+    typed.cancel();
+    nextCheck(area);
     try {
       const saved = await api("POST", "/api/knowledge/swrl/rules", { text: area.value, comment: comment.value, base_hash: state.hash });
       await reload(h("div", { class: "message ok", role: "status" }, `✓ Rule ${saved.number} added and live (rules version ${saved.version}).`));
@@ -423,23 +432,32 @@ function newRuleCard(ctx, state, messageEl, reload) {
   };
   return h("details", { class: "card new-rule" }, h("summary", {}, "Add a rule"), area, comment, verdict,
     h("div", { class: "buttons" },
-      h("button", { class: "secondary", onclick: () => runCheck("/api/knowledge/swrl/rules/check", area, verdict) }, "Check"),
+      h("button", { class: "secondary", onclick: () => { typed.cancel(); runCheck("/api/knowledge/swrl/rules/check", area, verdict); } }, "Check"),
       h("button", { class: "primary", onclick: add }, "Add")));
 }
 
+/** A new check (or save) of ``area``: answers to the ones before it are dropped. */
+function nextCheck(area) {
+  area.dataset.checks = String(Number(area.dataset.checks || 0) + 1);
+  return area.dataset.checks;
+}
+
+/** Pellet's check of the rule as it is now; an answer to an older text (typing went on) is dropped. */
 async function runCheck(path, area, verdict) {
+  const seq = nextCheck(area);
+  const typing = document.activeElement === area;
   fill(verdict, h("p", { class: "muted" }, "Pellet is checking…"));
   try {
     const result = await api("POST", path, { text: area.value });
-    showVerdict(verdict, result.ok, result.errors, area, result.changes);
+    if (area.dataset.checks === seq) showVerdict(verdict, result.ok, result.errors, area, result.changes, !typing);
   } catch (err) {
-    showVerdict(verdict, false, [{ message: err.message }], area);
+    if (area.dataset.checks === seq) showVerdict(verdict, false, [{ message: err.message }], area, [], !typing);
   }
 }
 
 /** Pellet's verdict: consistent, or each error with where it is (rule, line, column, atom); the
  * cursor goes to the column so the owner sees the spot. */
-function showVerdict(verdict, ok, errors, area, changes = []) {
+function showVerdict(verdict, ok, errors, area, changes = [], moveCursor = true) {
   if (ok) {
     fill(verdict, h("div", { class: "message ok", role: "status" }, "✓ Pellet: consistent with the ontology and the other rules.",
       changes.length ? h("ul", { class: "changes", "data-testid": "rule-changes" }, changes.map((c) => h("li", {},
@@ -450,7 +468,7 @@ function showVerdict(verdict, ok, errors, area, changes = []) {
   fill(verdict, h("div", { class: "message error", role: "alert" }, errors.map((e) => h("p", {},
     h("b", {}, where(e)), e.message))));
   const column = (errors[0] || {}).column;
-  if (column) {
+  if (column && moveCursor) { // not while the owner is typing: the cursor stays where they are
     area.focus();
     area.setSelectionRange(column - 1, Math.min(area.value.length, column - 1 + ((errors[0].atom || "").length || 1)));
   }
