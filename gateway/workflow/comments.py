@@ -95,15 +95,28 @@ def split_comment(line: str) -> tuple[str, str]:
     return line.rstrip(), ""
 
 
-def places(text: str) -> Iterator[tuple[int, Place | None]]:
-    """(line number, its place or None) for every line of ``text``."""
+_BLOCK_SCALAR = re.compile(r"(?:^|[:\s-])[|>][-+0-9]*$")  # "text: |", "- >-": a block of text follows
+
+
+def places(text: str) -> Iterator[tuple[int, Place | None, bool]]:
+    """(line number, its place or None, whether it is a comment line) for every line of ``text``.
+    The lines of a block scalar (``text: |``) are text, even when they start with ``#``."""
     walker = _Walker()
+    block_of: int | None = None  # the indent of the line that opened a block scalar
     for number, line in enumerate(text.splitlines()):
         stripped = line.strip()
+        indent = len(line) - len(line.lstrip(" "))
+        if block_of is not None and (not stripped or indent > block_of):
+            yield number, None, False
+            continue
+        block_of = None
         if not stripped or stripped.startswith("#"):
-            yield number, None
-        else:
-            yield number, walker.place(line)
+            yield number, None, bool(stripped)
+            continue
+        place = walker.place(line)
+        if place is not None and _BLOCK_SCALAR.search(place.body):
+            block_of = place.indent
+        yield number, place, False
 
 
 def comments_by_place(text: str) -> tuple[dict[str, list[str]], dict[str, str]]:
@@ -114,10 +127,10 @@ def comments_by_place(text: str) -> tuple[dict[str, list[str]], dict[str, str]]:
     trailing: dict[str, str] = {}
     pending: list[str] = []
     seen_data = False
-    for number, place in places(text):
+    for number, place, is_comment in places(text):
         stripped = lines[number].strip()
         if place is None:
-            if stripped.startswith("#"):
+            if is_comment:
                 pending.append(stripped)
             elif not stripped and pending:
                 pending.append("")
@@ -140,7 +153,7 @@ def restore(new_text: str, previous_text: str) -> str:
         return new_text
     lines = new_text.splitlines()
     out: list[str] = []
-    for number, place in places(new_text):
+    for number, place, _ in places(new_text):
         line = lines[number]
         if place is not None:
             for comment in above.pop(place.path, []):

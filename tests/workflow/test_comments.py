@@ -71,6 +71,16 @@ def test_a_comment_goes_with_its_step_and_follows_it_when_steps_move():
     assert "# then the words" not in written and "# walk them out first" in written
 
 
+def test_lines_of_a_block_text_are_text_even_when_they_start_with_a_hash():
+    text = COMMENTED.replace('        with: {text: "Thank you # very much"}\n',
+                             "        with:\n          text: |\n            # not a comment\n            Thank you.\n", 1)
+    document = read_document(text)
+    assert document["processes"]["see_off"]["steps"][1]["with"]["text"] == "# not a comment\nThank you.\n"
+    written = to_yaml(document, text)
+    assert read_document(written) == document
+    assert [line for line in written.splitlines() if line.strip() == "# not a comment"] == []
+
+
 def test_a_hash_inside_quotes_is_text_not_a_comment():
     assert split_comment('  with: {text: "Thank you # very much"}') == ('  with: {text: "Thank you # very much"}', "")
     assert split_comment("  a: 1 # note") == ("  a: 1", "# note")
