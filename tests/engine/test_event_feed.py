@@ -64,6 +64,14 @@ then
     actions.say("pepper", "big " + $p.getSeq() + " " + $p.getText().length());
 end
 
+rule "slow"
+when
+    $p: Ping(kind == "slow")
+then
+    try { Thread.sleep(300); } catch (InterruptedException e) { }
+    actions.say("pepper", "slow " + $p.getSeq());
+end
+
 rule "boom"
 when
     $p: Ping(kind == "boom")
@@ -376,8 +384,12 @@ def test_sparse_stream_is_delivered_without_flush(session):
         assert wait_for(lambda: len(got.items) == seq + 1, timeout=5.0), f"event {seq} never delivered"
         assert texts_of(got.results[-1]) == ["seen %d" % seq, "greet %d" % seq]
     assert feed.delivered == feed.submitted == 5 and feed.backlog == 0
-    # the first event of a quiet stream crosses at once; its answer comes back through the feed's thread
-    assert f"feed-{session.id}" in got.threads
+    # an answer Java has at once is handed over by the submitting thread; one that takes longer
+    # (300 ms here) is handed over by the feed's own thread, with nobody calling the feed
+    feed.submit(ping(5, "slow"), 1_600)
+    assert wait_for(lambda: len(got.items) == 6, timeout=5.0), "the slow event was never delivered"
+    assert texts_of(got.results[-1]) == ["seen 5", "slow 5"]
+    assert got.threads[-1] == f"feed-{session.id}"
     feed.close()
 
 
