@@ -219,7 +219,6 @@ class Journal:
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._idle = threading.Condition(self._lock)
-        self._inflight = 0
         self._in_hand: list[Entry] = []  # the batch being shipped (back to the queue if shipping breaks)
         self._stop = False
         self._adopted: deque[tuple[str, str, dict[str, Any]]] = deque()
@@ -235,7 +234,7 @@ class Journal:
         with self._lock:
             if self._stop:
                 raise RuntimeError("the Information State journal is closed")
-            if len(self._pending) + self._inflight + len(lines) > self.max_docs:
+            if len(self._pending) + len(self._in_hand) + len(lines) > self.max_docs:
                 self.dropped += len(lines)
                 raise JournalFull(f"the journal in {self.folder} holds {self.max_docs} writes not yet in the database")
             segment = self._writable_segment()
@@ -252,7 +251,7 @@ class Journal:
     @property
     def backlog(self) -> int:
         """Writes not yet confirmed by the database (this process's and adopted ones)."""
-        return len(self._pending) + self._inflight + self._adopt_pending
+        return len(self._pending) + len(self._in_hand) + self._adopt_pending
 
     # ---- shipping ------------------------------------------------------------------------------
     def _run(self) -> None:
@@ -270,7 +269,6 @@ class Journal:
                 with self._lock:
                     self._pending.extendleft(reversed(self._in_hand))
                     self._in_hand = []
-                    self._inflight = 0
                 time.sleep(self.retry_interval_s)
 
     def _ship_until_stopped(self) -> None:
@@ -296,20 +294,17 @@ class Journal:
                         break
                     self._wake.wait(timeout=left)
                 batch = [self._pending.popleft() for _ in range(min(self.batch, len(self._pending)))]
-                self._inflight = len(batch)
                 self._in_hand = batch
             if batch and not self._ship_batch(batch):
                 with self._lock:
                     self._pending.extendleft(reversed(batch))
                     self._in_hand = []
-                    self._inflight = 0
                     stopping = self._stop
                 if stopping:
                     return
                 time.sleep(self.retry_interval_s)
                 continue
             with self._lock:
-                self._inflight = 0
                 self._in_hand = []
                 for entry in batch:
                     entry.segment.shipped += 1
@@ -433,7 +428,7 @@ class Journal:
 
     def _wait_shipped(self, deadline: float) -> bool:
         """(lock held) Wait until nothing is pending, in flight or adopted."""
-        while self._pending or self._inflight or self._adopted:
+        while self._pending or self._in_hand or self._adopted:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return False

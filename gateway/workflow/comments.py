@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Iterator
 
 _KEY = re.compile(r"""^(?P<key>"(?:[^"\\]|\\.)*"|'(?:[^']|'')*'|[^\s#'"{\[\]}:,][^:#]*?):(?:\s|$)""")
-_STEP_ID = re.compile(r"""^id:\s*(?P<id>[A-Za-z_][A-Za-z0-9_]*)\s*(?:#.*)?$""")
+_STEP_ID = re.compile(r"""^id:\s*(?P<id>[A-Za-z_][A-Za-z0-9_]*)\s*$""")  # the comment is split off first
 
 
 @dataclass

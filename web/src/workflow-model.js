@@ -181,15 +181,27 @@ export function locateProblem(doc, problem) {
   return { stepPath, stepId: step && step.id, field: path.slice(stepEnd + 1).join(".") };
 }
 
-/** Rename module `from` to `to` everywhere: its key (same place), the steps that use it, the
- *  fire-rules modules that dispatch actions to it. Returns an error sentence, or "" when done. */
+const NAME = /^[A-Za-z_][A-Za-z0-9_]*$/;
+
+/** Why ``name`` cannot name a ``what`` (module, process, variable): "" when it can. ``taken``: the
+ *  name is used already. */
+export function nameProblem(what, name, taken = false) {
+  if (!NAME.test(name)) return `A ${what} name is letters, digits and _ (not starting with a digit).`;
+  return taken ? `There is already a ${what} “${name}”.` : "";
+}
+
+/** ``obj`` with key ``from`` renamed to ``to`` in the same place (YAML keeps the order). */
+function renameKey(obj, from, to) {
+  return Object.fromEntries(Object.entries(obj || {}).map(([name, v]) => [name === from ? to : name, v]));
+}
+
 /** Renames process ``from`` to ``to`` where it is defined (keeping its place), in every service
  *  that lists it and in every step that runs it; "" when done, else why not. */
 export function renameProcess(doc, from, to) {
   if (from === to) return "";
-  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A process name is letters, digits and _ (not starting with a digit).";
-  if ((doc.processes || {})[to]) return `There is already a process “${to}”.`;
-  doc.processes = Object.fromEntries(Object.entries(doc.processes).map(([name, p]) => [name === from ? to : name, p]));
+  const problem = nameProblem("process", to, !!(doc.processes || {})[to]);
+  if (problem) return problem;
+  doc.processes = renameKey(doc.processes, from, to);
   for (const service of Object.values(doc.services || {})) {
     if (Array.isArray(service.processes)) service.processes = service.processes.map((p) => (p === from ? to : p));
   }
@@ -226,9 +238,10 @@ export function variableText(value) {
 /** Renames variable ``from`` of a set step, keeping its place; "" when done, else why not. */
 export function renameVariable(step, from, to) {
   if (from === to) return "";
-  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A variable name is letters, digits and _ (not starting with a digit).";
+  const problem = nameProblem("variable", to);
+  if (problem) return problem;
   if (Object.prototype.hasOwnProperty.call(step.set || {}, to)) return `The step already sets “${to}”.`;
-  step.set = Object.fromEntries(Object.entries(step.set || {}).map(([name, v]) => [name === from ? to : name, v]));
+  step.set = renameKey(step.set, from, to);
   return "";
 }
 
@@ -239,11 +252,13 @@ export function newVariableName(step) {
   for (let n = 2; ; n += 1) if (!used.has(`value_${n}`)) return `value_${n}`;
 }
 
+/** Rename module `from` to `to` everywhere: its key (same place), the steps that use it, the
+ *  fire-rules modules that dispatch actions to it. Returns an error sentence, or "" when done. */
 export function renameModule(doc, from, to) {
   if (from === to) return "";
-  if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(to)) return "A module name is letters, digits and _ (not starting with a digit).";
-  if ((doc.modules || {})[to]) return `There is already a module “${to}”.`;
-  doc.modules = Object.fromEntries(Object.entries(doc.modules).map(([name, m]) => [name === from ? to : name, m]));
+  const problem = nameProblem("module", to, !!(doc.modules || {})[to]);
+  if (problem) return problem;
+  doc.modules = renameKey(doc.modules, from, to);
   for (const { step } of allSteps(doc)) if (step && step.module === from) step.module = to;
   for (const module of Object.values(doc.modules)) {
     for (const [action, target] of Object.entries(module.dispatch || {})) if (target === from) module.dispatch[action] = to;

@@ -17,7 +17,7 @@ import { languageFor } from "./lang.js";
 import {
   getIn, allSteps, findStep, uniqueStepId, insertStep, removeStep, shiftStep, moveStep, listName,
   moduleFor, addModule, stepSummary, locateProblem, samePath, renameModule, renameProcess, removeProcess,
-  variableValue, variableText, renameVariable, newVariableName,
+  variableValue, variableText, renameVariable, newVariableName, nameProblem,
 } from "./workflow-model.js";
 
 const CHECK_DELAY_MS = 300;
@@ -424,12 +424,9 @@ class WorkflowEditor {
     const add = (event) => {
       event.preventDefault();
       const name = nameEl.value.trim();
-      if (!/^[A-Za-z_][A-Za-z0-9_]*$/.test(name)) {
-        errorEl.textContent = "A process name is letters, digits and _ (not starting with a digit).";
-        return nameEl.focus();
-      }
-      if ((this.doc.processes || {})[name]) {
-        errorEl.textContent = `There is already a process “${name}”.`;
+      const problem = nameProblem("process", name, !!(this.doc.processes || {})[name]);
+      if (problem) {
+        errorEl.textContent = problem;
         return nameEl.focus();
       }
       this.doc.processes[name] = { steps: [] };
@@ -450,7 +447,7 @@ class WorkflowEditor {
       : h("h3", {}, h("span", { class: "wf-tag" }, "Process"), ` ${name}`,
         h("span", { class: "wf-process-tools" },
           h("button", { class: "secondary small", "aria-label": `Rename process ${name}`, onclick: () => this.startRename(name) }, "Rename"),
-          h("button", { class: "secondary small", "aria-label": `Remove process ${name}`, onclick: () => this.removeProcess(name) }, "Remove")));
+          h("button", { class: "secondary small", "aria-label": `Remove process ${name}`, onclick: () => this.removeProcessOf(name) }, "Remove")));
     return h("div", { class: "wf-process", "data-process": name },
       heading,
       process.description ? h("p", { class: "hint" }, process.description) : null,
@@ -502,7 +499,7 @@ class WorkflowEditor {
   }
 
   /** Removes a process with its steps, and from the services that list it (Ctrl+Z undoes). */
-  removeProcess(name) {
+  removeProcessOf(name) {
     const steps = removeProcess(this.doc, name);
     const inIt = (path) => path && path[0] === "processes" && path[1] === name;
     if (inIt(this.selected)) this.selected = null;
