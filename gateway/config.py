@@ -221,8 +221,9 @@ class ApiSettings(BaseModel):
     )
     fire_fast_path: bool = Field(
         default=True,
-        description="Answer POST /api/rulesets/{name}/fire in front of FastAPI's routing (same answers, about "
-        "half the CPU per request); false: through FastAPI like every other route.",
+        description="Answer POST /api/rulesets/{name}/fire and KIE command batches (POST .../containers/instances/"
+        "{id}) in front of FastAPI's routing (same answers, about half the CPU per request); false: through "
+        "FastAPI like every other route.",
     )
     server_id: str = "printeps-gateway"
 

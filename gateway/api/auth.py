@@ -21,6 +21,7 @@ from gateway.config import ApiSettings
 ROLE_RANK = {"caller": 1, "author": 2}
 
 _bearer = HTTPBearer(auto_error=False, description="A token from settings.api.tokens")
+KIE_CHALLENGE = 'Basic realm="kie-server"'
 _basic = HTTPBasic(auto_error=False, description="KIE Server endpoints only: settings.api.basic_users")
 
 
@@ -136,9 +137,15 @@ def require_kie(role: str) -> Callable[..., Principal]:
         bearer: HTTPAuthorizationCredentials | None = Security(_bearer),
         basic: HTTPBasicCredentials | None = Security(_basic),
     ) -> Principal:
-        return _auth(request).check(role, bearer, basic, challenge='Basic realm="kie-server"')
+        return _auth(request).check(role, bearer, basic, challenge=KIE_CHALLENGE)
 
     return dependency
+
+
+async def check_kie(request: Request, role: str) -> Principal:
+    """What :func:`require_kie` answers, for a caller outside FastAPI's dependency solving (the
+    KIE batch route's fast path): the same credential readers, the same check."""
+    return _auth(request).check(role, await _bearer(request), await _basic(request), challenge=KIE_CHALLENGE)
 
 
 caller = require("caller")

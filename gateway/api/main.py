@@ -17,7 +17,7 @@ from fastapi.responses import RedirectResponse
 
 from gateway.api.auth import Authenticator
 from gateway.api.errors import install_error_handlers
-from gateway.api.fire_path import FireFastPath
+from gateway.api.fast_paths import FastPaths
 from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
@@ -67,7 +67,7 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
         return RedirectResponse("/workbench/workflows", status_code=307)
 
     if settings.api.fire_fast_path:
-        app.add_middleware(FireFastPath)  # inside the body limit (added last, so outermost)
+        app.add_middleware(FastPaths)  # inside the body limit (added last, so outermost)
     app.add_middleware(BodyLimit, max_bytes=settings.api.max_body_bytes)
     if settings.api.is_open:
         log.warning("REST API is open (no tokens configured): every caller acts as author 'anonymous'")

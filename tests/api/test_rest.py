@@ -114,15 +114,15 @@ def test_try_fires_undeployed_text(client):
 
 
 def test_rollback_and_delete(client):
-    client.put("/api/rulesets/gone", json={"files": files("g1")})
-    client.put("/api/rulesets/gone", json={"files": files("g2")})
-    assert client.post("/api/rulesets/gone/rollback", json={"version": 1}).status_code == 200
-    fired = client.post("/api/rulesets/gone/fire", json={"facts": FACTS}).json()
+    client.put("/api/rulesets/rolled", json={"files": files("g1")})
+    client.put("/api/rulesets/rolled", json={"files": files("g2")})
+    assert client.post("/api/rulesets/rolled/rollback", json={"version": 1}).status_code == 200
+    fired = client.post("/api/rulesets/rolled/fire", json={"facts": FACTS}).json()
     assert fired["version"] == 1 and fired["actions"][0]["params"]["text"].endswith("(g1)")
-    assert client.post("/api/rulesets/gone/rollback", json={"version": 7}).status_code == 404
-    assert client.delete("/api/rulesets/gone").json() == {"name": "gone", "deleted": True}
-    assert client.post("/api/rulesets/gone/fire", json={"facts": FACTS}).status_code == 404
-    assert client.delete("/api/rulesets/gone").status_code == 404
+    assert client.post("/api/rulesets/rolled/rollback", json={"version": 7}).status_code == 404
+    assert client.delete("/api/rulesets/rolled").json() == {"name": "rolled", "deleted": True}
+    assert client.post("/api/rulesets/rolled/fire", json={"facts": FACTS}).status_code == 404
+    assert client.delete("/api/rulesets/rolled").status_code == 404
 
 
 def test_decisions_record_fires(client, deployed, api_gateway):

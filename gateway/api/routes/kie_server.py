@@ -20,6 +20,7 @@ the rules failed, 429 a limit — and 410/503 for a session whose owner process 
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any, Callable
 
@@ -60,6 +61,8 @@ from gateway.engine.sessions import (
     SessionNotFound,
 )
 
+log = logging.getLogger(__name__)
+
 PREFIX = "/kie-server/services/rest/server"
 KIND = "ruleset"
 kie_author = require_kie("author")
@@ -67,6 +70,22 @@ kie_author = require_kie("author")
 
 def failure(status: int, msg: str, headers: dict[str, str] | None = None) -> JSON:
     return JSON(service_response(False, msg), status_code=status, headers=headers)
+
+
+def kie_failure(request: Request, exc: Exception) -> JSON:
+    """The KIE ``FAILURE`` answer for an error raised while serving a KIE endpoint (shared by
+    :class:`KieRoute` and the batch route's fast path in :mod:`gateway.api.fast_paths`)."""
+    if isinstance(exc, ApiError):
+        return failure(exc.status, exc.message, exc.headers)
+    if isinstance(exc, BadBody):
+        return failure(exc.status, exc.message)
+    if isinstance(exc, RequestValidationError):
+        return failure(422, f"invalid request: {exc.errors()}")
+    metrics = getattr(request.app.state, "metrics", None)
+    if metrics is not None:
+        metrics.errors.labels("internal").inc()
+    log.error("KIE endpoint %s failed", request.url.path, exc_info=exc)
+    return failure(500, f"Unexpected error during processing: {type(exc).__name__}: {exc}")
 
 
 class KieRoute(APIRoute):
@@ -79,20 +98,8 @@ class KieRoute(APIRoute):
         async def route(request: Request) -> Response:
             try:
                 return await handler(request)
-            except ApiError as exc:
-                return failure(exc.status, exc.message, exc.headers)
-            except BadBody as exc:
-                return failure(exc.status, exc.message)
-            except RequestValidationError as exc:
-                return failure(422, f"invalid request: {exc.errors()}")
             except Exception as exc:
-                metrics = getattr(request.app.state, "metrics", None)
-                if metrics is not None:
-                    metrics.errors.labels("internal").inc()
-                import logging
-
-                logging.getLogger(__name__).exception("KIE endpoint %s failed", request.url.path)
-                return failure(500, f"Unexpected error during processing: {type(exc).__name__}: {exc}")
+                return kie_failure(request, exc)
 
         return route
 
@@ -319,7 +326,11 @@ BATCH_SCHEMA: dict[str, Any] = {
 
 @router.post("/containers/instances/{container_id}", openapi_extra=BATCH_SCHEMA)
 async def execute(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> Response:
-    """Run a command batch on the session its ``lookup`` names (see the module docstring)."""
+    """Run a command batch on the session its ``lookup`` names (see the module docstring).
+
+    Served by :mod:`gateway.api.fast_paths` in front of FastAPI (``api.fire_fast_path``, the
+    default), which calls this function with the same credential check; ``request``'s body is then
+    already read."""
     body = await read_body(request)
     state = request.app.state
     engine = _engine(request)

@@ -174,7 +174,7 @@ async def fire(name: RuleSetName, request: Request, _: Caller) -> JSON:
     ...}``; 422 naming the bad fact/field. The decision is recorded with the ``X-Request-ID`` (or
     ``traceparent``) header as its correlation id.
 
-    Served by :mod:`gateway.api.fire_path` in front of FastAPI (``api.fire_fast_path``, the
+    Served by :mod:`gateway.api.fast_paths` in front of FastAPI (``api.fire_fast_path``, the
     default); this route documents it and serves it when the fast path is off."""
     return JSON(await fire_answer(request.app.state, name, await read_json(request), correlation_id(request)))
 
