@@ -106,6 +106,9 @@ class StoreSettings(BaseModel):
         default=False,
         description="fsync every journalled write: survives a machine crash, not only a killed process (slower).")
     decision_facts_max: int = Field(default=1000, description="Facts kept per decision record (the count is kept).")
+    ship_from: Literal["process", "thread"] = Field(
+        default="process", description="Where journalled writes are inserted into MongoDB: a shipper process "
+        "of each gateway process (off the serving process's GIL: lower tail latency) or a thread of it.")
     ship_linger_s: float = Field(
         default=0.05, ge=0, description="How long journalled writes wait to be shipped together: fewer, larger "
         "inserts under load (0: ship at once; reads of the store may lag writes by this much).")

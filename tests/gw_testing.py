@@ -6,9 +6,21 @@ from __future__ import annotations
 import contextlib
 import itertools
 import os
+import time
 from pathlib import Path
+from typing import Callable
 
 _databases = itertools.count(1)
+
+
+def wait_for(cond: Callable[[], object], timeout_s: float = 30.0, step: float = 0.05) -> bool:
+    """True as soon as ``cond()`` is, False if it is still not after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(step)
+    return bool(cond())
 
 
 def open_test_store(mongo, folder: Path, name: str | None = None):

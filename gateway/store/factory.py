@@ -55,6 +55,7 @@ def open_store(settings: Any, *, join_running: bool = False) -> ManagedStore:
     store = ManagedStore(uri, cfg.database, Path(settings.data_dir) / "store" / "journal",
                          backend="embedded" if embedded else "external", timeout_ms=cfg.timeout_ms,
                          spool_max_docs=cfg.spool_max_docs, retry_interval_s=cfg.retry_interval_s,
-                         fsync=cfg.journal_fsync, linger_s=cfg.ship_linger_s)
+                         fsync=cfg.journal_fsync, linger_s=cfg.ship_linger_s,
+                         ship_process=cfg.ship_from == "process")
     store.embedded = embedded
     return store

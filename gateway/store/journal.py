@@ -52,17 +52,13 @@ class JournalFull(RuntimeError):
 
 @dataclass
 class Entry:
-    """One journalled write: where it goes and its journal line (the document is decoded from it
-    when shipped, so what reaches the database is exactly what was journalled)."""
+    """One journalled write: where it goes and its journal line (shipped as it is, so what reaches
+    the database is exactly what was journalled)."""
 
     database: str
     collection: str
     line: bytes
     segment: "Segment"
-
-    @property
-    def doc(self) -> dict[str, Any]:
-        return orjson.loads(self.line)["d"]
 
 
 class Segment:
@@ -129,19 +125,21 @@ def encode(database: str, collection: str, doc: dict[str, Any]) -> bytes:
                         option=orjson.OPT_NON_STR_KEYS) + b"\n"
 
 
-def read_entries(fh: BinaryIO, path: Path) -> Iterator[tuple[str, str, dict[str, Any]]]:
-    """The entries of an open segment file (``path`` names it in warnings)."""
+def read_entries(fh: BinaryIO, path: Path) -> Iterator[tuple[str, str, bytes]]:
+    """The entries of an open segment file as (database, collection, journal line); ``path`` names
+    it in warnings about lines that cannot be read (skipped)."""
     for raw in fh:
         if not raw.strip():
             continue
         try:
             entry = orjson.loads(raw)
-            yield entry["db"], entry["c"], entry["d"]
+            entry["d"]
+            yield entry["db"], entry["c"], raw if raw.endswith(b"\n") else raw + b"\n"
         except (orjson.JSONDecodeError, KeyError, TypeError):
             log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
 
 
-def _lock_orphan(path: Path, read: bool = True) -> tuple[int, list[tuple[str, str, dict[str, Any]]]] | None:
+def _lock_orphan(path: Path, read: bool = True) -> tuple[int, list[tuple[str, str, bytes]]] | None:
     """(locked fd, entries) of the segment at ``path`` if its writer is gone; None if a live
     writer holds it or it is no longer there.
 
@@ -186,13 +184,15 @@ def _unlink_quietly(path: Path) -> None:
         pass
 
 
-Ship = Callable[[str, str, list[dict[str, Any]]], None]
+# ship(database, collection, journal lines of that collection, in order): raises if not all are in
+Ship = Callable[[str, str, list[bytes]], None]
 
 
 class Journal:
     """Appends writes durably and hands them, in order and in batches, to ``ship``.
 
-    ``ship(database, collection, docs)`` must be idempotent and raise on failure (the batch is
+    ``ship(database, collection, lines)`` (journal lines, see :func:`encode`) must be idempotent and
+    raise on failure (the batch is
     then retried after ``retry_interval_s``; meanwhile ``degraded`` is true). One daemon thread
     ships; :meth:`flush` waits until everything appended so far is shipped.
     """
@@ -221,7 +221,7 @@ class Journal:
         self._idle = threading.Condition(self._lock)
         self._in_hand: list[Entry] = []  # the batch being shipped (back to the queue if shipping breaks)
         self._stop = False
-        self._adopted: deque[tuple[str, str, dict[str, Any]]] = deque()
+        self._adopted: deque[tuple[str, str, bytes]] = deque()
         self._adopt_pending = 0
         self._adopted_files: list[tuple[Path, int]] = []
         self._adopt_orphans()  # now, so that backlog and flush() count what a dead process left
@@ -319,15 +319,15 @@ class Journal:
             key = (batch[start].database, batch[start].collection)
             while end < len(batch) and (batch[end].database, batch[end].collection) == key:
                 end += 1
-            if not self._try_ship(key[0], key[1], [e.doc for e in batch[start:end]]):
+            if not self._try_ship(key[0], key[1], [e.line for e in batch[start:end]]):
                 # what was shipped before the failure is re-shipped later: harmless (idempotent)
                 return False
             start = end
         return True
 
-    def _try_ship(self, database: str, collection: str, docs: list[dict[str, Any]]) -> bool:
+    def _try_ship(self, database: str, collection: str, lines: list[bytes]) -> bool:
         try:
-            self.ship(database, collection, docs)
+            self.ship(database, collection, lines)
         except Exception as exc:  # the database is away (or refuses): keep the writes, retry
             if not self.degraded:
                 log.warning("Information State unreachable (%s: %s); keeping writes in %s",
@@ -400,11 +400,11 @@ class Journal:
     def _ship_adopted(self) -> None:
         while self._adopted:
             chunk = [self._adopted.popleft() for _ in range(min(self.batch, len(self._adopted)))]
-            groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
-            for database, collection, doc in chunk:
-                groups.setdefault((database, collection), []).append(doc)
-            for (database, collection), docs in groups.items():
-                if not self._try_ship(database, collection, docs):
+            groups: dict[tuple[str, str], list[bytes]] = {}
+            for database, collection, line in chunk:
+                groups.setdefault((database, collection), []).append(line)
+            for (database, collection), lines in groups.items():
+                if not self._try_ship(database, collection, lines):
                     self._adopted.extendleft(reversed(chunk))
                     return
             with self._lock:

@@ -21,10 +21,10 @@ from typing import Any, Mapping
 
 import pymongo
 from bson import ObjectId
-from bson.errors import InvalidDocument
-from pymongo.errors import BulkWriteError, DuplicateKeyError, OperationFailure, PyMongoError
+from pymongo.errors import PyMongoError
 
 from gateway.store.journal import Journal, JournalFull, encode
+from gateway.store.shipper import ShipperProcess, insert_journalled, journal_doc
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,7 @@ class InformationState:
 
     def __init__(self, uri: str, database: str, journal_dir: Path, *, backend: str = "external",
                  timeout_ms: int = 1000, spool_max_docs: int = 200_000, retry_interval_s: float = 1.0,
-                 fsync: bool = False, linger_s: float = 0.0) -> None:
+                 fsync: bool = False, linger_s: float = 0.0, ship_process: bool = False) -> None:
         self.uri = uri
         self.backend = backend
         self.process = process_name()  # stamped on every write (_meta.process)
@@ -109,6 +109,8 @@ class InformationState:
             tz_aware=True)
         self.db = self.client[database]
         self._indexed: set[tuple[str, str]] = set()
+        # inserts made by a process of their own, off the serving process's GIL (gateway.store.shipper)
+        self.shipper = ShipperProcess(uri, timeout_ms) if ship_process else None
         self.journal = Journal(Path(journal_dir), self._ship, max_docs=spool_max_docs, fsync=fsync,
                                retry_interval_s=retry_interval_s, linger_s=linger_s)
 
@@ -151,26 +153,18 @@ class InformationState:
         """Wait until every write made so far is in the database; False if it is not reachable."""
         return self.journal.flush(timeout_s)
 
-    def _ship(self, database: str, collection: str, docs: list[dict[str, Any]]) -> None:
-        """Insert journalled documents; ones already there (an earlier, interrupted ship) are skipped."""
-        target = self.client[database][collection]
-        if (database, collection) not in self._indexed:
-            target.create_index([("_meta.stored_type", 1), ("_meta.inserted_at", 1)])
-            self._indexed.add((database, collection))
-        try:
-            target.insert_many([_to_bson(d) for d in docs], ordered=False)
-        except BulkWriteError as exc:
-            refused = {e["index"]: e for e in exc.details.get("writeErrors", []) if e.get("code") != 11000}
-            for index, error in refused.items():  # the others are in: only these are set aside
-                self.journal.set_aside(database, collection, docs[index], error.get("errmsg", str(error)))
-        except (InvalidDocument, OperationFailure):
-            for doc in docs:  # one refused document must not hold up the others: one by one
-                try:
-                    target.insert_one(_to_bson(doc))
-                except DuplicateKeyError:
-                    pass
-                except (InvalidDocument, OperationFailure) as single:
-                    self.journal.set_aside(database, collection, doc, f"{type(single).__name__}: {single}")
+    def _ship(self, database: str, collection: str, lines: list[bytes]) -> None:
+        """Insert journalled writes (from the shipper process, or here); the documents the database
+        refuses are set aside. Raises when the batch is not known to be in (it is then retried)."""
+        create_index = (database, collection) not in self._indexed
+        if self.shipper is not None:
+            refused = self.shipper.ship(database, collection, lines, create_index=create_index)
+        else:
+            refused = insert_journalled(self.client, database, collection, [journal_doc(x) for x in lines],
+                                        create_index=create_index)
+        self._indexed.add((database, collection))
+        for index, error in refused:
+            self.journal.set_aside(database, collection, journal_doc(lines[index]), error)
 
     # ---- reads --------------------------------------------------------------------------------
     def query(self, collection: str, *, type: str | None = None, since: datetime | None = None,
@@ -234,6 +228,8 @@ class InformationState:
     def close(self, flush_timeout_s: float = 5.0) -> None:
         """Ship what can be shipped; what is left stays in the journal for the next start."""
         self.journal.close(flush_timeout_s)
+        if self.shipper is not None:
+            self.shipper.close()
         self.client.close()
 
 
@@ -258,20 +254,6 @@ def _body(doc: Mapping[str, Any], stored_type: str, inserted_by: str, process: s
     body["_meta"] = {"stored_type": stored_type, "inserted_at": time.time(), "inserted_by": inserted_by,
                      "process": process}
     return body
-
-
-def _to_bson(body: dict[str, Any]) -> dict[str, Any]:
-    """The stored form of a journalled document: ObjectId ``_id``, a datetime ``inserted_at``."""
-    doc = dict(body)
-    raw_id = doc.get("_id")
-    if isinstance(raw_id, str) and ObjectId.is_valid(raw_id):
-        doc["_id"] = ObjectId(raw_id)
-    meta = dict(doc.get("_meta") or {})
-    at = meta.get("inserted_at")
-    if isinstance(at, (int, float)):
-        meta["inserted_at"] = datetime.fromtimestamp(at, timezone.utc)
-    doc["_meta"] = meta
-    return doc
 
 
 def _redact(uri: str) -> str:

@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-import time
+import gw_testing
 
 
 def wait_for(cond, timeout_s: float = 20.0, step: float = 0.05) -> bool:
-    """Poll ``cond`` until true or ``timeout_s`` passes; returns its last value."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(step)
-    return bool(cond())
+    """The shared bounded wait (:func:`gw_testing.wait_for`), with the ROS tests' default of 20 s."""
+    return gw_testing.wait_for(cond, timeout_s, step)

@@ -19,10 +19,14 @@ def mongo(tmp_path_factory: pytest.TempPathFactory):
     db.stop()
 
 
-@pytest.fixture
+@pytest.fixture(params=["thread", "process"])
 def store(mongo: EmbeddedMongo, tmp_path: Path, request: pytest.FixtureRequest):
-    s = InformationState(mongo.uri, f"t_{request.node.name[:40].replace('[', '_').replace(']', '')}",
-                         tmp_path / "journal", backend="embedded", timeout_ms=500, retry_interval_s=0.2)
+    """A store over the module's database, shipping its writes from a thread or from its shipper
+    process (``store.ship_from``): every store test holds for both."""
+    name = request.node.originalname[:40]  # one database per test and way of shipping
+    s = InformationState(mongo.uri, f"t_{request.param[0]}_{name}",
+                         tmp_path / "journal", backend="embedded", timeout_ms=500, retry_interval_s=0.2,
+                         ship_process=request.param == "process")
     yield s
     s.close()
 

@@ -5,6 +5,7 @@ with the database is tested against a real server in test_store.py)."""
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import random
 import signal
@@ -22,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # once append() returned (what a fire's answer would acknowledge); shipping appends the ids to
 # shipped-<pid>. Small segments and a 10 ms adoption interval make the races frequent.
 WRITER = """
-import os, random, sys, time
+import json, os, random, sys, time
 sys.path.insert(0, sys.argv[3])
 import gateway.store.journal as J
 J.SEGMENT_BYTES = 4096
@@ -30,9 +31,9 @@ folder, out = sys.argv[1], sys.argv[2]
 pid = os.getpid()
 shipped = os.open(f"{out}/shipped-{pid}", os.O_WRONLY | os.O_CREAT | os.O_APPEND)
 acked = os.open(f"{out}/acked-{pid}", os.O_WRONLY | os.O_CREAT | os.O_APPEND)
-def ship(db, c, docs):
+def ship(db, c, lines):
     time.sleep(random.random() * 0.003)
-    os.write(shipped, "".join(d["id"] + "\\n" for d in docs).encode())
+    os.write(shipped, "".join(json.loads(x)["d"]["id"] + "\\n" for x in lines).encode())
 j = J.Journal(folder, ship, adopt_interval_s=0.01, batch=20)
 n = 0
 while True:
@@ -80,9 +81,9 @@ def test_writers_killed_at_random_lose_no_acknowledged_write_and_no_shipper_dies
             log.close()
     final = out / "final"
 
-    def ship(db: str, c: str, docs: list[dict]) -> None:
+    def ship(db: str, c: str, lines: list[bytes]) -> None:
         with open(final, "a") as fh:
-            fh.write("".join(d["id"] + "\n" for d in docs))
+            fh.write("".join(json.loads(x)["d"]["id"] + "\n" for x in lines))
 
     last = Journal(folder, ship, adopt_interval_s=0.01)
     try:
@@ -127,7 +128,7 @@ def test_the_shipper_survives_an_unexpected_error_and_keeps_shipping(tmp_path: P
             raise error
 
     monkeypatch.setattr(Journal, "_adopt_orphans", adopt_once_broken)
-    j = Journal(tmp_path, lambda db, c, docs: shipped.extend(d["_id"] for d in docs), adopt_interval_s=0.0,
+    j = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["_id"] for x in lines), adopt_interval_s=0.0,
                 retry_interval_s=0.05)
     try:
         j.append("db", "c", [encode("db", "c", {"_id": str(n)}) for n in range(3)])
@@ -149,7 +150,7 @@ def test_a_new_segment_is_locked_before_adopters_can_see_it(tmp_path: Path, monk
         seen.append(sorted(p.name for p in tmp_path.glob("*.jsonl")))
         real_flock(fd, op)
 
-    j = Journal(tmp_path, lambda db, c, docs: None)
+    j = Journal(tmp_path, lambda db, c, lines: None)
     try:
         monkeypatch.setattr(journal_module.fcntl, "flock", watching_flock)
         j.append("db", "c", [encode("db", "c", {"_id": "x"})])
@@ -166,7 +167,7 @@ def test_a_stale_new_file_is_removed_and_a_young_one_kept(tmp_path: Path) -> Non
     young.write_bytes(b"")
     old = time.time() - journal_module.STALE_NEW_S - 5
     os.utime(stale, (old, old))
-    j = Journal(tmp_path, lambda db, c, docs: None)
+    j = Journal(tmp_path, lambda db, c, lines: None)
     try:
         assert not stale.exists() and young.exists()
     finally:

@@ -8,18 +8,10 @@ import time
 from datetime import datetime, timedelta, timezone
 
 import pytest
+from gw_testing import wait_for
 
 from gateway.store import StoreError, open_store
 from gateway.store.store import InformationState
-
-
-def wait_for(cond, timeout_s: float = 30.0, step: float = 0.05) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(step)
-    return cond()
 
 
 def test_record_has_meta_and_query_by_type_time_and_fields(store: InformationState) -> None:
