@@ -103,6 +103,7 @@ class ShipperProcess:
         self.timeout_ms = timeout_ms
         self.answer_timeout_s = timeout_ms * 10 / 1000 + 5.0  # the child's own timeouts come first
         self.started = 0
+        self.closed = False
         self._proc: subprocess.Popen | None = None
         self._lock = threading.Lock()
 
@@ -127,6 +128,8 @@ class ShipperProcess:
     def _running(self) -> subprocess.Popen:
         if self._proc is not None and self._proc.poll() is None:
             return self._proc
+        if self.closed:
+            raise ShipperFailed("the store is closed")
         self._stop(kill=True)
         self._proc = subprocess.Popen(
             [sys.executable, "-c", "from gateway.store.shipper import main; main()", self.uri, str(self.timeout_ms)],
@@ -135,9 +138,11 @@ class ShipperProcess:
         return self._proc
 
     def close(self, timeout_s: float = 2.0) -> None:
-        """End the process: it exits at the end of its input; killed if it does not in time."""
-        with self._lock:
-            self._stop(kill=False, timeout_s=timeout_s)
+        """End the process: it exits at the end of its input; killed if it does not in time. Not
+        under the lock: a batch still waiting for its answer (the journal gave up on it at close)
+        must not hold the shutdown up; it fails, and stays in the journal for the next start."""
+        self.closed = True
+        self._stop(kill=False, timeout_s=timeout_s)
 
     def _stop(self, *, kill: bool, timeout_s: float = 2.0) -> None:
         proc, self._proc = self._proc, None
