@@ -133,7 +133,8 @@ def read_entries(fh: BinaryIO, path: Path) -> Iterator[tuple[str, str, bytes]]:
             continue
         try:
             entry = orjson.loads(raw)
-            entry["d"]
+            if not (isinstance(entry["db"], str) and isinstance(entry["c"], str) and isinstance(entry["d"], dict)):
+                raise TypeError("not a journal entry")
             yield entry["db"], entry["c"], raw if raw.endswith(b"\n") else raw + b"\n"
         except (orjson.JSONDecodeError, KeyError, TypeError):
             log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
@@ -191,10 +192,10 @@ Ship = Callable[[str, str, list[bytes]], None]
 class Journal:
     """Appends writes durably and hands them, in order and in batches, to ``ship``.
 
-    ``ship(database, collection, lines)`` (journal lines, see :func:`encode`) must be idempotent and
-    raise on failure (the batch is
-    then retried after ``retry_interval_s``; meanwhile ``degraded`` is true). One daemon thread
-    ships; :meth:`flush` waits until everything appended so far is shipped.
+    ``ship(database, collection, lines)`` (journal lines, see :func:`encode`) must be idempotent
+    and raise on failure (the batch is then retried after ``retry_interval_s``; meanwhile
+    ``degraded`` is true). One daemon thread ships; :meth:`flush` waits until everything appended
+    so far is shipped.
     """
 
     def __init__(self, folder: Path, ship: Ship, *, max_docs: int = 200_000, fsync: bool = False,

@@ -208,7 +208,8 @@ def test_kie_auth_on_the_fast_path_is_the_routes(secured_apps, fire_set, headers
     got = _same_answer(secured_apps, _kie_answer, f"{KIE}/{fire_set}", json={"commands": [_insert("k1", 30)]},
                        headers=headers)
     allowed = headers in (CALLER, AUTHOR) or headers.get("Authorization", "").endswith("a2llc2VydmVyOmtpZXB3")
-    assert (got[0] == 200) == allowed, got
+    assert got[0] == (200 if allowed else 401), got
+    assert got[1]["type"] == ("SUCCESS" if allowed else "FAILURE")
 
 
 def test_a_stateful_kie_session_on_the_fast_path_keeps_its_facts(open_apps, fire_set, api_gateway, client):

@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from gw_testing import wait_for
+
 import gateway.store.journal as journal_module
 from gateway.store.journal import Journal, encode
 
@@ -128,14 +130,31 @@ def test_the_shipper_survives_an_unexpected_error_and_keeps_shipping(tmp_path: P
             raise error
 
     monkeypatch.setattr(Journal, "_adopt_orphans", adopt_once_broken)
-    j = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["_id"] for x in lines), adopt_interval_s=0.0,
-                retry_interval_s=0.05)
+    j = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["_id"] for x in lines),
+                adopt_interval_s=0.0, retry_interval_s=0.05)
     try:
         j.append("db", "c", [encode("db", "c", {"_id": str(n)}) for n in range(3)])
         assert j.flush(5)
         assert shipped == ["0", "1", "2"]
         assert j._thread.is_alive()
         assert "shipping failed unexpectedly" in caplog.text and "adoption broke" in caplog.text
+    finally:
+        j.close()
+
+
+def test_unreadable_lines_of_an_adopted_segment_are_skipped_and_the_rest_shipped(tmp_path: Path, caplog) -> None:
+    """A line that is not JSON, or not a {db, c, d: document} entry, is skipped with a warning: it
+    must not hold up the good lines of the segment (as it would, retried forever, if shipped)."""
+    (tmp_path / "1-1-1.jsonl").write_bytes(b"".join([
+        encode("db", "c", {"_id": "a"}), b'{"db": "db", "c": "c", "d": 5}\n', b"{not json\n",
+        b'{"db": 1, "c": "c", "d": {}}\n', encode("db", "c", {"_id": "b"}).rstrip(b"\n")]))
+    shipped: list[str] = []
+    j = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["_id"] for x in lines))
+    try:
+        assert j.flush(5)
+        assert shipped == ["a", "b"]
+        assert caplog.text.count("skipped an unreadable line") == 3
+        assert wait_for(lambda: not list(tmp_path.glob("*.jsonl")), 5)  # deleted just after it is shipped
     finally:
         j.close()
 

@@ -28,6 +28,7 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 from fastapi.routing import APIRoute
+from starlette.exceptions import HTTPException
 
 from gateway.api.auth import Principal, kie_caller, require_kie
 from gateway.api.deps import correlation_id
@@ -81,6 +82,8 @@ def kie_failure(request: Request, exc: Exception) -> JSON:
         return failure(exc.status, exc.message)
     if isinstance(exc, RequestValidationError):
         return failure(422, f"invalid request: {exc.errors()}")
+    if isinstance(exc, HTTPException):  # e.g. a malformed basic auth header, from FastAPI's reader
+        return failure(exc.status_code, str(exc.detail), exc.headers)
     metrics = getattr(request.app.state, "metrics", None)
     if metrics is not None:
         metrics.errors.labels("internal").inc()
