@@ -3,8 +3,8 @@
 Why a process: a recorded fire is answered as soon as its decision is in the local journal; the
 insert happens later, in the background. Done by a thread of the serving process, that background
 work (decoding the journal lines, encoding BSON, pymongo's bookkeeping) competes with the serving
-thread for the GIL: with one worker at 2 connections its p99 was 5.5–6.1 ms, against 3.6–4.5 ms
-with the same inserts made by a separate process (bench/http_bench_notes.md, 2026-11-26). So each
+thread for the GIL: with one worker at 2 connections its p99 was 5.0–6.6 ms, against 2.3–4.6 ms
+with the inserts made by this process (interleaved runs, bench/http_bench_notes.md, 2026-11-26). So each
 gateway process starts one shipper process on its first write; the journal's thread only hands it
 the journal lines of a batch (bytes already encoded) and waits for its answer without the GIL.
 
@@ -43,6 +43,12 @@ from pymongo.errors import BulkWriteError, DuplicateKeyError, OperationFailure, 
 log = logging.getLogger(__name__)
 
 META_INDEX = [("_meta.stored_type", 1), ("_meta.inserted_at", 1)]
+
+
+def mongo_client(uri: str, timeout_ms: int) -> pymongo.MongoClient:
+    """A client with the store's timeouts (the store's own reads and the shipper process use the same)."""
+    return pymongo.MongoClient(uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms,
+                               socketTimeoutMS=timeout_ms * 5, tz_aware=True)
 
 
 class ShipperFailed(RuntimeError):
@@ -184,8 +190,7 @@ def _read_line(stream: IO[bytes], timeout_s: float) -> bytes:
 
 def serve(uri: str, timeout_ms: int, requests: IO[bytes], answers: IO[bytes]) -> None:
     """The shipper process's loop: one answer per request, until its input ends."""
-    client = pymongo.MongoClient(uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms,
-                                 socketTimeoutMS=timeout_ms * 5, tz_aware=True)
+    client = mongo_client(uri, timeout_ms)
     try:
         while True:
             header = requests.readline()

@@ -24,7 +24,7 @@ from bson import ObjectId
 from pymongo.errors import PyMongoError
 
 from gateway.store.journal import Journal, JournalFull, encode
-from gateway.store.shipper import ShipperProcess, insert_journalled, journal_doc
+from gateway.store.shipper import ShipperProcess, insert_journalled, journal_doc, mongo_client
 
 log = logging.getLogger(__name__)
 
@@ -104,9 +104,7 @@ class InformationState:
         self.backend = backend
         self.process = process_name()  # stamped on every write (_meta.process)
         self.database = database
-        self.client: pymongo.MongoClient = pymongo.MongoClient(
-            uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms, socketTimeoutMS=timeout_ms * 5,
-            tz_aware=True)
+        self.client: pymongo.MongoClient = mongo_client(uri, timeout_ms)
         self.db = self.client[database]
         self._indexed: set[tuple[str, str]] = set()
         # inserts made by a process of their own, off the serving process's GIL (gateway.store.shipper)
