@@ -72,6 +72,7 @@ class CompileOptions:
     cache_dir: str | None = None  # default: $PRINTEPS_CACHE_DIR or ~/.cache/printeps, + /rule-units
     memory_cache_mb: int = 256  # compiled units kept in memory (zipped class bytes)
     disk_cache_mb: int = 2048
+    plain_rules: bool = True  # build rules of the plain shapes at run time (gateway.engine.plain_rules)
 
     @classmethod
     def from_settings(cls, engine_settings: Any) -> "CompileOptions":
@@ -87,6 +88,7 @@ class CompileOptions:
             cache_dir=pick("cache_dir", None),
             memory_cache_mb=int(pick("memory_cache_mb", 256)),
             disk_cache_mb=int(pick("disk_cache_mb", 2048)),
+            plain_rules=pick("plain_rules", True),
         )
 
 

@@ -12,9 +12,11 @@ How a build goes (:func:`build`):
 2. the **declarations unit** (every file with its rules blanked out: declared types, globals,
    functions, queries) is taken from the cache or compiled; its classes are the parent of every
    rule unit's class loader, so all rules share one set of declared classes;
-3. rules whose key some cached unit holds are taken from it; the others are compiled in batches
-   (**rule units**: every file with all rules but the batch's blanked out, so line and column of an
-   error are those of the author's file), on ``workers`` threads, each unit cached (memory + disk);
+3. rules whose key some cached unit holds are taken from it; rules of the plain shapes
+   (:mod:`gateway.engine.plain_rules`) are built at run time without code generation (**plain
+   units**, cached as their description); the others are compiled in batches (**rule units**: every
+   file with all rules but the batch's blanked out, so line and column of an error are those of the
+   author's file), on ``workers`` threads, each unit cached (memory + disk);
 4. one KieBase is assembled (``Units.assemble``) from the declarations and the rules in the order of
    the text (files by name, rules as written), which is also the order a one-unit build gets, so
    rules of equal salience fire in the same order however the set was split;
@@ -41,7 +43,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gateway import jvm
-from gateway.engine import drl_items
+from gateway.engine import drl_items, plain_rules
 from gateway.engine.drl_items import RuleSetItems, SourceItems
 from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError
 from gateway.engine.unit_cache import UnitArtifact, UnitCache
@@ -53,7 +55,7 @@ log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, str], None]
 MAX_BATCH = 250  # rules per rule unit: bounds a unit's compile memory, leaves work for every worker
-FORMAT_VERSION = "units-1"
+FORMAT_VERSION = "units-2"  # units-2: plain units (rules built at run time)
 
 
 @dataclass
@@ -63,6 +65,7 @@ class BuildStats:
     mode: str = "incremental"  # incremental | whole | plan (loaded from a cached plan)
     rules: int = 0
     rules_compiled: int = 0
+    rules_built: int = 0  # plain rules built at run time, without code generation
     units_compiled: int = 0
     units_reused: int = 0
     compile_s: float = 0.0
@@ -271,6 +274,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
         else:
             found[key] = unit_id
     stats.units_reused = len(set(found.values()))
+    plain, missing = _plain_rules(items, missing) if options.plain_rules else ([], missing)
     jobs: list[tuple[str, list[tuple[str, SourceItems, drl_items.Item]]]] = []
     declarations_ready = threading.Event()  # set once the declarations unit is loaded (or failed)
     declarations: list[_Loaded] = []
@@ -284,13 +288,20 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
     batch = _batch_size(len(missing), options.workers)
     for k in range(0, len(missing), batch):
         jobs.append(("rules", missing[k:k + batch]))
-    total = max(len(missing), 1)
+    for k in range(0, len(plain), MAX_PLAIN_BATCH):  # last: they wait for the declarations unit
+        jobs.append(("plain", plain[k:k + MAX_PLAIN_BATCH]))
+    total = max(len(missing) + len(plain), 1)
     done = 0
     _progress(on_progress, 0, total, "compile")
     errors: list[CompileError] = []
 
-    def run(kind: str, rules: list[tuple[str, SourceItems, drl_items.Item]]) -> UnitArtifact:
+    def run(kind: str, rules: list[tuple[str, SourceItems, drl_items.Item]]) -> tuple[UnitArtifact | None, list]:
+        """Builds one unit; returns it and the rules it left to the compiler (plain units only)."""
         deadline.check()
+        if kind == "plain":
+            if not declarations_ready.wait(timeout=_wait_timeout(deadline)) or not declarations:
+                return None, []  # the declarations did not compile: their errors are reported
+            return _build_plain(rules, env, declarations[0])
         if kind == "declarations":
             try:
                 unit_sources = [_unit_source(by_file[s.file], s, s.blanked(lambda i: i.kind != "rule"))
@@ -298,7 +309,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
                 built = compiler.build_unit(unit_sources, decl_id, deadline)
                 unit = UnitArtifact(decl_id, "declarations", built.model_classes, {}, built.data)
                 declarations.append(_load(unit, None))
-                return unit
+                return unit, []
             finally:
                 declarations_ready.set()
         wanted = {(src.file, item.start) for _, src, item in rules}
@@ -317,7 +328,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
         # load it here, while other workers compile: the assembly then only links
         if declarations_ready.wait(timeout=_wait_timeout(deadline)) and declarations:
             _load(unit, declarations[0])
-        return unit
+        return unit, []
 
     compile_started = time.perf_counter()
     if jobs:
@@ -334,18 +345,27 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
                     _progress(on_progress, min(done, total), total, "compile")  # heartbeat: a cancel is heard
                     continue
                 for future in finished:
-                    _, rules = futures[future]
+                    kind, rules = futures[future]
                     try:
-                        unit = future.result()
+                        unit, leftovers = future.result()
                     except CompileFailed as failed:
                         errors.extend(failed.errors)
+                        leftovers = []
                     else:
-                        cache.put(unit, persist=options.disk_cache)
-                        for key in unit.rules:
-                            found[key] = unit.id
-                        stats.units_compiled += 1
-                        stats.rules_compiled += len(rules)
-                    done += len(rules)
+                        if unit is not None:
+                            cache.put(unit, persist=options.disk_cache)
+                            for key in unit.rules:
+                                found[key] = unit.id
+                            stats.units_compiled += 1
+                            if kind == "plain":
+                                stats.rules_built += len(unit.rules)
+                            else:
+                                stats.rules_compiled += len(rules)
+                    for k in range(0, len(leftovers), batch):  # plain rules the Java side refused
+                        more = pool.submit(run, "rules", leftovers[k:k + batch])
+                        futures[more] = ("rules", leftovers[k:k + batch])
+                        pending.add(more)
+                    done += len(rules) - len(leftovers)
                     _progress(on_progress, min(done, total), total, "compile")
         except BaseException:
             deadline.cancelled.set()  # workers start nothing new; a running unit finishes unused
@@ -356,6 +376,53 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
     if errors:
         raise CompileFailed(compiler._sorted(errors))
     return _Plan(decl_id, [(found[key], src.package, item.name) for key, src, item in order])
+
+
+MAX_PLAIN_BATCH = 2_000  # plain rules per plain unit (a one-rule edit builds a unit of one)
+Missing = list[tuple[str, SourceItems, drl_items.Item]]
+
+
+def _plain_rules(items: RuleSetItems, missing: Missing) -> tuple[list[tuple[str, SourceItems, drl_items.Item, dict]], Missing]:
+    """``missing`` split into rules of the plain shapes (with their descriptions) and the rest."""
+    imports = plain_rules.package_imports(items.sources)
+    plain: list[tuple[str, SourceItems, drl_items.Item, dict]] = []
+    rest: Missing = []
+    for key, src, item in missing:
+        package_imports = imports.get(src.package)
+        spec = plain_rules.describe(src, item, package_imports) if package_imports is not None else None
+        if spec is None:
+            rest.append((key, src, item))
+        else:
+            plain.append((key, src, item, spec))
+    return plain, rest
+
+
+def _build_plain(rules: list[tuple[str, SourceItems, drl_items.Item, dict]], env: str,
+                 declarations: _Loaded) -> tuple[UnitArtifact | None, Missing]:
+    """A plain unit of ``rules`` built against the declarations; the rules the Java side refused
+    (logged with the reason) are returned for the compiler."""
+    built = jvm.helper_class("PlainRules").build(declarations.loader, declarations.models,
+                                                 plain_rules.spec_json([spec for *_, spec in rules]).decode())
+    refused = {}
+    for line in built.rejected():
+        index, _, reason = str(line).partition("\t")
+        refused[int(index)] = reason
+    for index, reason in refused.items():
+        log.debug("rule %r left to the compiler: %s", rules[index][2].name, reason)
+    leftovers = [(key, src, item) for k, (key, src, item, _) in enumerate(rules) if k in refused]
+    kept = [rule for k, rule in enumerate(rules) if k not in refused]
+    if not kept:
+        return None, leftovers
+    if refused:  # the unit's cached description holds only what was built
+        built = jvm.helper_class("PlainRules").build(declarations.loader, declarations.models,
+                                                     plain_rules.spec_json([spec for *_, spec in kept]).decode())
+    unit_id = drl_items.digest("plain", env, *(key for key, *_ in kept))
+    unit = UnitArtifact(unit_id, "plain", [], {key: (src.package, item.name) for key, src, item, _ in kept},
+                        plain_rules.spec_json([spec for *_, spec in kept]))
+    loaded = _Loaded(declarations.loader, built.models(), len(kept), f"{unit.id}#{next(_load_serial)}")
+    with _loaded_lock:
+        _loaded[(unit.id, declarations.token)] = loaded
+    return unit, leftovers
 
 
 HEARTBEAT_S = 0.5  # how often a long unit's wait reports progress (and hears a cancel)
@@ -451,6 +518,8 @@ def _load(unit: UnitArtifact, parent: _Loaded | None) -> _Loaded:
         if loaded is not None:
             _loaded.move_to_end(key)
             return loaded
+    if unit.kind == "plain":
+        return _load_plain(unit, parent, key)
     units = jvm.helper_class("Units")
     classes = units.unzip(jpype.JArray(jpype.JByte)(unit.data))
     loader = units.loader(parent.loader if parent is not None else None, classes)
@@ -463,6 +532,21 @@ def _load(unit: UnitArtifact, parent: _Loaded | None) -> _Loaded:
         _loaded[key] = loaded
         while len(_loaded) > 1 and sum(one.rules for one in _loaded.values()) > MAX_LOADED_RULES:
             _loaded.popitem(last=False)
+    return loaded
+
+
+def _load_plain(unit: UnitArtifact, parent: _Loaded | None, key: tuple[str, str]) -> _Loaded:
+    """A plain unit's rules built again from its description, against ``parent``'s classes."""
+    if parent is None:
+        raise _MissingUnit(unit.id)
+    built = jvm.helper_class("PlainRules").build(parent.loader, parent.models, unit.data.decode())
+    if len(built.rejected()):  # cannot happen for the classes it was built against: build the set again
+        log.warning("plain unit %s no longer builds (%s); compiling the rule set again", unit.id,
+                    list(built.rejected())[:3])
+        raise _MissingUnit(unit.id)
+    loaded = _Loaded(parent.loader, built.models(), len(unit.rules), f"{unit.id}#{next(_load_serial)}")
+    with _loaded_lock:
+        _loaded[key] = loaded
     return loaded
 
 

@@ -64,6 +64,11 @@ def options(tmp_path) -> CompileOptions:
     incremental.reset()
 
 
+def rebuilt_rules(stats: incremental.BuildStats) -> int:
+    """Rules a build made anew: compiled to Java, or (plain shapes) built at run time."""
+    return stats.rules_compiled + stats.rules_built
+
+
 def whole(files: dict[str, str]) -> compiler.CompiledRuleSet:
     return compiler.compile_files(files, "whole", CompileOptions(incremental=False, disk_cache=False))
 
@@ -80,7 +85,8 @@ def fire(compiled, facts) -> dict:
 
 def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = True) -> str:
     """One rule of a random shape; some modify facts, so firing order and inference both matter."""
-    shape = rng.choice(["age", "tier", "amount", "join", "accumulate", "modify", "function", "absent"]
+    shape = rng.choice(["age", "tier", "amount", "join", "accumulate", "modify", "function", "absent",
+                        "plain tier", "plain join", "plain accumulate"]
                        + (["query"] if queries else []) + (["vip"] if vip_field else []))
     salience = f"salience {rng.randint(-5, 5)}\n" if rng.random() < 0.3 else ""
     say = f'actions.say("bot", "{name}");'
@@ -109,6 +115,17 @@ def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = 
     elif shape == "absent":  # a not after a first pattern: deleting facts may activate it
         when = f"$c: Customer(age > {rng.randint(10, 60)})\n    not Order(customer == $c.id)"
         then = f'actions.say("bot", "{name} no order " + $c.getId());'
+    elif shape == "plain tier":  # the plain shapes (built at run time, gateway.engine.plain_rules)
+        when = f'Customer(tier {rng.choice(["==", "!="])} "{rng.choice(["gold", "vip"])}", age <= {rng.randint(20, 80)})'
+        then = say + f' actions.say("kiosk", "{name} again");'
+    elif shape == "plain join":
+        when = (f'$o: Order(amount >= {rng.randint(0, 900)}.0)\n'
+                f'    $c: Customer(id == $o.customer, age > {rng.randint(10, 50)}, tier != "vip")')
+        then = say
+    elif shape == "plain accumulate":
+        when = (f'$c: Customer(tier == "{rng.choice(["gold", "silver", "vip"])}")\n'
+                f'    accumulate(Order(customer == $c.id, amount > 100, $a: amount); $t: sum($a); $t > {rng.randint(0, 1200)}.0)')
+        then = say
     elif shape == "query":
         when = f"?bigSpenders({rng.randint(100, 900)}.0;)\n    $c: Customer(age < {rng.randint(20, 80)})"
         then = f'actions.say("bot", "{name} " + $c.getId());'
@@ -187,7 +204,7 @@ class RandomSet:
         return sets
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, 2, 3])
 def test_incremental_builds_fire_exactly_as_whole_builds_over_random_edits(options, seed):
     rule_set = RandomSet(seed)
     compiled = compiler.compile_files(rule_set.files(), "inc", options)
@@ -209,13 +226,13 @@ def test_incremental_builds_fire_exactly_as_whole_builds_over_random_edits(optio
             assert fire(built, facts) == fire(reference, facts), f"step {step} ({kind}) fires differently"
         # only what changed was compiled: a new or changed rule, or every rule naming a changed type
         if kind in ("add", "change"):
-            assert built.stats.rules_compiled == 1, (kind, built.stats)
+            assert rebuilt_rules(built.stats) == 1, (kind, built.stats)
         elif kind in ("remove", "restored"):
-            assert built.stats.rules_compiled == 0, (kind, built.stats)
+            assert rebuilt_rules(built.stats) == 0, (kind, built.stats)
         else:
             naming_customer = sum(1 for text in texts.values() if "Customer" in text)
-            assert 0 < built.stats.rules_compiled <= naming_customer + 1, built.stats  # + the rule a new field brings
-            assert built.stats.rules_compiled < built.rule_count
+            assert 0 < rebuilt_rules(built.stats) <= naming_customer + 1, built.stats  # + the rule a new field brings
+            assert rebuilt_rules(built.stats) < built.rule_count
 
 
 def _rule_texts(files: dict[str, str]) -> dict[str, str]:
@@ -236,7 +253,7 @@ def test_a_declared_type_change_rebuilds_exactly_the_rules_that_use_it(options):
     compiler.compile_files(files, "types", options)
     changed = dict(files, **{"types.drl": TYPES.format(extra="\n    vip: boolean")})
     built = compiler.compile_files(changed, "types", options)
-    assert built.stats.rules_compiled == 5  # the rules naming Customer; the Order rules are reused
+    assert rebuilt_rules(built.stats) == 5  # the rules naming Customer; the Order rules are reused
     assert built.types["Customer"]["vip"] == "boolean"
     facts = [{"type": "Customer", "id": "x", "age": 3, "tier": "gold", "vip": True}, {"type": "Order", "id": "o", "customer": "x", "amount": 2.5}]
     assert fire(built, facts) == fire(whole(changed), facts)
@@ -299,6 +316,7 @@ def test_a_thousand_rule_set_builds_edits_and_fires_as_expected(options):
     files = growth_rules.drl_files(1000)
     compiled = compiler.compile_files(files, "growth", options)
     assert compiled.rule_count == 1000 and compiled.stats.units_compiled > 1
+    assert compiled.stats.rules_built == 1000 and compiled.stats.rules_compiled == 0  # all plain shapes
     for k in range(6):
         facts = growth_rules.sample_facts(k)
         got = {}
@@ -307,7 +325,7 @@ def test_a_thousand_rule_set_builds_edits_and_fires_as_expected(options):
         assert got == growth_rules.expected_firings(1000, facts)
     variants = {517: 1}
     edited = compiler.compile_files(growth_rules.drl_files(1000, variants), "growth", options)
-    assert edited.stats.rules_compiled == 1 and edited.stats.units_reused > 1
+    assert edited.stats.rules_built == 1 and edited.stats.units_reused > 1
     for k in range(6):
         facts = growth_rules.sample_facts(k)
         fired = [rule for rule, _, _ in fire(edited, facts)["actions"]]
@@ -336,6 +354,63 @@ def test_a_bad_rule_among_a_thousand_is_located_and_nothing_serving_changes(tmp_
     assert engine.fire("growth", growth_rules.sample_facts(2)).to_dict()["actions"] == served
 
 
+def test_plain_rules_fire_as_compiled_ones_and_share_their_nodes(options):
+    """The growth shapes built at run time against the same rules compiled to Java, and a set that
+    mixes both for the same constraints (a compiled rule's then-part is not plain): equal constraints
+    must be one node, or Drools' alpha hashing keeps only one of them and a rule never fires."""
+    files = growth_rules.drl_files(300)
+    plain = compiler.compile_files(files, "plain", options)
+    compiled = compiler.compile_files(files, "compiled", CompileOptions(incremental=True, disk_cache=False,
+                                                                        plain_rules=False))
+    assert plain.stats.rules_built == 300 and compiled.stats.rules_built == 0
+    mixed_files = dict(files)
+    mixed_files["mixed.drl"] = f"package {growth_rules.PACKAGE};\n\n" + "\n".join(
+        growth_rules.rule_drl(i).replace(f'rule "{growth_rules.rule_name(i)}"', f'rule "copy {i}"')
+        .replace(f'actions.say("bot", "{growth_rules.rule_name(i)}");', f'actions.say("bot", "copy " + {i});')
+        for i in range(0, 300, 3))
+    mixed = compiler.compile_files(mixed_files, "mixed", options)
+    assert mixed.stats.rules_compiled == 100 and mixed.stats.rules_built == 300  # a new file: new package header
+    reference = whole(mixed_files)
+    for k in range(40):
+        facts = growth_rules.sample_facts(k)
+        assert fire(plain, facts) == fire(compiled, facts), k
+        assert fire(mixed, facts) == fire(reference, facts), k
+
+
+def test_rules_the_plain_builder_refuses_go_to_the_compiler(options):
+    rules = HEADER + textwrap.dedent("""\
+        rule "unknown method"
+        when
+            Customer(age > 3)
+        then
+            actions.shout("bot", "hi");
+        end
+
+        rule "wrong literal"
+        when
+            Customer(age > 3.5)
+        then
+            actions.say("bot", "wrong literal");
+        end
+
+        rule "plain"
+        when
+            Customer(age > 3)
+        then
+            actions.say("bot", "plain");
+        end
+        """)
+    files = {"types.drl": TYPES.format(extra=""), "a.drl": rules.replace('actions.shout("bot", "hi");', "")}
+    built = compiler.compile_files(files, "refused", options)
+    assert built.stats.rules_built == 2 and built.stats.rules_compiled == 1  # "wrong literal": int vs 3.5
+    facts = [{"type": "Customer", "id": "c1", "age": 4, "tier": "gold"}]
+    assert fire(built, facts) == fire(whole(files), facts)
+    with pytest.raises(CompileFailed) as failed:
+        compiler.compile_files({**files, "a.drl": rules}, "refused", options)
+    error = failed.value.errors[0]
+    assert (error.file, error.line) == ("a.drl", 7) and error.column > 0
+
+
 # --------------------------------------------------------------------------- caches and artifacts
 
 
@@ -353,8 +428,8 @@ def test_the_disk_cache_serves_another_process_without_compiling(options, tmp_pa
         print("RESULT", json.dumps([c.stats.to_dict(), e.stats.to_dict(), c.rule_count]))
     """)
     same, edited, rules = report
-    assert same["mode"] == "plan" and same["rules_compiled"] == 0 and rules == 120
-    assert edited["mode"] == "incremental" and edited["rules_compiled"] == 1
+    assert same["mode"] == "plan" and (same["rules_compiled"] + same["rules_built"]) == 0 and rules == 120
+    assert edited["mode"] == "incremental" and (edited["rules_compiled"] + edited["rules_built"]) == 1
 
 
 def test_another_host_assembles_from_the_shared_units_without_compiling(options, tmp_path, store):
@@ -372,12 +447,12 @@ def test_another_host_assembles_from_the_shared_units_without_compiling(options,
         incremental.reset()  # another host: nothing in memory, and another disk
         other = CompileOptions(cache_dir=str(tmp_path / "other-host"))
         there = compiler.compile_files(files, "hosts", other)
-        assert there.stats.mode == "plan" and there.stats.rules_compiled == 0 and there.rule_count == 120
+        assert there.stats.mode == "plan" and rebuilt_rules(there.stats) == 0 and there.rule_count == 120
         fire = lambda c: json.loads(str(c.runner.fire(encode_facts(facts, 100), 1000, False, True)))["actions"]  # noqa: E731
         assert fire(there) == fire(first)
         edited = dict(files, **{"rules_000.drl": files["rules_000.drl"].replace("r00007", "r00007 edited")})
         again = compiler.compile_files(edited, "hosts", other)
-        assert again.stats.mode == "incremental" and again.stats.rules_compiled == 1
+        assert again.stats.mode == "incremental" and rebuilt_rules(again.stats) == 1
         assert list((tmp_path / "other-host").rglob("units/*.zip"))  # kept on that host's disk too
     finally:
         incremental.share_units(None)
@@ -401,7 +476,7 @@ def test_the_shared_tier_failing_never_fails_a_build(options):
     incremental.share_units(SharedUnitStore(DownDb()))
     try:
         built = compiler.compile_files(growth_rules.drl_files(20), "down", options)
-        assert built.rule_count == 20 and built.stats.rules_compiled == 20
+        assert built.rule_count == 20 and rebuilt_rules(built.stats) == 20
     finally:
         incremental.share_units(None)
 
@@ -425,7 +500,7 @@ def test_export_and_load_a_compiled_set_in_another_process(options, tmp_path):
         print("RESULT", json.dumps([c.stats.to_dict(), c.rule_count, answer["actions"]]))
     """)
     stats, rules, actions = report
-    assert stats["mode"] == "loaded" and stats["rules_compiled"] == 0 and rules == 150
+    assert stats["mode"] == "loaded" and (stats["rules_compiled"] + stats["rules_built"]) == 0 and rules == 150
     answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 100), 1000, False, True)))
     assert actions == answer["actions"]
 
@@ -460,7 +535,7 @@ def test_a_unit_evicted_from_the_disk_cache_is_compiled_again(options, tmp_path)
     for unit in Path(options.cache_dir).rglob("units/*.zip"):
         unit.unlink()
     rebuilt = compiler.compile_files(files, "evicted", options)
-    assert rebuilt.stats.mode == "incremental" and rebuilt.stats.rules_compiled == 40
+    assert rebuilt.stats.mode == "incremental" and rebuilt_rules(rebuilt.stats) == 40
 
 
 # --------------------------------------------------------------------------- limits, warming

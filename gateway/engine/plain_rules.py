@@ -1,0 +1,297 @@
+"""Rules of the plain shapes, described for building at run time without code generation.
+
+Why: Drools' executable model generates and compiles Java for every rule (~11 ms of CPU a rule:
+two minutes for 10,000), while the model objects it would build take microseconds. Most rules of a
+large table are of a few plain shapes: patterns on declared or imported types whose constraints
+compare a field with a literal or with a field of an earlier pattern, a ``sum`` accumulate, and a
+then-part of calls with literal arguments on a global (``actions.say("bot", "Welcome")``). This
+module recognises exactly those, strictly, and describes them as JSON for the Java side
+(``org.printeps.gateway.PlainRules``), which builds the same ``Rule`` objects the generated code
+would (same indexes, property reactivity and accumulate functions). Anything else — another
+operator, a method call in a constraint, ``not``/``exists``/``from``, an attribute other than
+``salience``, a then-part with Java beyond such calls, a string with escapes — is left to Drools'
+compiler, which also reports its errors with file, line and column. So is any rule the Java side
+cannot build exactly (an unknown field, a literal of another type, an ambiguous method).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from typing import Any
+
+from gateway.engine.drl_items import Item, SourceItems
+
+FORMAT = 1  # org.printeps.gateway.PlainRules.FORMAT
+
+_TOKEN = re.compile(
+    r"""
+     (?P<space>\s+)
+    |(?P<comment>//[^\n]*|/\*.*?\*/)
+    |(?P<string>"[^"\\\n]*")
+    |(?P<number>\d+(?:\.\d+)?(?![\w.]))
+    |(?P<name>\$?[A-Za-z_][A-Za-z0-9_]*)
+    |(?P<punct>==|!=|>=|<=|[<>:;,().\-*])
+    """,
+    re.X | re.S,
+)
+OPERATORS = {"==", "!=", ">", ">=", "<", "<="}
+KEYWORDS = {
+    "not", "exists", "eval", "forall", "from", "collect", "or", "and", "over", "window", "entry", "in", "matches",
+    "memberOf", "contains", "soundslike", "excludes", "this", "null", "new", "accumulate", "when", "then", "end",
+    "rule", "query", "if", "do", "break", "modify", "insert", "update", "delete", "retract",
+}
+
+
+class NotPlain(Exception):
+    """The text is not of a plain shape (the rule goes to Drools' compiler)."""
+
+
+def tokens(text: str) -> list[tuple[str, str]]:
+    """(kind, text) of every token but spaces and comments; NotPlain on any other character."""
+    out: list[tuple[str, str]] = []
+    pos = 0
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if m is None:
+            raise NotPlain(f"character {text[pos]!r}")
+        kind = m.lastgroup or ""
+        if kind not in ("space", "comment"):
+            out.append((kind, m.group()))
+        pos = m.end()
+    return out
+
+
+def package_imports(sources: list[SourceItems]) -> dict[str, list[str]] | None:
+    """The imports of each package (DRL imports are package-wide), or None for a package whose
+    header holds more than package, import and global statements (attributes, functions imports…):
+    its rules are all left to the compiler."""
+    out: dict[str, list[str]] = {}
+    for src in sources:
+        try:
+            imports = _header_imports(src.header())
+        except NotPlain:
+            out[src.package] = None  # type: ignore[assignment]
+            continue
+        if src.package in out and out[src.package] is None:
+            continue
+        out.setdefault(src.package, [])
+        out[src.package].extend(i for i in imports if i not in out[src.package])
+    return out
+
+
+def _header_imports(header: str) -> list[str]:
+    toks = tokens(header)
+    imports: list[str] = []
+    k = 0
+    while k < len(toks):
+        word = toks[k][1]
+        if word == "package":
+            k = _dotted(toks, k + 1)[1]
+        elif word == "import":
+            name, k = _dotted(toks, k + 1, star=True)
+            if name in ("function", "static") or name.startswith(("function.", "static.")):
+                raise NotPlain("import function/static")
+            imports.append(name)
+        elif word == "global":
+            _, k = _dotted(toks, k + 1)
+            if k >= len(toks) or toks[k][0] != "name":
+                raise NotPlain("global")
+            k += 1
+        else:
+            raise NotPlain(f"header statement {word!r}")
+        if k < len(toks) and toks[k][1] == ";":
+            k += 1
+    return imports
+
+
+def _dotted(toks: list[tuple[str, str]], k: int, star: bool = False) -> tuple[str, int]:
+    if k >= len(toks) or toks[k][0] != "name":
+        raise NotPlain("a name was expected")
+    parts = [toks[k][1]]
+    k += 1
+    while k + 1 < len(toks) and toks[k][1] == "." and (toks[k + 1][0] == "name" or (star and toks[k + 1][1] == "*")):
+        parts.append(toks[k + 1][1])
+        k += 2
+    return ".".join(parts), k
+
+
+def describe(src: SourceItems, item: Item, imports: list[str]) -> dict[str, Any] | None:
+    """The description of rule ``item`` for PlainRules, or None if it is not of a plain shape."""
+    try:
+        return _Parser(tokens(src.item_text(item))).rule(src.package, item.name, imports)
+    except NotPlain:
+        return None
+
+
+def spec_json(rules: list[dict[str, Any]]) -> bytes:
+    """The description of a unit of plain rules (what its cache entry holds)."""
+    return json.dumps({"format": FORMAT, "rules": rules}, separators=(",", ":"), sort_keys=True).encode()
+
+
+class _Parser:
+    """A strict recursive-descent reader of one rule's tokens (see the module docstring)."""
+
+    def __init__(self, toks: list[tuple[str, str]]):
+        self.toks = toks
+        self.k = 0
+
+    # ---- token helpers
+    def peek(self, ahead: int = 0) -> tuple[str, str]:
+        k = self.k + ahead
+        return self.toks[k] if k < len(self.toks) else ("eof", "")
+
+    def take(self, text: str | None = None, kind: str | None = None) -> str:
+        tok_kind, tok = self.peek()
+        if (text is not None and tok != text) or (kind is not None and tok_kind != kind) or tok_kind == "eof":
+            raise NotPlain(f"expected {text or kind}, found {tok!r}")
+        self.k += 1
+        return tok
+
+    def name(self) -> str:
+        word = self.take(kind="name")
+        if word in KEYWORDS:
+            raise NotPlain(f"keyword {word}")
+        return word
+
+    # ---- grammar
+    def rule(self, package: str, name: str, imports: list[str]) -> dict[str, Any]:
+        self.take("rule")
+        self.take(kind="string" if self.peek()[0] == "string" else "name")
+        salience = None
+        while self.peek()[1] != "when":
+            self.take("salience")
+            if salience is not None:
+                raise NotPlain("two saliences")
+            salience = self.integer()
+        self.take("when")
+        lhs = []
+        while self.peek()[1] != "then":
+            lhs.append(self.condition())
+        self.take("then")
+        rhs = []
+        while not (self.peek()[1] == "end" and self.k == len(self.toks) - 1):
+            rhs.append(self.call())
+        self.take("end")
+        if not lhs:
+            raise NotPlain("no condition")
+        return {"package": package, "name": name, "salience": salience, "imports": imports, "lhs": lhs, "rhs": rhs}
+
+    def integer(self) -> int:
+        sign = -1 if self.peek()[1] == "-" and self.take("-") else 1
+        digits = self.take(kind="number")
+        if "." in digits:
+            raise NotPlain("salience must be an integer")
+        return sign * int(digits)
+
+    def condition(self) -> dict[str, Any]:
+        if self.peek()[1] == "accumulate":
+            return {"accumulate": self.accumulate()}
+        return {"pattern": self.pattern()}
+
+    def pattern(self) -> dict[str, Any]:
+        var = None
+        if self.peek()[1].startswith("$") and self.peek(1)[1] == ":":
+            var = self.take(kind="name")
+            self.take(":")
+        type_name = self.type_name()
+        self.take("(")
+        constraints: list[dict[str, Any]] = []
+        binds: list[dict[str, str]] = []
+        while self.peek()[1] != ")":
+            if constraints or binds:
+                self.take(",")
+            if self.peek()[1].startswith("$"):
+                bound = self.take(kind="name")
+                self.take(":")
+                binds.append({"var": bound, "field": self.name()})
+            else:
+                constraints.append(self.constraint())
+        self.take(")")
+        return {"type": type_name, "var": var, "constraints": constraints, "binds": binds}
+
+    def type_name(self) -> str:
+        parts = [self.name()]
+        while self.peek()[1] == ".":
+            self.take(".")
+            parts.append(self.name())
+        return ".".join(parts)
+
+    def constraint(self) -> dict[str, Any]:
+        field = self.name()
+        op = self.take(kind="punct")
+        if op not in OPERATORS:
+            raise NotPlain(f"operator {op}")
+        if self.peek()[1].startswith("$"):
+            ref = self.take(kind="name")
+            self.take(".")
+            ref_field = self.name()
+            if self.peek()[1] == ".":
+                raise NotPlain("a path deeper than $var.field")
+            return {"field": field, "op": op, "ref": ref, "refField": ref_field, "text": f"{field} {op} {ref}.{ref_field}"}
+        literal, text = self.literal()
+        return {"field": field, "op": op, "literal": literal, "text": f"{field} {op} {text}"}
+
+    def literal(self) -> tuple[dict[str, Any], str]:
+        kind, tok = self.peek()
+        if kind == "string":
+            self.k += 1
+            return {"s": tok[1:-1]}, tok
+        if tok in ("true", "false"):
+            self.k += 1
+            return {"b": tok == "true"}, tok
+        sign = ""
+        if tok == "-":
+            self.k += 1
+            sign = "-"
+        digits = self.take(kind="number")
+        if len(digits) > 1 and digits[0] == "0" and digits[1] != ".":
+            raise NotPlain("a number with a leading zero (octal in Java)")
+        return {"n": sign + digits}, sign + digits
+
+    def accumulate(self) -> dict[str, Any]:
+        self.take("accumulate")
+        self.take("(")
+        source = self.pattern()
+        self.take(";")
+        var = self.take(kind="name")
+        if not var.startswith("$"):
+            raise NotPlain("accumulate result without a $variable")
+        self.take(":")
+        function = self.name()
+        self.take("(")
+        arg = self.take(kind="name") if self.peek()[1] != ")" else None
+        self.take(")")
+        constraints = []
+        if self.peek()[1] == ";":
+            self.take(";")
+            while True:
+                self.take(var)
+                op = self.take(kind="punct")
+                if op not in OPERATORS:
+                    raise NotPlain(f"operator {op}")
+                literal, text = self.literal()
+                if "n" not in literal:
+                    raise NotPlain("an accumulate result compared with a non-number")
+                constraints.append({"op": op, "literal": literal, "text": f"{var} {op} {text}"})
+                if self.peek()[1] != ",":
+                    break
+                self.take(",")
+        self.take(")")
+        return {"source": source, "function": function, "arg": arg, "var": var, "constraints": constraints}
+
+    def call(self) -> dict[str, Any]:
+        target = self.name()
+        if target.startswith("$"):
+            raise NotPlain("a call on a bound variable")
+        self.take(".")
+        method = self.name()
+        self.take("(")
+        args = []
+        while self.peek()[1] != ")":
+            if args:
+                self.take(",")
+            args.append(self.literal()[0])
+        self.take(")")
+        self.take(";")
+        return {"target": target, "method": method, "args": args}

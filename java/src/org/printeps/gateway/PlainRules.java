@@ -1,0 +1,696 @@
+package org.printeps.gateway;
+
+import java.lang.reflect.InvocationTargetException;
+import java.lang.reflect.Method;
+import java.lang.reflect.Modifier;
+import java.util.ArrayList;
+import java.util.Collections;
+import java.util.HashMap;
+import java.util.LinkedHashMap;
+import java.util.List;
+import java.util.Map;
+import java.util.Objects;
+
+import org.drools.model.AlphaIndex;
+import org.drools.model.BetaIndex;
+import org.drools.model.DSL;
+import org.drools.model.Declaration;
+import org.drools.model.DomainClassMetadata;
+import org.drools.model.EntryPoint;
+import org.drools.model.Global;
+import org.drools.model.Index;
+import org.drools.model.Model;
+import org.drools.model.PatternDSL;
+import org.drools.model.Query;
+import org.drools.model.Rule;
+import org.drools.model.RuleItemBuilder;
+import org.drools.model.TypeMetaData;
+import org.drools.model.Variable;
+import org.drools.model.functions.Block0;
+import org.drools.model.functions.Block1;
+import org.drools.model.functions.Function1;
+import org.drools.model.functions.Predicate1;
+import org.drools.model.functions.Predicate2;
+import org.drools.model.impl.RuleBuilder;
+import org.drools.modelcompiler.util.ClassUtil;
+
+/**
+ * Rules of the plain shapes built at run time as executable-model objects, without generating or
+ * compiling Java: the rule set's Python side describes each such rule (patterns on declared or
+ * imported types with field-versus-literal and field-versus-bound-field comparisons, a sum
+ * accumulate, a then-part of calls with literal arguments on one global) and this class builds the
+ * same {@link Rule} the executable model's generated code builds: the same alpha and beta indexes,
+ * property reactivity and accumulate functions, so Drools hashes, shares and fires them alike.
+ *
+ * Why: generating and compiling Java costs ~11 ms of CPU per rule (10,000 rules: two minutes of
+ * CPU); building the same model objects takes microseconds. A rule this class cannot build exactly
+ * (an unknown field, a type it would have to convert, an ambiguous method) is reported as rejected
+ * with the reason and goes through Drools' compiler, which also reports its errors with file, line
+ * and column.
+ */
+public final class PlainRules {
+    private PlainRules() {}
+
+    /** The description format this class reads (the Python side writes the same number). */
+    public static final int FORMAT = 1;
+
+    /** What {@link #build} made: one model per package, and the rules it refused ("index\treason"). */
+    public static final class Built {
+        private final List<Model> models;
+        private final List<String> rejected;
+
+        Built(List<Model> models, List<String> rejected) {
+            this.models = models;
+            this.rejected = rejected;
+        }
+
+        public List<Model> models() { return models; }
+        public String[] rejected() { return rejected.toArray(new String[0]); }
+    }
+
+    /** A rule this class cannot build exactly as the compiler would. */
+    static final class Reject extends RuntimeException {
+        Reject(String message) { super(message, null, false, false); }
+    }
+
+    /**
+     * Builds the rules of {@code spec} (JSON: {@code {"format": 1, "rules": [...]}}) against the
+     * classes of {@code loader} (the declarations unit's) and the globals of {@code declarations}.
+     */
+    @SuppressWarnings("unchecked")
+    public static Built build(ClassLoader loader, List<Model> declarations, String spec) {
+        Map<String, Object> root = (Map<String, Object>) Json.parse(spec);
+        Object format = root.get("format");
+        if (!(format instanceof Number) || ((Number) format).intValue() != FORMAT) {
+            throw new IllegalArgumentException("plain rule description of format " + format + ", expected " + FORMAT);
+        }
+        Map<String, Global<?>> globals = new HashMap<String, Global<?>>();
+        for (Model m : declarations) {
+            for (Global<?> g : m.getGlobals()) globals.putIfAbsent(m.getPackageName() + "\0" + g.getName(), g);
+        }
+        Map<String, PlainModel> byPackage = new LinkedHashMap<String, PlainModel>();
+        List<String> rejected = new ArrayList<String>();
+        List<Object> rules = (List<Object>) root.get("rules");
+        Context context = new Context(loader, globals);
+        for (int k = 0; k < rules.size(); k++) {
+            Map<String, Object> r = (Map<String, Object>) rules.get(k);
+            try {
+                Rule rule = new OneRule(context, r).build();
+                byPackage.computeIfAbsent((String) r.get("package"), PlainModel::new).rules.add(rule);
+            } catch (Reject e) {
+                rejected.add(k + "\t" + e.getMessage());
+            } catch (RuntimeException | LinkageError e) {
+                rejected.add(k + "\t" + e);
+            }
+        }
+        return new Built(new ArrayList<Model>(byPackage.values()), rejected);
+    }
+
+    // ------------------------------------------------------------------ shared state of one build
+
+    static final class Context {
+        final ClassLoader loader;
+        final Map<String, Global<?>> globals;
+        final Map<Class<?>, DomainClassMetadata> metadata = new HashMap<Class<?>, DomainClassMetadata>();
+        final Map<String, Property> properties = new HashMap<String, Property>();
+
+        Context(ClassLoader loader, Map<String, Global<?>> globals) {
+            this.loader = loader;
+            this.globals = globals;
+        }
+
+        DomainClassMetadata metadata(Class<?> type) {
+            return metadata.computeIfAbsent(type, Metadata::new);
+        }
+
+        Property property(Class<?> type, String field) {
+            String key = type.getName() + "\0" + field;
+            Property p = properties.get(key);
+            if (p == null) {
+                p = Property.of(type, field, metadata(type));
+                properties.put(key, p);
+            }
+            return p;
+        }
+    }
+
+    /**
+     * The property indexes of a class as the executable model numbers them (its generated
+     * {@code DomainClassesMetadata}): the position in Drools' list of accessible properties. Alpha
+     * hashing and property reactivity key on these numbers.
+     */
+    static final class Metadata implements DomainClassMetadata {
+        private final Class<?> type;
+        private final List<String> names;
+
+        Metadata(Class<?> type) {
+            this.type = type;
+            this.names = ClassUtil.getAccessiblePropertiesIncludingNonGetterValueMethod(type);
+        }
+
+        public Class<?> getDomainClass() { return type; }
+        public int getPropertiesSize() { return names.size(); }
+
+        public int getPropertyIndex(String name) {
+            int i = names.indexOf(name);
+            if (i < 0) throw new RuntimeException("Unknown property '" + name + "' for class " + type);
+            return i;
+        }
+    }
+
+    /** A readable field of a fact class: its getter, type and property index. */
+    static final class Property implements Function1<Object, Object> {
+        final Class<?> owner;
+        final String name;
+        final Method getter;
+        final Class<?> type;  // as declared (a primitive stays primitive)
+        final int index;
+
+        private Property(Class<?> owner, String name, Method getter, int index) {
+            this.owner = owner;
+            this.name = name;
+            this.getter = getter;
+            this.type = getter.getReturnType();
+            this.index = index;
+        }
+
+        static Property of(Class<?> owner, String name, DomainClassMetadata meta) {
+            Method getter = getter(owner, "get" + capitalize(name));
+            if (getter == null) {
+                Method is = getter(owner, "is" + capitalize(name));
+                if (is != null && (is.getReturnType() == boolean.class)) getter = is;
+            }
+            if (getter == null) throw new Reject("no readable field '" + name + "' in " + owner.getName());
+            int index;
+            try {
+                index = meta.getPropertyIndex(name);
+            } catch (RuntimeException e) {
+                throw new Reject("'" + name + "' is not a property of " + owner.getName());
+            }
+            return new Property(owner, name, getter, index);
+        }
+
+        private static Method getter(Class<?> owner, String name) {
+            try {
+                Method m = owner.getMethod(name);
+                return Modifier.isStatic(m.getModifiers()) || m.getReturnType() == void.class ? null : m;
+            } catch (NoSuchMethodException e) {
+                return null;
+            }
+        }
+
+        public Object apply(Object fact) {
+            try {
+                return getter.invoke(fact);
+            } catch (InvocationTargetException e) {
+                throw rethrow(e.getCause());
+            } catch (IllegalAccessException e) {
+                throw new IllegalStateException(e);
+            }
+        }
+
+        @Override public boolean equals(Object o) {
+            return o instanceof Property && ((Property) o).owner == owner && ((Property) o).name.equals(name);
+        }
+
+        @Override public int hashCode() { return owner.hashCode() * 31 + name.hashCode(); }
+    }
+
+    static RuntimeException rethrow(Throwable t) {
+        if (t instanceof RuntimeException) return (RuntimeException) t;
+        if (t instanceof Error) throw (Error) t;
+        return new RuntimeException(t);
+    }
+
+    static String capitalize(String s) {
+        return s.isEmpty() ? s : Character.toUpperCase(s.charAt(0)) + s.substring(1);
+    }
+
+    // ------------------------------------------------------------------ values and comparisons
+
+    /** How two values compare: by number for numeric types, by equals for the rest. */
+    enum Kind { INTEGRAL, DECIMAL, TEXT, BOOLEAN }
+
+    static Kind kindOf(Class<?> t) {
+        if (t == int.class || t == Integer.class) return Kind.INTEGRAL;
+        if (t == double.class || t == Double.class) return Kind.DECIMAL;
+        if (t == String.class) return Kind.TEXT;
+        if (t == boolean.class || t == Boolean.class) return Kind.BOOLEAN;
+        throw new Reject("fields of type " + t.getName() + " are left to the compiler");
+    }
+
+    static Class<?> boxed(Class<?> t) {
+        if (t == int.class) return Integer.class;
+        if (t == double.class) return Double.class;
+        if (t == boolean.class) return Boolean.class;
+        return t;
+    }
+
+    /** A literal of the description ({"s": text} | {"n": digits} | {"b": bool}) as a value of {@code type}. */
+    @SuppressWarnings("unchecked")
+    static Object literal(Object spec, Class<?> type) {
+        Map<String, Object> lit = (Map<String, Object>) spec;
+        Kind kind = kindOf(type);
+        Class<?> box = boxed(type);
+        if (lit.containsKey("s")) {
+            if (kind != Kind.TEXT) throw new Reject("a text literal compared with a " + type.getName() + " field");
+            return lit.get("s");
+        }
+        if (lit.containsKey("b")) {
+            if (kind != Kind.BOOLEAN) throw new Reject("a boolean literal compared with a " + type.getName() + " field");
+            return lit.get("b");
+        }
+        String digits = (String) lit.get("n");
+        if (digits == null) throw new Reject("unknown literal " + spec);
+        boolean decimal = digits.contains(".");
+        if (box == Integer.class && !decimal) return Integer.valueOf(digits);
+        if (box == Double.class) return Double.valueOf(javaText(lit, type));
+        throw new Reject("the number " + digits + " compared with a " + type.getName() + " field");
+    }
+
+    /**
+     * The literal as the executable model writes it in the generated Java expression: text quoted,
+     * integers as written, a number compared with a double field as a double literal. A literal
+     * whose written form the compiler may print otherwise (0.10, 1e3) is left to the compiler.
+     */
+    @SuppressWarnings("unchecked")
+    static String javaText(Object spec, Class<?> type) {
+        Map<String, Object> lit = (Map<String, Object>) spec;
+        if (lit.containsKey("s")) return "\"" + lit.get("s") + "\"";
+        if (lit.containsKey("b")) return String.valueOf(lit.get("b"));
+        String digits = (String) lit.get("n");
+        if (kindOf(type) != Kind.DECIMAL) return digits;
+        String text = digits.contains(".") ? digits : digits + ".0";
+        if (!Double.toString(Double.parseDouble(text)).equals(text)) throw new Reject("the number " + digits);
+        return text;
+    }
+
+    /**
+     * The id the executable model gives a constraint: an md5 of the pattern class and the Java
+     * expression it generates. Constraints of equal id are one node to Drools, so a rule built here
+     * shares its nodes with a compiled rule of the same constraint; a different id would make two
+     * alpha nodes of one hashed value, and Drools' alpha hashing keeps only one of them.
+     */
+    static String exprId(Class<?> type, Property field, String op, String right) {
+        Kind kind = kindOf(field.type);
+        String fn;
+        String not = "";
+        switch (op) {
+            case "==": case "!=":
+                fn = kind == Kind.INTEGRAL || kind == Kind.DECIMAL ? "areNumbersNullSafeEquals" : "areNullSafeEquals";
+                if (op.equals("!=")) not = "!";
+                break;
+            case ">": fn = "greaterThanNumbers"; break;
+            case ">=": fn = "greaterOrEqualNumbers"; break;
+            case "<": fn = "lessThanNumbers"; break;
+            case "<=": fn = "lessOrEqualNumbers"; break;
+            default: throw new Reject("operator " + op);
+        }
+        String java = not + "org.drools.modelcompiler.util.EvaluationUtil." + fn + "(_this." + field.getter.getName() + "(), "
+                + right + ")";
+        return "GENERATED_" + org.drools.util.StringUtils.md5Hash(String.valueOf(type) + java);
+    }
+
+    static Index.ConstraintType constraintType(String op) {
+        switch (op) {
+            case "==": return Index.ConstraintType.EQUAL;
+            case "!=": return Index.ConstraintType.NOT_EQUAL;
+            case ">": return Index.ConstraintType.GREATER_THAN;
+            case ">=": return Index.ConstraintType.GREATER_OR_EQUAL;
+            case "<": return Index.ConstraintType.LESS_THAN;
+            case "<=": return Index.ConstraintType.LESS_OR_EQUAL;
+            default: throw new Reject("operator " + op);
+        }
+    }
+
+    /** {@code left op right}, null-safe as the executable model's EvaluationUtil: a null never orders. */
+    static boolean compare(Kind kind, String op, Object left, Object right) {
+        boolean equality = op.equals("==") || op.equals("!=");
+        if (equality) {
+            boolean same;
+            if (left == null || right == null) {
+                same = left == right;
+            } else if (kind == Kind.INTEGRAL) {
+                same = ((Number) left).longValue() == ((Number) right).longValue();
+            } else if (kind == Kind.DECIMAL) {
+                same = ((Number) left).doubleValue() == ((Number) right).doubleValue();
+            } else {
+                same = left.equals(right);
+            }
+            return op.equals("==") == same;
+        }
+        if (left == null || right == null) return false;
+        int c;
+        if (kind == Kind.INTEGRAL) {
+            c = Long.compare(((Number) left).longValue(), ((Number) right).longValue());
+        } else if (kind == Kind.DECIMAL) {
+            double a = ((Number) left).doubleValue(), b = ((Number) right).doubleValue();
+            if (Double.isNaN(a) || Double.isNaN(b)) return false;
+            c = a < b ? -1 : a > b ? 1 : 0;
+        } else {
+            throw new Reject("operator " + op + " on " + kind);
+        }
+        switch (op) {
+            case ">": return c > 0;
+            case ">=": return c >= 0;
+            case "<": return c < 0;
+            case "<=": return c <= 0;
+            default: throw new Reject("operator " + op);
+        }
+    }
+
+    /** {@code fact.field op literal}. Equal by value, so equal constraints share one alpha node. */
+    static final class FieldTest implements Predicate1<Object> {
+        final Property field;
+        final Kind kind;
+        final String op;
+        final Object value;
+
+        FieldTest(Property field, String op, Object value) {
+            this.field = field;
+            this.kind = kindOf(field.type);
+            this.op = op;
+            this.value = value;
+            if (kind == Kind.TEXT || kind == Kind.BOOLEAN) {
+                if (!op.equals("==") && !op.equals("!=")) throw new Reject("operator " + op + " on " + kind);
+            }
+        }
+
+        public boolean test(Object fact) { return compare(kind, op, field.apply(fact), value); }
+
+        @Override public boolean equals(Object o) {
+            if (!(o instanceof FieldTest)) return false;
+            FieldTest t = (FieldTest) o;
+            return t.field.equals(field) && t.op.equals(op) && Objects.equals(t.value, value);
+        }
+
+        @Override public int hashCode() { return Objects.hash(field, op, value); }
+    }
+
+    /** {@code fact.field op other.otherField} (a join). */
+    static final class JoinTest implements Predicate2<Object, Object> {
+        final Property field;
+        final Property other;
+        final Kind kind;
+        final String op;
+
+        JoinTest(Property field, String op, Property other) {
+            this.field = field;
+            this.other = other;
+            this.kind = kindOf(field.type);
+            if (kindOf(other.type) != kind) {
+                throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
+            }
+            if ((kind == Kind.TEXT || kind == Kind.BOOLEAN) && !op.equals("==") && !op.equals("!=")) {
+                throw new Reject("operator " + op + " on " + kind);
+            }
+            this.op = op;
+        }
+
+        public boolean test(Object fact, Object bound) { return compare(kind, op, field.apply(fact), other.apply(bound)); }
+
+        @Override public boolean equals(Object o) {
+            if (!(o instanceof JoinTest)) return false;
+            JoinTest t = (JoinTest) o;
+            return t.field.equals(field) && t.other.equals(other) && t.op.equals(op);
+        }
+
+        @Override public int hashCode() { return Objects.hash(field, other, op); }
+    }
+
+    /** An accumulate's result {@code op literal}. */
+    static final class ResultTest implements Predicate1<Object> {
+        final String op;
+        final Object value;
+
+        ResultTest(String op, Object value) {
+            this.op = op;
+            this.value = value;
+        }
+
+        public boolean test(Object result) { return compare(Kind.DECIMAL, op, result, value); }
+
+        @Override public boolean equals(Object o) {
+            return o instanceof ResultTest && ((ResultTest) o).op.equals(op) && ((ResultTest) o).value.equals(value);
+        }
+
+        @Override public int hashCode() { return Objects.hash(op, value); }
+    }
+
+    /** A then-part of calls with literal arguments on one global. */
+    static final class Calls implements Block1<Object> {
+        final Method[] methods;
+        final Object[][] args;
+
+        Calls(Method[] methods, Object[][] args) {
+            this.methods = methods;
+            this.args = args;
+        }
+
+        public void execute(Object target) throws Exception {
+            for (int k = 0; k < methods.length; k++) {
+                try {
+                    methods[k].invoke(target, args[k]);
+                } catch (InvocationTargetException e) {
+                    Throwable cause = e.getCause();
+                    if (cause instanceof Exception) throw (Exception) cause;
+                    throw rethrow(cause);
+                }
+            }
+        }
+    }
+
+    // ------------------------------------------------------------------ one rule
+
+    static final class OneRule {
+        final Context context;
+        final Map<String, Object> spec;
+        final String pkg;
+        final List<String> imports;
+        final Map<String, Declaration<Object>> vars = new HashMap<String, Declaration<Object>>();
+        final Map<String, Class<?>> varTypes = new HashMap<String, Class<?>>();
+        int unnamed = 0;
+
+        @SuppressWarnings("unchecked")
+        OneRule(Context context, Map<String, Object> spec) {
+            this.context = context;
+            this.spec = spec;
+            this.pkg = (String) spec.get("package");
+            Object imports = spec.get("imports");
+            this.imports = imports == null ? Collections.<String>emptyList() : (List<String>) imports;
+        }
+
+        @SuppressWarnings("unchecked")
+        Rule build() {
+            List<RuleItemBuilder<?>> items = new ArrayList<RuleItemBuilder<?>>();
+            for (Object element : (List<Object>) spec.get("lhs")) {
+                Map<String, Object> e = (Map<String, Object>) element;
+                if (e.containsKey("pattern")) {
+                    items.add(pattern((Map<String, Object>) e.get("pattern"), null));
+                } else if (e.containsKey("accumulate")) {
+                    accumulate((Map<String, Object>) e.get("accumulate"), items);
+                } else {
+                    throw new Reject("unknown condition " + e.keySet());
+                }
+            }
+            items.add(consequence((List<Object>) spec.get("rhs")));
+            RuleBuilder rule = PatternDSL.rule(pkg, (String) spec.get("name"));
+            Object salience = spec.get("salience");
+            if (salience != null) rule = rule.attribute(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
+            return rule.build(items.toArray(new RuleItemBuilder<?>[0]));
+        }
+
+        Class<?> resolve(String name) {
+            List<String> candidates = new ArrayList<String>();
+            if (name.contains(".")) {
+                candidates.add(name);
+            } else {
+                for (String imp : imports) {
+                    if (imp.endsWith("." + name)) candidates.add(imp);
+                }
+                candidates.add(pkg.isEmpty() ? name : pkg + "." + name);
+                for (String imp : imports) {
+                    if (imp.endsWith(".*")) candidates.add(imp.substring(0, imp.length() - 1) + name);
+                }
+            }
+            for (String c : candidates) {
+                try {
+                    return Class.forName(c, false, context.loader);
+                } catch (ClassNotFoundException | LinkageError e) {
+                    // the next candidate
+                }
+            }
+            throw new Reject("type " + name + " not found");
+        }
+
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        PatternDSL.PatternDef<Object> pattern(Map<String, Object> p, List<Object> binds) {
+            Class<?> type = resolve((String) p.get("type"));
+            String var = (String) p.get("var");
+            String name = var != null ? var : "$pattern_" + type.getSimpleName() + "$" + (++unnamed) + "$";
+            if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
+            Declaration<Object> decl = (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name);
+            PatternDSL.PatternDef<Object> def = PatternDSL.pattern(decl);
+            for (Object c : (List<Object>) p.get("constraints")) {
+                def = constraint(def, type, (Map<String, Object>) c);
+            }
+            vars.put(name, decl);
+            varTypes.put(name, type);
+            if (binds != null) {
+                for (Object b : (List<Object>) p.get("binds")) binds.add(b);
+            } else if (!((List<Object>) p.get("binds")).isEmpty()) {
+                throw new Reject("field bindings outside an accumulate are left to the compiler");
+            }
+            return def;
+        }
+
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        PatternDSL.PatternDef<Object> constraint(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> c) {
+            Property field = context.property(type, (String) c.get("field"));
+            String op = (String) c.get("op");
+            Index.ConstraintType ct = constraintType(op);
+            if (c.containsKey("literal")) {
+                Object value = literal(c.get("literal"), field.type);
+                FieldTest test = new FieldTest(field, op, value);
+                String exprId = exprId(type, field, op, javaText(c.get("literal"), field.type));
+                AlphaIndex index = PatternDSL.alphaIndexedBy((Class) field.type, ct, field.index, (Function1) field, value);
+                return def.expr(exprId, test, index, PatternDSL.reactOn(field.name));
+            }
+            String ref = (String) c.get("ref");
+            Declaration<Object> bound = vars.get(ref);
+            if (bound == null) throw new Reject("variable " + ref + " is not a pattern bound before");
+            Property other = context.property(varTypes.get(ref), (String) c.get("refField"));
+            JoinTest test = new JoinTest(field, op, other);
+            String exprId = exprId(type, field, op, ref + "." + other.getter.getName() + "()");
+            BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
+                                                       (Function1) other, other.type);
+            return def.expr(exprId, bound, test, index, PatternDSL.reactOn(field.name));
+        }
+
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        void accumulate(Map<String, Object> a, List<RuleItemBuilder<?>> items) {
+            List<Object> binds = new ArrayList<Object>();
+            PatternDSL.PatternDef<Object> source = pattern((Map<String, Object>) a.get("source"), binds);
+            String function = (String) a.get("function");
+            String arg = (String) a.get("arg");
+            Variable<Object> input = null;
+            for (Object b : binds) {
+                Map<String, Object> bind = (Map<String, Object>) b;
+                Class<?> type = varTypes.get(sourceVar(source));
+                Property field = context.property(type, (String) bind.get("field"));
+                if (!((String) bind.get("var")).equals(arg)) throw new Reject("a binding the accumulate does not use");
+                Class<?> box = boxed(field.type);
+                if (function.equals("sum") && box != Double.class) {
+                    throw new Reject("sum over " + field.type.getName() + " is left to the compiler");
+                }
+                input = (Variable<Object>) (Variable) DSL.declarationOf(box, arg);
+                source = source.bind(input, (Function1) field, PatternDSL.reactOn(field.name));
+            }
+            org.drools.model.functions.accumulate.AccumulateFunction fn;
+            Class<?> resultType;
+            if (function.equals("sum") && input != null && binds.size() == 1) {
+                fn = DSL.accFunction(org.drools.core.base.accumulators.SumAccumulateFunction::new, input);
+                resultType = Double.class;
+            } else {
+                throw new Reject("accumulate function " + function + " is left to the compiler");
+            }
+            String resultName = (String) a.get("var");
+            if (vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
+            Declaration<Object> result = (Declaration<Object>) (Declaration) DSL.declarationOf(resultType, context.metadata(resultType), resultName);
+            vars.put(resultName, result);
+            varTypes.put(resultName, resultType);
+            items.add((RuleItemBuilder<?>) DSL.accumulate(source, fn.as(result)));
+            List<Object> tests = (List<Object>) a.get("constraints");
+            if (!tests.isEmpty()) {
+                PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
+                for (Object t : tests) {
+                    Map<String, Object> c = (Map<String, Object>) t;
+                    Object value = literal(c.get("literal"), double.class);
+                    String op = (String) c.get("op");
+                    constraintType(op);
+                    on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), new ResultTest(op, value));
+                }
+                items.add(on);
+            }
+        }
+
+        private String sourceVar(PatternDSL.PatternDef<Object> source) {
+            return source.getFirstVariable().getName();
+        }
+
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        RuleItemBuilder<?> consequence(List<Object> calls) {
+            if (calls.isEmpty()) return DSL.execute((Block0) () -> {});
+            String target = null;
+            Method[] methods = new Method[calls.size()];
+            Object[][] args = new Object[calls.size()][];
+            for (int k = 0; k < calls.size(); k++) {
+                Map<String, Object> call = (Map<String, Object>) calls.get(k);
+                String t = (String) call.get("target");
+                if (target != null && !target.equals(t)) throw new Reject("calls on more than one global");
+                target = t;
+                List<Object> literals = (List<Object>) call.get("args");
+                Global<?> global = context.globals.get(pkg + "\0" + t);
+                if (global == null) throw new Reject("no global " + t + " in package " + pkg);
+                Method chosen = null;
+                Object[] values = null;
+                for (Method m : global.getType().getMethods()) {
+                    if (!m.getName().equals(call.get("method")) || m.getParameterCount() != literals.size()
+                            || Modifier.isStatic(m.getModifiers())) continue;
+                    Object[] converted = convert(m.getParameterTypes(), literals);
+                    if (converted == null) continue;
+                    if (chosen != null) throw new Reject("more than one method " + m.getName() + " fits");
+                    chosen = m;
+                    values = converted;
+                }
+                if (chosen == null) throw new Reject("no method " + call.get("method") + " of " + t + " fits");
+                methods[k] = chosen;
+                args[k] = values;
+            }
+            Global<Object> global = (Global<Object>) context.globals.get(pkg + "\0" + target);
+            return DSL.on(global).execute(new Calls(methods, args));
+        }
+
+        /** The literals as arguments of a method with these parameter types, or null if they do not fit exactly. */
+        @SuppressWarnings("unchecked")
+        static Object[] convert(Class<?>[] types, List<Object> literals) {
+            Object[] out = new Object[types.length];
+            for (int k = 0; k < types.length; k++) {
+                Map<String, Object> lit = (Map<String, Object>) literals.get(k);
+                Class<?> t = types[k];
+                if (lit.containsKey("s")) {
+                    if (t != String.class && t != Object.class && t != CharSequence.class) return null;
+                    out[k] = lit.get("s");
+                } else if (lit.containsKey("b")) {
+                    if (t != boolean.class && t != Boolean.class && t != Object.class) return null;
+                    out[k] = lit.get("b");
+                } else {
+                    String digits = (String) lit.get("n");
+                    boolean decimal = digits.contains(".");
+                    if ((t == int.class || t == Integer.class) && !decimal) out[k] = Integer.valueOf(digits);
+                    else if ((t == long.class || t == Long.class) && !decimal) out[k] = Long.valueOf(digits);
+                    else if (t == double.class || t == Double.class) out[k] = Double.valueOf(digits);
+                    else if (t == Object.class || t == Number.class) out[k] = decimal ? (Object) Double.valueOf(digits) : (Object) Integer.valueOf(digits);
+                    else return null;
+                }
+            }
+            return out;
+        }
+    }
+
+    /** The rules of one package that were built here (no declarations: those come from the declarations unit). */
+    static final class PlainModel implements Model {
+        private final String packageName;
+        final List<Rule> rules = new ArrayList<Rule>();
+
+        PlainModel(String packageName) { this.packageName = packageName; }
+
+        public String getName() { return packageName + ".plain"; }
+        public String getPackageName() { return packageName; }
+        public List<Global> getGlobals() { return Collections.emptyList(); }
+        public List<Rule> getRules() { return rules; }
+        public List<Query> getQueries() { return Collections.emptyList(); }
+        public List<TypeMetaData> getTypeMetaDatas() { return Collections.emptyList(); }
+        public List<EntryPoint> getEntryPoints() { return Collections.emptyList(); }
+    }
+}
