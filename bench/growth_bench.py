@@ -101,6 +101,9 @@ def measure(sizes: list[int], whole_up_to: int, only: tuple[str, ...] = ALL_RUNS
         results = {"sizes": sizes, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
                    "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                    "python": platform.python_version(), "runs": {}}
+    else:  # --merge: say which rows this run replaced
+        results.setdefault("merged", []).append({"at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                                                 "sizes": sizes, "runs": list(only), "load_start": os.getloadavg()})
     work = Path(tempfile.mkdtemp(prefix="printeps-growth-bench-"))
     for n in sizes:
         print(f"{n} rules", flush=True)
@@ -167,7 +170,9 @@ def report(r: dict[str, Any]) -> str:
         "3-pattern join and an accumulate; every pattern leads with an equality Drools hashes, as in a real table. A "
         "request is 5 facts (2 customers, 2 orders, 1 product). Every engine ran in its own process and was checked to "
         "fire exactly the rules the Python model of the set says. Timings on a loaded 2-core machine move by 2x from "
-        "run to run: read the ratios.",
+        "run to run: read the ratios." + "".join(
+            f" Measured again on {m['at']} (`--merge`, load {m['load_start'][0]:.1f} at its start): the "
+            f"{', '.join(m['runs'])} rows at {', '.join(f'{s:,}' for s in m['sizes'])} rules." for m in r.get("merged", [])),
         "",
         "![Growth: cold build, one-rule redeploy, fire p99 and RSS against the number of rules](img/growth.svg)",
         "",
@@ -241,12 +246,14 @@ def report(r: dict[str, Any]) -> str:
         if "error" in crash:
             lines.append(f"| {n:,} | durable_rules 2.0.28, range + equality + join rules | {int(n * 0.8):,} | crashed: `{crash['error']}` | | | | |")
     lines += ["", "Build breakdown of the cold deploys (seconds; compile runs on 2 worker threads, loading overlaps it):", "",
-              "| rules | mode | units compiled | compile | load | assemble | total |", "|---|---|---|---|---|---|---|"]
+              "| rules | mode | units made | rules compiled to Java / built at run time (plain) | compile | load | assemble | total |",
+              "|---|---|---|---|---|---|---|---|"]
     for n in sizes:
         for key in ("gateway", "whole"):
             st = g(n, key, "cold_deploy", "stats") or {}
             if st:
-                lines.append(f"| {n:,} | {st.get('mode')} | {st.get('units_compiled')} | {_f(st.get('compile_s'), '.1f')} | "
+                lines.append(f"| {n:,} | {st.get('mode')} | {st.get('units_compiled')} | "
+                             f"{st.get('rules_compiled', '')} / {st.get('rules_built', 0)} | {_f(st.get('compile_s'), '.1f')} | "
                              f"{_f(st.get('load_s'), '.2f')} | {_f(st.get('assemble_s'), '.2f')} | {_f(st.get('total_s'), '.1f')} |")
     lines.append("")
     if r.get("notes"):
