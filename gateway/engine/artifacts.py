@@ -93,7 +93,10 @@ def load_compiled(data: bytes, files: dict[str, str], options: CompileOptions | 
                 cache.put(UnitArtifact.from_manifest(unit_manifest, unit_data), persist=options.disk_cache)
         plan = incremental._plan_from_json(manifest["plan"])
         stats = incremental.BuildStats(mode="loaded", rules=len(plan.rules))
-        compiled = incremental.assemble(plan, files, dict(manifest["plan"].get("expanded", {})), cache, stats)
+        try:
+            compiled = incremental.assemble(plan, files, dict(manifest["plan"].get("expanded", {})), cache, stats)
+        except incremental._MissingUnit as exc:
+            raise IncompatibleArtifact(f"unit {exc} of the archive does not load here: compile the files") from None
         if options.incremental and options.disk_cache:
             cache.put_plan(digest, manifest["plan"])
     return compiled

@@ -106,11 +106,12 @@ MAX_LOADED_RULES = 60_000  # loaded units kept for the next build (their classes
 
 def env_key() -> str:
     """What generated classes are valid for: this Drools, the helper classes generated code calls
-    (the ``actions`` global), this unit format. Other helper changes keep the cache."""
+    (the ``actions`` global), this unit format and plain rule description format. Other helper
+    changes keep the cache (a plain unit is built again from its description by the current code)."""
     units = jvm.helper_class("Units")
     linked = {k: v for k, v in jvm.helper_sources().items() if k.endswith(".Actions")}
     helpers = drl_items.digest(*(f"{k}\0{v}" for k, v in sorted(linked.items())))
-    return f"drools-{units.droolsVersion()}-{FORMAT_VERSION}-{helpers[:12]}"
+    return f"drools-{units.droolsVersion()}-{FORMAT_VERSION}.{plain_rules.FORMAT}-{helpers[:12]}"
 
 
 def default_cache_dir() -> Path:
@@ -361,9 +362,10 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
                                 stats.rules_built += len(unit.rules)
                             else:
                                 stats.rules_compiled += len(rules)
-                    for k in range(0, len(leftovers), batch):  # plain rules the Java side refused
-                        more = pool.submit(run, "rules", leftovers[k:k + batch])
-                        futures[more] = ("rules", leftovers[k:k + batch])
+                    size = _batch_size(len(leftovers), options.workers)
+                    for k in range(0, len(leftovers), size):  # plain rules the Java side refused
+                        more = pool.submit(run, "rules", leftovers[k:k + size])
+                        futures[more] = ("rules", leftovers[k:k + size])
                         pending.add(more)
                     done += len(rules) - len(leftovers)
                     _progress(on_progress, min(done, total), total, "compile")
@@ -379,13 +381,14 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
 
 
 MAX_PLAIN_BATCH = 2_000  # plain rules per plain unit (a one-rule edit builds a unit of one)
-Missing = list[tuple[str, SourceItems, drl_items.Item]]
+Missing = list[tuple[str, SourceItems, drl_items.Item]]  # (rule key, its file, the rule)
+Plain = list[tuple[str, SourceItems, drl_items.Item, dict]]  # the same and its plain description
 
 
-def _plain_rules(items: RuleSetItems, missing: Missing) -> tuple[list[tuple[str, SourceItems, drl_items.Item, dict]], Missing]:
+def _plain_rules(items: RuleSetItems, missing: Missing) -> tuple[Plain, Missing]:
     """``missing`` split into rules of the plain shapes (with their descriptions) and the rest."""
     imports = plain_rules.package_imports(items.sources)
-    plain: list[tuple[str, SourceItems, drl_items.Item, dict]] = []
+    plain: Plain = []
     rest: Missing = []
     for key, src, item in missing:
         package_imports = imports.get(src.package)
@@ -397,32 +400,32 @@ def _plain_rules(items: RuleSetItems, missing: Missing) -> tuple[list[tuple[str,
     return plain, rest
 
 
-def _build_plain(rules: list[tuple[str, SourceItems, drl_items.Item, dict]], env: str,
-                 declarations: _Loaded) -> tuple[UnitArtifact | None, Missing]:
+def _build_plain(rules: Plain, env: str, declarations: _Loaded) -> tuple[UnitArtifact | None, Missing]:
     """A plain unit of ``rules`` built against the declarations; the rules the Java side refused
     (logged with the reason) are returned for the compiler."""
-    built = jvm.helper_class("PlainRules").build(declarations.loader, declarations.models,
-                                                 plain_rules.spec_json([spec for *_, spec in rules]).decode())
+    built = _java_build(plain_rules.spec_json([spec for *_, spec in rules]), declarations)
     refused = {}
     for line in built.rejected():
         index, _, reason = str(line).partition("\t")
         refused[int(index)] = reason
-    for index, reason in refused.items():
-        log.debug("rule %r left to the compiler: %s", rules[index][2].name, reason)
+        log.debug("rule %r left to the compiler: %s", rules[int(index)][2].name, reason)
     leftovers = [(key, src, item) for k, (key, src, item, _) in enumerate(rules) if k in refused]
     kept = [rule for k, rule in enumerate(rules) if k not in refused]
     if not kept:
         return None, leftovers
+    data = plain_rules.spec_json([spec for *_, spec in kept])
     if refused:  # the unit's cached description holds only what was built
-        built = jvm.helper_class("PlainRules").build(declarations.loader, declarations.models,
-                                                     plain_rules.spec_json([spec for *_, spec in kept]).decode())
-    unit_id = drl_items.digest("plain", env, *(key for key, *_ in kept))
-    unit = UnitArtifact(unit_id, "plain", [], {key: (src.package, item.name) for key, src, item, _ in kept},
-                        plain_rules.spec_json([spec for *_, spec in kept]))
-    loaded = _Loaded(declarations.loader, built.models(), len(kept), f"{unit.id}#{next(_load_serial)}")
-    with _loaded_lock:
-        _loaded[(unit.id, declarations.token)] = loaded
+        built = _java_build(data, declarations)
+    unit = UnitArtifact(drl_items.digest("plain", env, *(key for key, *_ in kept)), "plain", [],
+                        {key: (src.package, item.name) for key, src, item, _ in kept}, data)
+    _remember((unit.id, declarations.token),
+              _Loaded(declarations.loader, built.models(), len(kept), f"{unit.id}#{next(_load_serial)}"))
     return unit, leftovers
+
+
+def _java_build(description: bytes, declarations: _Loaded) -> Any:
+    """``PlainRules.build`` of a plain unit's description against the declarations' classes and globals."""
+    return jvm.helper_class("PlainRules").build(declarations.loader, declarations.models, description.decode())
 
 
 HEARTBEAT_S = 0.5  # how often a long unit's wait reports progress (and hears a cancel)
@@ -527,7 +530,11 @@ def _load(unit: UnitArtifact, parent: _Loaded | None) -> _Loaded:
     if unit.kind == "rules":
         loader.release()  # nothing compiles against a rule unit: keep only the defined classes
     models = units.models(loader, jpype.JArray(jpype.JString)(unit.model_classes))
-    loaded = _Loaded(loader, models, len(unit.rules), f"{unit.id}#{next(_load_serial)}")
+    return _remember(key, _Loaded(loader, models, len(unit.rules), f"{unit.id}#{next(_load_serial)}"))
+
+
+def _remember(key: tuple[str, str], loaded: _Loaded) -> _Loaded:
+    """Keep a loaded unit for the next builds, within MAX_LOADED_RULES."""
     with _loaded_lock:
         _loaded[key] = loaded
         while len(_loaded) > 1 and sum(one.rules for one in _loaded.values()) > MAX_LOADED_RULES:
@@ -539,15 +546,11 @@ def _load_plain(unit: UnitArtifact, parent: _Loaded | None, key: tuple[str, str]
     """A plain unit's rules built again from its description, against ``parent``'s classes."""
     if parent is None:
         raise _MissingUnit(unit.id)
-    built = jvm.helper_class("PlainRules").build(parent.loader, parent.models, unit.data.decode())
-    if len(built.rejected()):  # cannot happen for the classes it was built against: build the set again
-        log.warning("plain unit %s no longer builds (%s); compiling the rule set again", unit.id,
-                    list(built.rejected())[:3])
+    built = _java_build(unit.data, parent)
+    if len(built.rejected()):  # not for the classes it was built against: treated as a unit gone
+        log.warning("plain unit %s no longer builds: %s", unit.id, list(built.rejected())[:3])
         raise _MissingUnit(unit.id)
-    loaded = _Loaded(parent.loader, built.models(), len(unit.rules), f"{unit.id}#{next(_load_serial)}")
-    with _loaded_lock:
-        _loaded[key] = loaded
-    return loaded
+    return _remember(key, _Loaded(parent.loader, built.models(), len(unit.rules), f"{unit.id}#{next(_load_serial)}"))
 
 
 def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache: UnitCache | None,
