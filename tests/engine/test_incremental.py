@@ -421,6 +421,20 @@ def test_rules_the_plain_builder_refuses_go_to_the_compiler(options):
         compiler.compile_files({**files, "a.drl": rules}, "refused", options)
     error = failed.value.errors[0]
     assert (error.file, error.line) == ("a.drl", 7) and error.column > 0
+    # a variable bound inside an accumulate is not visible after it: an error, never a plain rule
+    scoped = HEADER + textwrap.dedent("""\
+        rule "scoped"
+        when
+            $c: Customer()
+            accumulate($o: Order(customer == $c.id, $a: amount); $t: sum($a); $t > 1.0)
+            Customer(id == $o.customer)
+        then
+            actions.say("bot", "scoped");
+        end
+        """)
+    with pytest.raises(CompileFailed) as failed:
+        compiler.compile_files({**files, "a.drl": scoped}, "refused", options)
+    assert (failed.value.errors[0].file, failed.value.errors[0].line) == ("a.drl", 7)
 
 
 # --------------------------------------------------------------------------- caches and artifacts

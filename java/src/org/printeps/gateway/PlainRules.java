@@ -9,7 +9,6 @@ import java.util.HashMap;
 import java.util.LinkedHashMap;
 import java.util.List;
 import java.util.Map;
-import java.util.Objects;
 
 import org.drools.model.AlphaIndex;
 import org.drools.model.BetaIndex;
@@ -160,14 +159,12 @@ public final class PlainRules {
 
     /** A readable field of a fact class: its getter, type and property index. */
     static final class Property implements Function1<Object, Object> {
-        final Class<?> owner;
         final String name;
         final Method getter;
         final Class<?> type;  // as declared (a primitive stays primitive)
         final int index;
 
-        private Property(Class<?> owner, String name, Method getter, int index) {
-            this.owner = owner;
+        private Property(String name, Method getter, int index) {
             this.name = name;
             this.getter = getter;
             this.type = getter.getReturnType();
@@ -187,7 +184,7 @@ public final class PlainRules {
             } catch (RuntimeException e) {
                 throw new Reject("'" + name + "' is not a property of " + owner.getName());
             }
-            return new Property(owner, name, getter, index);
+            return new Property(name, getter, index);
         }
 
         private static Method getter(Class<?> owner, String name) {
@@ -208,12 +205,6 @@ public final class PlainRules {
                 throw new IllegalStateException(e);
             }
         }
-
-        @Override public boolean equals(Object o) {
-            return o instanceof Property && ((Property) o).owner == owner && ((Property) o).name.equals(name);
-        }
-
-        @Override public int hashCode() { return owner.hashCode() * 31 + name.hashCode(); }
     }
 
     static RuntimeException rethrow(Throwable t) {
@@ -359,7 +350,15 @@ public final class PlainRules {
         }
     }
 
-    /** {@code fact.field op literal}. Equal by value, so equal constraints share one alpha node. */
+    /** {@code kind} if values of it can be compared by {@code op} (text and booleans only for equality). */
+    static Kind comparable(Kind kind, String op) {
+        if ((kind == Kind.TEXT || kind == Kind.BOOLEAN) && !op.equals("==") && !op.equals("!=")) {
+            throw new Reject("operator " + op + " on " + kind);
+        }
+        return kind;
+    }
+
+    /** {@code fact.field op literal}. (Drools shares nodes by constraint id, not by predicate.) */
     static final class FieldTest implements Predicate1<Object> {
         final Property field;
         final Kind kind;
@@ -368,23 +367,12 @@ public final class PlainRules {
 
         FieldTest(Property field, String op, Object value) {
             this.field = field;
-            this.kind = kindOf(field.type);
+            this.kind = comparable(kindOf(field.type), op);
             this.op = op;
             this.value = value;
-            if (kind == Kind.TEXT || kind == Kind.BOOLEAN) {
-                if (!op.equals("==") && !op.equals("!=")) throw new Reject("operator " + op + " on " + kind);
-            }
         }
 
         public boolean test(Object fact) { return compare(kind, op, field.apply(fact), value); }
-
-        @Override public boolean equals(Object o) {
-            if (!(o instanceof FieldTest)) return false;
-            FieldTest t = (FieldTest) o;
-            return t.field.equals(field) && t.op.equals(op) && Objects.equals(t.value, value);
-        }
-
-        @Override public int hashCode() { return Objects.hash(field, op, value); }
     }
 
     /** {@code fact.field op other.otherField} (a join). */
@@ -397,25 +385,14 @@ public final class PlainRules {
         JoinTest(Property field, String op, Property other) {
             this.field = field;
             this.other = other;
-            this.kind = kindOf(field.type);
+            this.kind = comparable(kindOf(field.type), op);
             if (kindOf(other.type) != kind) {
                 throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
-            }
-            if ((kind == Kind.TEXT || kind == Kind.BOOLEAN) && !op.equals("==") && !op.equals("!=")) {
-                throw new Reject("operator " + op + " on " + kind);
             }
             this.op = op;
         }
 
         public boolean test(Object fact, Object bound) { return compare(kind, op, field.apply(fact), other.apply(bound)); }
-
-        @Override public boolean equals(Object o) {
-            if (!(o instanceof JoinTest)) return false;
-            JoinTest t = (JoinTest) o;
-            return t.field.equals(field) && t.other.equals(other) && t.op.equals(op);
-        }
-
-        @Override public int hashCode() { return Objects.hash(field, other, op); }
     }
 
     /** An accumulate's result {@code op literal}. */
@@ -429,12 +406,6 @@ public final class PlainRules {
         }
 
         public boolean test(Object result) { return compare(Kind.DECIMAL, op, result, value); }
-
-        @Override public boolean equals(Object o) {
-            return o instanceof ResultTest && ((ResultTest) o).op.equals(op) && ((ResultTest) o).value.equals(value);
-        }
-
-        @Override public int hashCode() { return Objects.hash(op, value); }
     }
 
     /** A then-part of calls with literal arguments on one global. */
@@ -571,12 +542,14 @@ public final class PlainRules {
         void accumulate(Map<String, Object> a, List<RuleItemBuilder<?>> items) {
             List<Object> binds = new ArrayList<Object>();
             PatternDSL.PatternDef<Object> source = pattern((Map<String, Object>) a.get("source"), binds);
+            String sourceVar = source.getFirstVariable().getName();
+            Class<?> type = varTypes.remove(sourceVar);  // bound inside the accumulate: not visible after it
+            vars.remove(sourceVar);
             String function = (String) a.get("function");
             String arg = (String) a.get("arg");
             Variable<Object> input = null;
             for (Object b : binds) {
                 Map<String, Object> bind = (Map<String, Object>) b;
-                Class<?> type = varTypes.get(sourceVar(source));
                 Property field = context.property(type, (String) bind.get("field"));
                 if (!((String) bind.get("var")).equals(arg)) throw new Reject("a binding the accumulate does not use");
                 Class<?> box = boxed(field.type);
@@ -612,10 +585,6 @@ public final class PlainRules {
                 }
                 items.add(on);
             }
-        }
-
-        private String sourceVar(PatternDSL.PatternDef<Object> source) {
-            return source.getFirstVariable().getName();
         }
 
         @SuppressWarnings({"unchecked", "rawtypes"})
