@@ -4,7 +4,8 @@ Why: Drools' executable model generates and compiles Java for every rule (~11 ms
 two minutes for 10,000), while the model objects it would build take microseconds. Most rules of a
 large table are of a few plain shapes: patterns on declared or imported types whose constraints
 compare a field with a literal or with a field of an earlier pattern, a ``sum`` accumulate, and a
-then-part of calls with literal arguments on a global (``actions.say("bot", "Welcome")``). This
+then-part of calls on a global whose arguments are literals, bound variables, their getters, or
+texts joined from those with ``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This
 module recognises exactly those, strictly, and describes them as JSON for the Java side
 (``org.printeps.gateway.PlainRules``), which builds the same ``Rule`` objects the generated code
 would (same indexes, property reactivity and accumulate functions). Anything else — another
@@ -31,7 +32,7 @@ _TOKEN = re.compile(
     |(?P<string>"[^"\\\n]*")
     |(?P<number>\d+(?:\.\d+)?(?![\w.]))
     |(?P<name>\$?[A-Za-z_][A-Za-z0-9_]*)
-    |(?P<punct>==|!=|>=|<=|[<>:;,().\-*])
+    |(?P<punct>==|!=|>=|<=|[<>:;,().\-*+])
     """,
     re.X | re.S,
 )
@@ -291,7 +292,34 @@ class _Parser:
         while self.peek()[1] != ")":
             if args:
                 self.take(",")
-            args.append(self.literal()[0])
+            args.append(self.argument())
         self.take(")")
         self.take(";")
         return {"target": target, "method": method, "args": args}
+
+    def argument(self) -> dict[str, Any]:
+        """A literal, a bound variable ``$v``, a getter ``$v.getX()``, or a text built with ``+`` from
+        those that starts with a text literal (so every ``+`` is Java's string concatenation)."""
+        terms = [self.term()]
+        while self.peek()[1] == "+":
+            self.take("+")
+            terms.append(self.term())
+        if len(terms) == 1:
+            return terms[0]
+        if "s" not in terms[0]:
+            raise NotPlain("a + that is not a text concatenation")
+        return {"concat": terms}
+
+    def term(self) -> dict[str, Any]:
+        if not self.peek()[1].startswith("$"):
+            return self.literal()[0]
+        var = self.take(kind="name")
+        if self.peek()[1] != ".":
+            return {"var": var}
+        self.take(".")
+        getter = self.name()
+        if not getter.startswith(("get", "is")):
+            raise NotPlain("a method other than a getter on a bound variable")
+        self.take("(")
+        self.take(")")
+        return {"var": var, "getter": getter}

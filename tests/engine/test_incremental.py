@@ -128,11 +128,11 @@ def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = 
         then = say
     elif shape == "plain number join":
         when = (f'$o: Order(amount > {rng.randint(0, 500)})\n'
-                f'    Order(amount < $o.amount, customer == $o.customer, id != $o.id)')
-        then = say
+                f'    $p: Order(amount < $o.amount, customer == $o.customer, id != $o.id)')
+        then = f'actions.say("bot", "{name} " + $o.getAmount() + " > " + $p.getAmount() + " " + $p.getId());'
     elif shape == "plain same age":
-        when = f'$c: Customer(age >= {rng.randint(0, 60)})\n    Customer(age == $c.age, id != $c.id)'
-        then = say
+        when = f'$c: Customer(age >= {rng.randint(0, 60)})\n    $d: Customer(age == $c.age, id != $c.id)'
+        then = f'actions.say("bot", "{name} " + $c.getAge() + $d.getId() + true + 2.50);'
     elif shape == "plain vip":
         when = f'Customer(vip == {rng.choice(["true", "false"])}, age > {rng.randint(10, 60)})'
         then = say
@@ -378,7 +378,7 @@ def test_plain_rules_fire_as_compiled_ones_and_share_their_nodes(options):
     mixed_files = dict(files)
     mixed_files["mixed.drl"] = f"package {growth_rules.PACKAGE};\n\n" + "\n".join(
         growth_rules.rule_drl(i).replace(f'rule "{growth_rules.rule_name(i)}"', f'rule "copy {i}"')
-        .replace(f'actions.say("bot", "{growth_rules.rule_name(i)}");', f'actions.say("bot", "copy " + {i});')
+        .replace(f'actions.say("bot", "{growth_rules.rule_name(i)}");', f'actions.say("bot", "copy " + ({i}));')
         for i in range(0, 300, 3))
     mixed = compiler.compile_files(mixed_files, "mixed", options)
     assert mixed.stats.rules_compiled == 100 and mixed.stats.rules_built == 300  # a new file: new package header

@@ -55,6 +55,15 @@ def test_literals_salience_comments_and_several_calls():
     json.loads(plain_rules.spec_json([spec]))  # what a plain unit caches
 
 
+def test_then_part_arguments_may_read_bound_facts():
+    spec = describe('rule "x"\nwhen\n    $o: Order()\nthen\n'
+                    '    actions.call("a", $o, $o.getId(), "total " + $o.getTotal() + " of " + $o.isOpen() + 2);\nend')
+    assert spec["rhs"][0]["args"] == [
+        {"s": "a"}, {"var": "$o"}, {"var": "$o", "getter": "getId"},
+        {"concat": [{"s": "total "}, {"var": "$o", "getter": "getTotal"}, {"s": " of "},
+                    {"var": "$o", "getter": "isOpen"}, {"n": "2"}]}]
+
+
 @pytest.mark.parametrize("when, then", [
     ("not Order()", 'actions.say("a", "b");'),
     ("exists Order()", 'actions.say("a", "b");'),
@@ -72,7 +81,12 @@ def test_literals_salience_comments_and_several_calls():
     ("Order(code == 'a')", 'actions.say("a", "b");'),
     ("Order(code == null)", 'actions.say("a", "b");'),
     ("Order(total > 1e3)", 'actions.say("a", "b");'),
-    ("$o: Order()", 'actions.say("a", "b" + $o.getId());'),
+    ("$o: Order()", 'actions.say("a", 1 + $o.getId());'),
+    ("$o: Order()", 'actions.say("a", $o.getId() + "b");'),
+    ("$o: Order()", 'actions.say("a", $o.id);'),
+    ("$o: Order()", 'actions.say("a", $o.setId());'),
+    ("$o: Order()", 'actions.say("a", $o.getLine(1));'),
+    ("$o: Order()", 'actions.say("a", $o.getCustomer().getName());'),
     ("$o: Order()", "modify($o) { setTotal(2) }"),
     ("$o: Order()", "insert(new Line());"),
     ("$o: Order()", 'System.out.println("x");'),

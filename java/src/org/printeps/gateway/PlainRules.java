@@ -27,6 +27,9 @@ import org.drools.model.TypeMetaData;
 import org.drools.model.Variable;
 import org.drools.model.functions.Block0;
 import org.drools.model.functions.Block1;
+import org.drools.model.functions.Block2;
+import org.drools.model.functions.Block3;
+import org.drools.model.functions.Block4;
 import org.drools.model.functions.Function1;
 import org.drools.model.functions.Predicate1;
 import org.drools.model.functions.Predicate2;
@@ -37,7 +40,8 @@ import org.drools.modelcompiler.util.ClassUtil;
  * Rules of the plain shapes built at run time as executable-model objects, without generating or
  * compiling Java: the rule set's Python side describes each such rule (patterns on declared or
  * imported types with field-versus-literal and field-versus-bound-field comparisons, a sum
- * accumulate, a then-part of calls with literal arguments on one global) and this class builds the
+ * accumulate, a then-part of calls on one global with literals, bound facts, their getters and
+ * text joined from those) and this class builds the
  * same {@link Rule} the executable model's generated code builds: the same alpha and beta indexes,
  * property reactivity and accumulate functions, so Drools hashes, shares and fires them alike.
  *
@@ -408,26 +412,39 @@ public final class PlainRules {
         public boolean test(Object result) { return compare(Kind.DECIMAL, op, result, value); }
     }
 
-    /** A then-part of calls with literal arguments on one global. */
-    static final class Calls implements Block1<Object> {
-        final Method[] methods;
-        final Object[][] args;
+    /** One argument of a then-part call: its value when the rule fires, from the facts it names. */
+    interface Arg {
+        Object value(Object[] facts) throws Exception;
+    }
 
-        Calls(Method[] methods, Object[][] args) {
+    /** A then-part: calls on one global, with the facts of the variables its arguments read. */
+    static final class Calls {
+        final Method[] methods;
+        final Arg[][] args;
+
+        Calls(Method[] methods, Arg[][] args) {
             this.methods = methods;
             this.args = args;
         }
 
-        public void execute(Object target) throws Exception {
+        void run(Object target, Object... facts) throws Exception {
             for (int k = 0; k < methods.length; k++) {
-                try {
-                    methods[k].invoke(target, args[k]);
-                } catch (InvocationTargetException e) {
-                    Throwable cause = e.getCause();
-                    if (cause instanceof Exception) throw (Exception) cause;
-                    throw rethrow(cause);
-                }
+                Object[] values = new Object[args[k].length];
+                for (int i = 0; i < values.length; i++) values[i] = args[k][i].value(facts);
+                invoke(methods[k], target, values);
             }
+        }
+    }
+
+    static final Object[] NO_ARGS = new Object[0];
+
+    static Object invoke(Method method, Object target, Object[] values) throws Exception {
+        try {
+            return method.invoke(target, values);
+        } catch (InvocationTargetException e) {
+            Throwable cause = e.getCause();
+            if (cause instanceof Exception) throw (Exception) cause;
+            throw rethrow(cause);
         }
     }
 
@@ -591,59 +608,116 @@ public final class PlainRules {
         RuleItemBuilder<?> consequence(List<Object> calls) {
             if (calls.isEmpty()) return DSL.execute((Block0) () -> {});
             String target = null;
+            List<String> used = new ArrayList<String>();  // the variables the arguments read, in order
             Method[] methods = new Method[calls.size()];
-            Object[][] args = new Object[calls.size()][];
+            Arg[][] args = new Arg[calls.size()][];
             for (int k = 0; k < calls.size(); k++) {
                 Map<String, Object> call = (Map<String, Object>) calls.get(k);
                 String t = (String) call.get("target");
                 if (target != null && !target.equals(t)) throw new Reject("calls on more than one global");
                 target = t;
-                List<Object> literals = (List<Object>) call.get("args");
+                List<Object> given = (List<Object>) call.get("args");
                 Global<?> global = context.globals.get(pkg + "\0" + t);
                 if (global == null) throw new Reject("no global " + t + " in package " + pkg);
-                Method chosen = null;
-                Object[] values = null;
                 for (Method m : global.getType().getMethods()) {
-                    if (!m.getName().equals(call.get("method")) || m.getParameterCount() != literals.size()
+                    if (!m.getName().equals(call.get("method")) || m.getParameterCount() != given.size()
                             || Modifier.isStatic(m.getModifiers())) continue;
-                    Object[] converted = convert(m.getParameterTypes(), literals);
-                    if (converted == null) continue;
-                    if (chosen != null) throw new Reject("more than one method " + m.getName() + " fits");
-                    chosen = m;
-                    values = converted;
+                    Arg[] fitted = fit(m.getParameterTypes(), given, used);
+                    if (fitted == null) continue;
+                    if (methods[k] != null) throw new Reject("more than one method " + m.getName() + " fits");
+                    methods[k] = m;
+                    args[k] = fitted;
                 }
-                if (chosen == null) throw new Reject("no method " + call.get("method") + " of " + t + " fits");
-                methods[k] = chosen;
-                args[k] = values;
+                if (methods[k] == null) throw new Reject("no method " + call.get("method") + " of " + t + " fits");
             }
             Global<Object> global = (Global<Object>) context.globals.get(pkg + "\0" + target);
-            return DSL.on(global).execute(new Calls(methods, args));
+            Calls block = new Calls(methods, args);
+            Variable[] v = new Variable[used.size()];
+            for (int i = 0; i < v.length; i++) v[i] = vars.get(used.get(i));
+            switch (v.length) {
+                case 0: return DSL.on(global).execute((Block1<Object>) g -> block.run(g));
+                case 1: return DSL.on(global, v[0]).execute((Block2<Object, Object>) (g, a) -> block.run(g, a));
+                case 2: return DSL.on(global, v[0], v[1]).execute((Block3<Object, Object, Object>) (g, a, b) -> block.run(g, a, b));
+                case 3: return DSL.on(global, v[0], v[1], v[2]).execute(
+                        (Block4<Object, Object, Object, Object>) (g, a, b, c) -> block.run(g, a, b, c));
+                default: throw new Reject("a then-part reading more than three variables");
+            }
         }
 
-        /** The literals as arguments of a method with these parameter types, or null if they do not fit exactly. */
+        /** The arguments for a method with these parameter types, or null if one of them does not
+         *  fit exactly as Java would pass it (no widening, no overload choice). */
         @SuppressWarnings("unchecked")
-        static Object[] convert(Class<?>[] types, List<Object> literals) {
-            Object[] out = new Object[types.length];
+        Arg[] fit(Class<?>[] types, List<Object> given, List<String> used) {
+            Arg[] out = new Arg[types.length];
             for (int k = 0; k < types.length; k++) {
-                Map<String, Object> lit = (Map<String, Object>) literals.get(k);
-                Class<?> t = types[k];
-                if (lit.containsKey("s")) {
-                    if (t != String.class && t != Object.class && t != CharSequence.class) return null;
-                    out[k] = lit.get("s");
-                } else if (lit.containsKey("b")) {
-                    if (t != boolean.class && t != Boolean.class && t != Object.class) return null;
-                    out[k] = lit.get("b");
-                } else {
-                    String digits = (String) lit.get("n");
-                    boolean decimal = digits.contains(".");
-                    if ((t == int.class || t == Integer.class) && !decimal) out[k] = Integer.valueOf(digits);
-                    else if ((t == long.class || t == Long.class) && !decimal) out[k] = Long.valueOf(digits);
-                    else if (t == double.class || t == Double.class) out[k] = Double.valueOf(digits);
-                    else if (t == Object.class || t == Number.class) out[k] = decimal ? (Object) Double.valueOf(digits) : (Object) Integer.valueOf(digits);
-                    else return null;
-                }
+                out[k] = argument((Map<String, Object>) given.get(k), types[k], used);
+                if (out[k] == null) return null;
             }
             return out;
+        }
+
+        @SuppressWarnings("unchecked")
+        Arg argument(Map<String, Object> spec, Class<?> type, List<String> used) {
+            if (spec.containsKey("concat")) {
+                if (!accepts(type, String.class)) return null;
+                List<Object> parts = (List<Object>) spec.get("concat");
+                Arg[] values = new Arg[parts.size()];
+                for (int i = 0; i < values.length; i++) {
+                    values[i] = argument((Map<String, Object>) parts.get(i), Object.class, used);
+                }
+                return facts -> {
+                    StringBuilder text = new StringBuilder();
+                    for (Arg part : values) text.append(String.valueOf(part.value(facts)));
+                    return text.toString();
+                };
+            }
+            String var = (String) spec.get("var");
+            if (var == null) {
+                Object value = constant(spec, type);
+                return value == null ? null : facts -> value;
+            }
+            Class<?> varType = varTypes.get(var);
+            if (varType == null) throw new Reject("variable " + var + " is not bound");
+            int at = used.indexOf(var);
+            if (at < 0) {
+                used.add(var);
+                at = used.size() - 1;
+            }
+            final int index = at;
+            String getter = (String) spec.get("getter");
+            if (getter == null) return accepts(type, varType) ? facts -> facts[index] : null;
+            Method read;
+            try {
+                read = varType.getMethod(getter);
+            } catch (NoSuchMethodException e) {
+                throw new Reject("no method " + getter + "() of " + varType.getName());
+            }
+            if (read.getReturnType() == void.class || Modifier.isStatic(read.getModifiers())) throw new Reject(getter + "() is not a getter");
+            return accepts(type, read.getReturnType()) ? facts -> invoke(read, facts[index], NO_ARGS) : null;
+        }
+
+        /** Whether a parameter of type {@code param} takes a value of type {@code value} without widening. */
+        static boolean accepts(Class<?> param, Class<?> value) {
+            if (boxed(param) == boxed(value)) return true;
+            return !param.isPrimitive() && param.isAssignableFrom(boxed(value));
+        }
+
+        /** A literal as an argument of a parameter of this type, or null if it does not fit exactly. */
+        @SuppressWarnings("unchecked")
+        static Object constant(Map<String, Object> lit, Class<?> t) {
+            if (lit.containsKey("s")) {
+                return t == String.class || t == Object.class || t == CharSequence.class ? lit.get("s") : null;
+            }
+            if (lit.containsKey("b")) {
+                return t == boolean.class || t == Boolean.class || t == Object.class ? lit.get("b") : null;
+            }
+            String digits = (String) lit.get("n");
+            boolean decimal = digits.contains(".");
+            if ((t == int.class || t == Integer.class) && !decimal) return Integer.valueOf(digits);
+            if ((t == long.class || t == Long.class) && !decimal) return Long.valueOf(digits);
+            if (t == double.class || t == Double.class) return Double.valueOf(digits);
+            if (t == Object.class || t == Number.class) return decimal ? (Object) Double.valueOf(digits) : (Object) Integer.valueOf(digits);
+            return null;
         }
     }
 
