@@ -38,12 +38,13 @@ import org.drools.modelcompiler.util.ClassUtil;
 
 /**
  * Rules of the plain shapes built at run time as executable-model objects, without generating or
- * compiling Java: the rule set's Python side describes each such rule (patterns on declared or
- * imported types with field-versus-literal and field-versus-bound-field comparisons, a sum
- * accumulate, a then-part of calls on one global with literals, bound facts, their getters and
- * text joined from those) and this class builds the
- * same {@link Rule} the executable model's generated code builds: the same alpha and beta indexes,
- * property reactivity and accumulate functions, so Drools hashes, shares and fires them alike.
+ * compiling Java. The rule set's Python side ({@code gateway.engine.plain_rules}) describes each
+ * such rule: patterns on declared or imported types with field-versus-literal and
+ * field-versus-bound-field comparisons, a sum accumulate, a then-part of calls on one global with
+ * literals, bound facts, their getters and text joined from those. This class builds the same
+ * {@link Rule} the executable model's generated code builds: the same alpha and beta indexes,
+ * property reactivity, accumulate function and constraint ids, so Drools hashes, shares and fires
+ * them alike, also next to compiled rules.
  *
  * Why: generating and compiling Java costs ~11 ms of CPU per rule (10,000 rules: two minutes of
  * CPU); building the same model objects takes microseconds. A rule this class cannot build exactly
@@ -362,56 +363,6 @@ public final class PlainRules {
         return kind;
     }
 
-    /** {@code fact.field op literal}. (Drools shares nodes by constraint id, not by predicate.) */
-    static final class FieldTest implements Predicate1<Object> {
-        final Property field;
-        final Kind kind;
-        final String op;
-        final Object value;
-
-        FieldTest(Property field, String op, Object value) {
-            this.field = field;
-            this.kind = comparable(kindOf(field.type), op);
-            this.op = op;
-            this.value = value;
-        }
-
-        public boolean test(Object fact) { return compare(kind, op, field.apply(fact), value); }
-    }
-
-    /** {@code fact.field op other.otherField} (a join). */
-    static final class JoinTest implements Predicate2<Object, Object> {
-        final Property field;
-        final Property other;
-        final Kind kind;
-        final String op;
-
-        JoinTest(Property field, String op, Property other) {
-            this.field = field;
-            this.other = other;
-            this.kind = comparable(kindOf(field.type), op);
-            if (kindOf(other.type) != kind) {
-                throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
-            }
-            this.op = op;
-        }
-
-        public boolean test(Object fact, Object bound) { return compare(kind, op, field.apply(fact), other.apply(bound)); }
-    }
-
-    /** An accumulate's result {@code op literal}. */
-    static final class ResultTest implements Predicate1<Object> {
-        final String op;
-        final Object value;
-
-        ResultTest(String op, Object value) {
-            this.op = op;
-            this.value = value;
-        }
-
-        public boolean test(Object result) { return compare(Kind.DECIMAL, op, result, value); }
-    }
-
     /** One argument of a then-part call: its value when the rule fires, from the facts it names. */
     interface Arg {
         Object value(Object[] facts) throws Exception;
@@ -539,7 +490,8 @@ public final class PlainRules {
             Index.ConstraintType ct = constraintType(op);
             if (c.containsKey("literal")) {
                 Object value = literal(c.get("literal"), field.type);
-                FieldTest test = new FieldTest(field, op, value);
+                Kind kind = comparable(kindOf(field.type), op);
+                Predicate1<Object> test = fact -> compare(kind, op, field.apply(fact), value);
                 String exprId = exprId(type, field, op, javaText(c.get("literal"), field.type));
                 AlphaIndex index = PatternDSL.alphaIndexedBy((Class) field.type, ct, field.index, (Function1) field, value);
                 return def.expr(exprId, test, index, PatternDSL.reactOn(field.name));
@@ -548,7 +500,11 @@ public final class PlainRules {
             Declaration<Object> bound = vars.get(ref);
             if (bound == null) throw new Reject("variable " + ref + " is not a pattern bound before");
             Property other = context.property(varTypes.get(ref), (String) c.get("refField"));
-            JoinTest test = new JoinTest(field, op, other);
+            Kind kind = comparable(kindOf(field.type), op);
+            if (kindOf(other.type) != kind) {
+                throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
+            }
+            Predicate2<Object, Object> test = (fact, joined) -> compare(kind, op, field.apply(fact), other.apply(joined));
             String exprId = exprId(type, field, op, ref + "." + other.getter.getName() + "()");
             BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
                                                        (Function1) other, other.type);
@@ -598,7 +554,8 @@ public final class PlainRules {
                     Object value = literal(c.get("literal"), double.class);
                     String op = (String) c.get("op");
                     constraintType(op);
-                    on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), new ResultTest(op, value));
+                    Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
+                    on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
                 }
                 items.add(on);
             }
