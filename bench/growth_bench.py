@@ -101,9 +101,10 @@ def measure(sizes: list[int], whole_up_to: int, only: tuple[str, ...] = ALL_RUNS
         results = {"sizes": sizes, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
                    "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                    "python": platform.python_version(), "runs": {}}
-    else:  # --merge: say which rows this run replaced
-        results.setdefault("merged", []).append({"at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-                                                 "sizes": sizes, "runs": list(only), "load_start": os.getloadavg()})
+    else:  # --merge: say which rows this run replaced (an earlier merge of no other rows is gone)
+        merged = [m for m in results.get("merged", []) if not (set(m["sizes"]) <= set(sizes) and set(m["runs"]) <= set(only))]
+        results["merged"] = merged + [{"at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "sizes": sizes,
+                                       "runs": list(only), "load_start": os.getloadavg()}]
     work = Path(tempfile.mkdtemp(prefix="printeps-growth-bench-"))
     for n in sizes:
         print(f"{n} rules", flush=True)
