@@ -41,8 +41,8 @@ class EngineSettings(BaseModel):
     compile_workers: int = Field(default=2, description="Threads compiling rule units at once.")
     compile_plain_rules: bool = Field(
         default=True, description="Build rules of the plain shapes (field vs literal or bound field, sum "
-        "accumulate, calls on a global with literals, bound facts and their getters) at run time without generating Java: "
-        "milliseconds instead of ~11 ms of CPU a rule (false: every rule through Drools' compiler).")
+        "accumulate, calls on a global with literals, bound facts and their getters) at run time without "
+        "generating Java: milliseconds instead of ~11 ms of CPU a rule (false: every rule through Drools' compiler).")
     compile_timeout_s: float = Field(
         default=600.0, description="Compile time limit; beyond it the build fails with a 503 (0: none).")
     compile_disk_cache: bool = Field(default=True, description="Keep compiled rule units on disk, shared by processes.")

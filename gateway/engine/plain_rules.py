@@ -229,7 +229,8 @@ class _Parser:
             ref_field = self.name()
             if self.peek()[1] == ".":
                 raise NotPlain("a path deeper than $var.field")
-            return {"field": field, "op": op, "ref": ref, "refField": ref_field, "text": f"{field} {op} {ref}.{ref_field}"}
+            return {"field": field, "op": op, "ref": ref, "refField": ref_field,
+                    "text": f"{field} {op} {ref}.{ref_field}"}
         literal, text = self.literal()
         return {"field": field, "op": op, "literal": literal, "text": f"{field} {op} {text}"}
 

@@ -116,7 +116,8 @@ def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = 
         when = f"$c: Customer(age > {rng.randint(10, 60)})\n    not Order(customer == $c.id)"
         then = f'actions.say("bot", "{name} no order " + $c.getId());'
     elif shape == "plain tier":  # the plain shapes (built at run time, gateway.engine.plain_rules)
-        when = f'Customer(tier {rng.choice(["==", "!="])} "{rng.choice(["gold", "vip"])}", age <= {rng.randint(20, 80)})'
+        tier = rng.choice(["gold", "vip"])
+        when = f'Customer(tier {rng.choice(["==", "!="])} "{tier}", age <= {rng.randint(20, 80)})'
         then = say + f' actions.say("kiosk", "{name} again");'
     elif shape == "plain join":
         when = (f'$o: Order(amount >= {rng.randint(0, 900)}.0)\n'
@@ -124,7 +125,8 @@ def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = 
         then = say
     elif shape == "plain accumulate":
         when = (f'$c: Customer(tier == "{rng.choice(["gold", "silver", "vip"])}")\n'
-                f'    accumulate(Order(customer == $c.id, amount > 100, $a: amount); $t: sum($a); $t > {rng.randint(0, 1200)}.0)')
+                f'    accumulate(Order(customer == $c.id, amount > 100, $a: amount); $t: sum($a); '
+                f'$t > {rng.randint(0, 1200)}.0)')
         then = say
     elif shape == "plain number join":
         when = (f'$o: Order(amount > {rng.randint(0, 500)})\n'

@@ -102,7 +102,8 @@ def test_other_shapes_are_left_to_the_compiler(when, then):
     assert describe(f'rule "x"\nwhen\n    {when}\nthen\n    {then}\nend') is None
 
 
-@pytest.mark.parametrize("attribute", ["no-loop", "no-loop true", "agenda-group \"g\"", "enabled false", "salience 1 salience 2",
+@pytest.mark.parametrize("attribute", ["no-loop", "no-loop true", "agenda-group \"g\"", "enabled false",
+                                       "salience 1 salience 2",
                                        "@Author(me)", "extends base"])
 def test_attributes_other_than_salience_are_left_to_the_compiler(attribute):
     assert describe(f'rule "x" {attribute}\nwhen\n    Order()\nthen\n    actions.say("a", "b");\nend') is None
