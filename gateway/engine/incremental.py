@@ -404,20 +404,19 @@ def _build_plain(rules: Plain, env: str, declarations: _Loaded) -> tuple[UnitArt
     """A plain unit of ``rules`` built against the declarations; the rules the Java side refused
     (logged with the reason) are returned for the compiler."""
     built = _java_build(plain_rules.spec_json([spec for *_, spec in rules]), declarations)
-    refused = {}
+    refused: set[int] = set()
     for line in built.rejected():
         index, _, reason = str(line).partition("\t")
-        refused[int(index)] = reason
+        refused.add(int(index))
         log.debug("rule %r left to the compiler: %s", rules[int(index)][2].name, reason)
     leftovers = [(key, src, item) for k, (key, src, item, _) in enumerate(rules) if k in refused]
     kept = [rule for k, rule in enumerate(rules) if k not in refused]
     if not kept:
         return None, leftovers
-    data = plain_rules.spec_json([spec for *_, spec in kept])
-    if refused:  # the unit's cached description holds only what was built
-        built = _java_build(data, declarations)
+    # the models hold the built rules only; so does the unit's cached description
     unit = UnitArtifact(drl_items.digest("plain", env, *(key for key, *_ in kept)), "plain", [],
-                        {key: (src.package, item.name) for key, src, item, _ in kept}, data)
+                        {key: (src.package, item.name) for key, src, item, _ in kept},
+                        plain_rules.spec_json([spec for *_, spec in kept]))
     _remember((unit.id, declarations.token),
               _Loaded(declarations.loader, built.models(), len(kept), f"{unit.id}#{next(_load_serial)}"))
     return unit, leftovers

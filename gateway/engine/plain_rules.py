@@ -63,21 +63,20 @@ def tokens(text: str) -> list[tuple[str, str]]:
     return out
 
 
-def package_imports(sources: list[SourceItems]) -> dict[str, list[str]] | None:
+def package_imports(sources: list[SourceItems]) -> dict[str, list[str] | None]:
     """The imports of each package (DRL imports are package-wide), or None for a package whose
     header holds more than package, import and global statements (attributes, functions imports…):
     its rules are all left to the compiler."""
-    out: dict[str, list[str]] = {}
+    out: dict[str, list[str] | None] = {}
     for src in sources:
         try:
             imports = _header_imports(src.header())
         except NotPlain:
-            out[src.package] = None  # type: ignore[assignment]
+            out[src.package] = None
             continue
-        if src.package in out and out[src.package] is None:
-            continue
-        out.setdefault(src.package, [])
-        out[src.package].extend(i for i in imports if i not in out[src.package])
+        known = out.setdefault(src.package, [])
+        if known is not None:
+            known.extend(i for i in imports if i not in known)
     return out
 
 

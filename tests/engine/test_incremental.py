@@ -115,7 +115,7 @@ def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = 
     elif shape == "absent":  # a not after a first pattern: deleting facts may activate it
         when = f"$c: Customer(age > {rng.randint(10, 60)})\n    not Order(customer == $c.id)"
         then = f'actions.say("bot", "{name} no order " + $c.getId());'
-    elif shape == "plain tier":  # the plain shapes (built at run time, gateway.engine.plain_rules)
+    elif shape == "plain tier":  # more plain shapes (gateway.engine.plain_rules); most of the above are plain too
         tier = rng.choice(["gold", "vip"])
         when = f'Customer(tier {rng.choice(["==", "!="])} "{tier}", age <= {rng.randint(20, 80)})'
         then = say + f' actions.say("kiosk", "{name} again");'

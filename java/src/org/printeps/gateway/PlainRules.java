@@ -128,13 +128,7 @@ public final class PlainRules {
         }
 
         Property property(Class<?> type, String field) {
-            String key = type.getName() + "\0" + field;
-            Property p = properties.get(key);
-            if (p == null) {
-                p = Property.of(type, field, metadata(type));
-                properties.put(key, p);
-            }
-            return p;
+            return properties.computeIfAbsent(type.getName() + "\0" + field, key -> Property.of(type, field, metadata(type)));
         }
     }
 
@@ -287,19 +281,18 @@ public final class PlainRules {
      * shares its nodes with a compiled rule of the same constraint; a different id would make two
      * alpha nodes of one hashed value, and Drools' alpha hashing keeps only one of them.
      */
-    static String exprId(Class<?> type, Property field, String op, String right) {
-        Kind kind = kindOf(field.type);
+    static String exprId(Class<?> type, Property field, Kind kind, Index.ConstraintType op, String right) {
         String fn;
         String not = "";
         switch (op) {
-            case "==": case "!=":
+            case EQUAL: case NOT_EQUAL:
                 fn = kind == Kind.INTEGRAL || kind == Kind.DECIMAL ? "areNumbersNullSafeEquals" : "areNullSafeEquals";
-                if (op.equals("!=")) not = "!";
+                if (op == Index.ConstraintType.NOT_EQUAL) not = "!";
                 break;
-            case ">": fn = "greaterThanNumbers"; break;
-            case ">=": fn = "greaterOrEqualNumbers"; break;
-            case "<": fn = "lessThanNumbers"; break;
-            case "<=": fn = "lessOrEqualNumbers"; break;
+            case GREATER_THAN: fn = "greaterThanNumbers"; break;
+            case GREATER_OR_EQUAL: fn = "greaterOrEqualNumbers"; break;
+            case LESS_THAN: fn = "lessThanNumbers"; break;
+            case LESS_OR_EQUAL: fn = "lessOrEqualNumbers"; break;
             default: throw new Reject("operator " + op);
         }
         String java = not + "org.drools.modelcompiler.util.EvaluationUtil." + fn + "(_this." + field.getter.getName() + "(), "
@@ -319,10 +312,10 @@ public final class PlainRules {
         }
     }
 
-    /** {@code left op right}, null-safe as the executable model's EvaluationUtil: a null never orders. */
-    static boolean compare(Kind kind, String op, Object left, Object right) {
-        boolean equality = op.equals("==") || op.equals("!=");
-        if (equality) {
+    /** {@code left op right}, null-safe as the executable model's EvaluationUtil: a null never orders.
+     *  (On the fire path: {@code op} is parsed once, when the rule is built.) */
+    static boolean compare(Kind kind, Index.ConstraintType op, Object left, Object right) {
+        if (op == Index.ConstraintType.EQUAL || op == Index.ConstraintType.NOT_EQUAL) {
             boolean same;
             if (left == null || right == null) {
                 same = left == right;
@@ -333,7 +326,7 @@ public final class PlainRules {
             } else {
                 same = left.equals(right);
             }
-            return op.equals("==") == same;
+            return (op == Index.ConstraintType.EQUAL) == same;
         }
         if (left == null || right == null) return false;
         int c;
@@ -344,20 +337,21 @@ public final class PlainRules {
             if (Double.isNaN(a) || Double.isNaN(b)) return false;
             c = a < b ? -1 : a > b ? 1 : 0;
         } else {
-            throw new Reject("operator " + op + " on " + kind);
+            throw new IllegalStateException("operator " + op + " on " + kind);  // refused by comparable()
         }
         switch (op) {
-            case ">": return c > 0;
-            case ">=": return c >= 0;
-            case "<": return c < 0;
-            case "<=": return c <= 0;
-            default: throw new Reject("operator " + op);
+            case GREATER_THAN: return c > 0;
+            case GREATER_OR_EQUAL: return c >= 0;
+            case LESS_THAN: return c < 0;
+            case LESS_OR_EQUAL: return c <= 0;
+            default: throw new IllegalStateException("operator " + op);
         }
     }
 
     /** {@code kind} if values of it can be compared by {@code op} (text and booleans only for equality). */
-    static Kind comparable(Kind kind, String op) {
-        if ((kind == Kind.TEXT || kind == Kind.BOOLEAN) && !op.equals("==") && !op.equals("!=")) {
+    static Kind comparable(Kind kind, Index.ConstraintType op) {
+        if ((kind == Kind.TEXT || kind == Kind.BOOLEAN)
+                && op != Index.ConstraintType.EQUAL && op != Index.ConstraintType.NOT_EQUAL) {
             throw new Reject("operator " + op + " on " + kind);
         }
         return kind;
@@ -486,13 +480,12 @@ public final class PlainRules {
         @SuppressWarnings({"unchecked", "rawtypes"})
         PatternDSL.PatternDef<Object> constraint(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> c) {
             Property field = context.property(type, (String) c.get("field"));
-            String op = (String) c.get("op");
-            Index.ConstraintType ct = constraintType(op);
+            Index.ConstraintType ct = constraintType((String) c.get("op"));
+            Kind kind = comparable(kindOf(field.type), ct);
             if (c.containsKey("literal")) {
                 Object value = literal(c.get("literal"), field.type);
-                Kind kind = comparable(kindOf(field.type), op);
-                Predicate1<Object> test = fact -> compare(kind, op, field.apply(fact), value);
-                String exprId = exprId(type, field, op, javaText(c.get("literal"), field.type));
+                Predicate1<Object> test = fact -> compare(kind, ct, field.apply(fact), value);
+                String exprId = exprId(type, field, kind, ct, javaText(c.get("literal"), field.type));
                 AlphaIndex index = PatternDSL.alphaIndexedBy((Class) field.type, ct, field.index, (Function1) field, value);
                 return def.expr(exprId, test, index, PatternDSL.reactOn(field.name));
             }
@@ -500,12 +493,11 @@ public final class PlainRules {
             Declaration<Object> bound = vars.get(ref);
             if (bound == null) throw new Reject("variable " + ref + " is not a pattern bound before");
             Property other = context.property(varTypes.get(ref), (String) c.get("refField"));
-            Kind kind = comparable(kindOf(field.type), op);
             if (kindOf(other.type) != kind) {
                 throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
             }
-            Predicate2<Object, Object> test = (fact, joined) -> compare(kind, op, field.apply(fact), other.apply(joined));
-            String exprId = exprId(type, field, op, ref + "." + other.getter.getName() + "()");
+            Predicate2<Object, Object> test = (fact, joined) -> compare(kind, ct, field.apply(fact), other.apply(joined));
+            String exprId = exprId(type, field, kind, ct, ref + "." + other.getter.getName() + "()");
             BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
                                                        (Function1) other, other.type);
             return def.expr(exprId, bound, test, index, PatternDSL.reactOn(field.name));
@@ -552,8 +544,7 @@ public final class PlainRules {
                 for (Object t : tests) {
                     Map<String, Object> c = (Map<String, Object>) t;
                     Object value = literal(c.get("literal"), double.class);
-                    String op = (String) c.get("op");
-                    constraintType(op);
+                    Index.ConstraintType op = constraintType((String) c.get("op"));
                     Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
                     on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
                 }
