@@ -556,6 +556,26 @@ def test_load_compiled_refuses_other_files_and_other_environments(options):
         load_compiled(b"not a zip", files, options)
 
 
+def test_an_archived_plain_unit_that_no_longer_builds_is_an_incompatible_archive(options, tmp_path):
+    """A plain unit is built again when loaded; if its description no longer builds here (a field
+    it names is gone), the archive is refused like one for another environment, not half loaded."""
+    import io
+    import zipfile
+
+    files = growth_rules.drl_files(20)
+    data = export_compiled(compiler.compile_files(files, "x", options), options)
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as src, zipfile.ZipFile(buffer, "w") as dst:
+        for name in src.namelist():
+            body = src.read(name)
+            if name.startswith("units/") and b'"field":"tier"' in body:
+                body = body.replace(b'"field":"tier"', b'"field":"rank"')
+            dst.writestr(name, body)
+    incremental.reset()
+    with pytest.raises(IncompatibleArtifact, match="does not load here"):
+        load_compiled(buffer.getvalue(), files, CompileOptions(cache_dir=str(tmp_path / "elsewhere")))
+
+
 def test_a_unit_evicted_from_the_disk_cache_is_compiled_again(options, tmp_path):
     files = growth_rules.drl_files(40)
     compiler.compile_files(files, "evicted", options)
