@@ -102,10 +102,16 @@ class StoreSettings(BaseModel):
     )
     database: str = "printeps"
     embedded_port: int = Field(default=0, description="Loopback port of the embedded DB; 0 = a free one.")
-    embedded_cache: str = "64M"
+    embedded_cache: str = Field(
+        default="256M",
+        description="The embedded DB's cache (resident only as data fills it). Not smaller: its storage engine "
+        "holds each insert in cache until it commits, and wedges when concurrent inserts fill a fifth of it.",
+    )
     timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation.")
     spool_max_docs: int = Field(default=200_000, description="Bound of the on-disk write buffer (documents).")
-    retry_interval_s: float = Field(default=1.0, description="How often a degraded store tries to reconnect.")
+    retry_interval_s: float = Field(
+        default=1.0, description="Wait after a failed try to ship; doubled after each further failure, up to 8×."
+    )
     journal_fsync: bool = Field(
         default=False,
         description="fsync every journalled write: survives a machine crash, not only a killed process (slower).")

@@ -103,7 +103,7 @@ def _daemon_path() -> str:
 class EmbeddedMongo:
     """One SecantusDB daemon process: start(), uri, stop(). Restartable on the same port and data."""
 
-    def __init__(self, data_dir: Path, port: int = 0, cache: str = "64M") -> None:
+    def __init__(self, data_dir: Path, port: int = 0, cache: str = "256M") -> None:
         self.data_dir = Path(data_dir)
         self.port = port or free_port()
         self.cache = cache

@@ -193,14 +193,24 @@ class Journal:
     """Appends writes durably and hands them, in order and in batches, to ``ship``.
 
     ``ship(database, collection, lines)`` (journal lines, see :func:`encode`) must be idempotent
-    and raise on failure (the batch is then retried after ``retry_interval_s``; meanwhile
-    ``degraded`` is true). One daemon thread ships; :meth:`flush` waits until everything appended
-    so far is shipped.
+    and raise on failure (meanwhile ``degraded`` is true). One daemon thread ships; :meth:`flush`
+    waits until everything appended so far is shipped.
+
+    A failed batch is retried after ``retry_interval_s``, doubled after each further failure up to
+    ``MAX_BACKOFF`` times that, and in halves (down to ``MIN_BATCH``), back to full size as tries
+    succeed. Why: a database that times out is mostly one that is overloaded, and it still does the
+    work of the request the client gave up on; full-size retries at a fixed pace keep it there (each
+    retry is again too big to finish in time), smaller and rarer ones let it catch up. A batch is
+    also bounded in bytes (``batch_bytes``): an embedded engine holds a whole insert in cache until
+    it commits, and large decisions in a 500-document batch came close to what it can hold.
     """
 
+    MAX_BACKOFF = 8
+    MIN_BATCH = 10
+
     def __init__(self, folder: Path, ship: Ship, *, max_docs: int = 200_000, fsync: bool = False,
-                 retry_interval_s: float = 1.0, batch: int = 500, adopt_interval_s: float = 10.0,
-                 linger_s: float = 0.0) -> None:
+                 retry_interval_s: float = 1.0, batch: int = 500, batch_bytes: int = 1024 * 1024,
+                 adopt_interval_s: float = 10.0, linger_s: float = 0.0) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.ship = ship
@@ -208,6 +218,9 @@ class Journal:
         self.fsync = fsync
         self.retry_interval_s = retry_interval_s
         self.batch = batch
+        self.batch_bytes = batch_bytes
+        self._batch_now = batch  # smaller after failures, back to ``batch`` as tries succeed
+        self._failures = 0  # consecutive failed tries (the backoff)
         self.linger_s = linger_s  # wait this long for a batch to fill: fewer, larger inserts under load
         self._flushing = 0
         self.adopt_interval_s = adopt_interval_s
@@ -294,23 +307,49 @@ class Journal:
                     if left <= 0:
                         break
                     self._wake.wait(timeout=left)
-                batch = [self._pending.popleft() for _ in range(min(self.batch, len(self._pending)))]
+                batch = self._take_batch()
                 self._in_hand = batch
             if batch and not self._ship_batch(batch):
                 with self._lock:
                     self._pending.extendleft(reversed(batch))
                     self._in_hand = []
-                    stopping = self._stop
-                if stopping:
+                if not self._back_off():
                     return
-                time.sleep(self.retry_interval_s)
                 continue
             with self._lock:
                 self._in_hand = []
                 for entry in batch:
                     entry.segment.shipped += 1
                 self._release_segments(batch)
-            self._ship_adopted()
+            if not self._ship_adopted() and not self._back_off():
+                return
+
+    def _take_batch(self) -> list[Entry]:
+        """(lock held) The next entries to ship: at most ``_batch_now`` of them and ``batch_bytes``
+        bytes (at least one)."""
+        batch: list[Entry] = []
+        size = 0
+        while self._pending and len(batch) < self._batch_now:
+            size += len(self._pending[0].line)
+            if batch and size > self.batch_bytes:
+                break
+            batch.append(self._pending.popleft())
+        return batch
+
+    def _back_off(self) -> bool:
+        """After a failed try: smaller batches, and wait (longer after each failure in a row).
+        False when the journal is closing (the rest stays on disk for the next process)."""
+        self._failures += 1
+        self._batch_now = max(self.MIN_BATCH, self._batch_now // 2)
+        wait = self.retry_interval_s * min(self.MAX_BACKOFF, 2 ** (self._failures - 1))
+        with self._lock:
+            self._wake.wait_for(lambda: self._stop, timeout=wait)
+            return not self._stop
+
+    def _shipped_one(self) -> None:
+        """After a successful try: the backoff is over, batches grow back to full size."""
+        self._failures = 0
+        self._batch_now = min(self.batch, self._batch_now * 2)
 
     def _ship_batch(self, batch: list[Entry]) -> bool:
         """Ship consecutive entries of one (database, collection) together; False on failure."""
@@ -340,6 +379,7 @@ class Journal:
             log.info("Information State reachable again; shipping the journal")
         self.degraded = False
         self.last_error = None
+        self._shipped_one()
         return True
 
     def _release_segments(self, batch: list[Entry]) -> None:
@@ -398,22 +438,24 @@ class Journal:
                 _unlink_quietly(path)
                 os.close(adopted[0])
 
-    def _ship_adopted(self) -> None:
+    def _ship_adopted(self) -> bool:
+        """Ship what was adopted from dead processes; False if a try failed (retried later)."""
         while self._adopted:
-            chunk = [self._adopted.popleft() for _ in range(min(self.batch, len(self._adopted)))]
+            chunk = [self._adopted.popleft() for _ in range(min(self._batch_now, len(self._adopted)))]
             groups: dict[tuple[str, str], list[bytes]] = {}
             for database, collection, line in chunk:
                 groups.setdefault((database, collection), []).append(line)
             for (database, collection), lines in groups.items():
                 if not self._try_ship(database, collection, lines):
                     self._adopted.extendleft(reversed(chunk))
-                    return
+                    return False
             with self._lock:
                 self._adopt_pending -= len(chunk)
         for path, fd in self._adopted_files:
             _unlink_quietly(path)
             os.close(fd)
         self._adopted_files = []
+        return True
 
     # ---- waiting and closing ---------------------------------------------------------------------
     def flush(self, timeout_s: float = 10.0) -> bool:

@@ -191,3 +191,56 @@ def test_a_stale_new_file_is_removed_and_a_young_one_kept(tmp_path: Path) -> Non
         assert not stale.exists() and young.exists()
     finally:
         j.close()
+
+
+def test_failed_tries_back_off_with_smaller_batches_that_grow_back(tmp_path: Path) -> None:
+    """A database that times out is retried later and later, in halved batches; once tries succeed
+    the batches grow back to full size. Nothing is lost or shipped out of order."""
+    calls: list[tuple[float, int]] = []
+    shipped: list[int] = []
+    failing = {"n": 3}
+
+    def ship(db: str, c: str, lines: list[bytes]) -> None:
+        calls.append((time.monotonic(), len(lines)))
+        if failing["n"] > 0:
+            failing["n"] -= 1
+            raise TimeoutError("overloaded")
+        shipped.extend(json.loads(x)["d"]["i"] for x in lines)
+
+    j = Journal(tmp_path, ship, retry_interval_s=0.1, batch=80)
+    try:
+        j.append("db", "c", [encode("db", "c", {"i": i}) for i in range(400)])
+        assert j.flush(10)
+    finally:
+        j.close()
+    assert shipped == list(range(400))
+    sizes = [n for _, n in calls]
+    assert sizes[:5] == [80, 40, 20, 10, 20]  # halved on each failure, doubled back on success
+    assert max(sizes[5:]) == 80
+    waits = [b[0] - a[0] for a, b in zip(calls, calls[1:4])]
+    assert waits[0] >= 0.1 and waits[1] >= 0.2 and waits[2] >= 0.4  # the backoff doubles
+
+
+def test_a_batch_is_bounded_in_bytes(tmp_path: Path) -> None:
+    batches: list[int] = []
+    j = Journal(tmp_path, lambda db, c, lines: batches.append(sum(map(len, lines))), batch=500,
+                batch_bytes=10_000, linger_s=0.5)
+    try:
+        j.append("db", "c", [encode("db", "c", {"pad": "x" * 1000}) for _ in range(50)])
+        assert j.flush(10)
+    finally:
+        j.close()
+    assert sum(batches) > 50_000 and max(batches) <= 10_000
+
+
+def test_closing_during_a_backoff_does_not_wait_it_out(tmp_path: Path) -> None:
+    def down(db: str, c: str, lines: list[bytes]) -> None:
+        raise ConnectionError("away")
+
+    j = Journal(tmp_path, down, retry_interval_s=30)
+    j.append("db", "c", [encode("db", "c", {"i": 1})])
+    assert wait_for(lambda: j.degraded, 5)
+    start = time.monotonic()
+    j.close(timeout_s=10)
+    assert time.monotonic() - start < 5
+    assert list(tmp_path.glob("*.jsonl"))  # the write stays on disk for the next process
