@@ -32,7 +32,7 @@ from typing import Any, Callable
 
 from gateway import jvm
 from gateway.engine import decision_table, scenarios
-from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError
+from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.ruleset import check_files, content_hash, is_table_file
 
 log = logging.getLogger(__name__)
@@ -544,7 +544,7 @@ def build_unit(sources: list[_Source], unit_id: str, deadline: Any = None) -> Bu
         except _OOM_TYPES():
             raise
         except Exception as exc:  # e.g. ConsequenceRewriteException: the builder throws instead of reporting
-            if _is_oom_text(str(exc)):
+            if says_out_of_memory(str(exc)):
                 raise _memory_error() from None
             raise CompileFailed(_unbound_variables(sources) or [_error_from_exception(exc, sources)]) from None
         if deadline is not None:
@@ -556,7 +556,7 @@ def build_unit(sources: list[_Source], unit_id: str, deadline: Any = None) -> Bu
             messages = list(exc.getErrorMessages()) or messages
             module = None
         if messages:
-            if any(_is_oom_text(str(m.getText())) for m in messages):
+            if any(says_out_of_memory(str(m.getText())) for m in messages):
                 raise _memory_error()
             mapped = _map_build_messages(messages, by_path, sources)
             unbound = _unbound_variables(sources) if any(e.message.startswith("then-part:") for e in mapped) else []
@@ -569,11 +569,17 @@ def build_unit(sources: list[_Source], unit_id: str, deadline: Any = None) -> Bu
         data = bytes(memoryview(units.zip(classes)))
         return BuiltUnit(names, data)
     finally:
-        ks.getRepository().removeKieModule(release)  # built modules would otherwise pile up in the repository
+        _forget_module(ks, release)
 
 
-def _is_oom_text(text: str) -> bool:
-    return any(m in text for m in ("OutOfMemoryError", "Java heap space", "GC overhead limit exceeded", "Metaspace"))
+def _forget_module(ks: Any, release: Any) -> None:
+    """Remove a built module from the repository (they would otherwise pile up there). Right after
+    the JVM ran out of memory even this call can fail (JPype's "Fatal error occurred"): then the
+    module is left, and the error being raised, the one that says why, is not replaced by this."""
+    try:
+        ks.getRepository().removeKieModule(release)
+    except Exception as exc:
+        log.debug("could not remove the built module %s from the repository: %s", release, exc)
 
 
 def _memory_error() -> CompileResourceError:

@@ -90,6 +90,18 @@ class BuildCancelled(EngineError):
     kind = "cancelled"
 
 
+# How the JVM running out of memory shows in the text of an error. JPype's own "Fatal error
+# occurred" stands in for the Java error when JPype cannot build that error's Python side, which,
+# in a build, is the heap being exhausted (1 build in 6 with a 32 MB heap ended so).
+OUT_OF_MEMORY_MARKERS = ("OutOfMemoryError", "Java heap space", "GC overhead limit exceeded", "Metaspace",
+                         "Fatal error occurred")
+
+
+def says_out_of_memory(text: str) -> bool:
+    """Whether an error's text says the JVM ran out of memory (see OUT_OF_MEMORY_MARKERS)."""
+    return any(marker in text for marker in OUT_OF_MEMORY_MARKERS)
+
+
 class CompileResourceError(EngineError):
     """Compiling ran out of memory or time: a server-side limit, not a fault of the rule text.
 

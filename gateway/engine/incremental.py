@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 from gateway import jvm
 from gateway.engine import drl_items, plain_rules
 from gateway.engine.drl_items import RuleSetItems, SourceItems
-from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError
+from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.unit_cache import UnitArtifact, UnitCache
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -663,9 +663,6 @@ def _plan_from_json(data: dict[str, Any]) -> _Plan:
 
 # --------------------------------------------------------------------------- resource errors
 
-_OOM_MARKERS = ("OutOfMemoryError", "Java heap space", "GC overhead limit exceeded", "Metaspace")
-
-
 def _resource_error_of(exc: BaseException) -> CompileResourceError | None:
     """A CompileResourceError if ``exc`` (or its cause chain) is the JVM running out of memory."""
     text = f"{type(exc).__name__}: {exc}"
@@ -678,7 +675,7 @@ def _resource_error_of(exc: BaseException) -> CompileResourceError | None:
         text += f" {inner.getClass().getName()}: {inner.getMessage()}"
         cause = getattr(inner, "getCause", None)
         seen += 1
-    if any(marker in text for marker in _OOM_MARKERS):
+    if says_out_of_memory(text):
         return memory_error()
     return None
 

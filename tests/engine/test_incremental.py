@@ -23,7 +23,7 @@ from gateway.engine.artifacts import (
     load_compiled,
 )
 from gateway.engine.compiler import CompileOptions
-from gateway.engine.errors import CompileFailed, CompileResourceError
+from gateway.engine.errors import CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.results import encode_facts
 from gateway.engine.warmup import plain_facts, warm
 
@@ -628,6 +628,22 @@ def test_running_out_of_heap_while_compiling_is_a_resource_error(tmp_path):
     """ % str(ROOT / "bench" / "peers"))
     assert report["reason"] == "memory" and "PRINTEPS_JVM_HEAP" in report["setting"]
     assert "file" not in report  # never blamed on a rule file
+
+
+def test_a_build_out_of_memory_is_not_blamed_on_the_rules_by_what_jpype_says_next():
+    """Out of memory, JPype may answer a JVM call with its own "Fatal error occurred" instead of the
+    Java error (1 build in 6 of the test above): the build call itself, or the cleanup after it."""
+    assert says_out_of_memory("Fatal error occurred") and not says_out_of_memory("mismatched input")
+
+    class Repository:
+        def removeKieModule(self, release: object) -> None:
+            raise RuntimeError("Fatal error occurred")
+
+    class Services:
+        def getRepository(self) -> Repository:
+            return Repository()
+
+    compiler._forget_module(Services(), "release")  # the error being raised is kept, not replaced
 
 
 def test_progress_is_reported_by_stage(options):
