@@ -202,7 +202,7 @@ class Journal:
     work of the request the client gave up on; full-size retries at a fixed pace keep it there (each
     retry is again too big to finish in time), smaller and rarer ones let it catch up. A batch is
     also bounded in bytes (``batch_bytes``): an embedded engine holds a whole insert in cache until
-    it commits, and large decisions in a 500-document batch came close to what it can hold.
+    it commits, and 500 large decisions in one insert can come close to what it holds.
     """
 
     MAX_BACKOFF = 8
@@ -341,7 +341,7 @@ class Journal:
         False when the journal is closing (the rest stays on disk for the next process)."""
         self._failures += 1
         self._batch_now = max(self.MIN_BATCH, self._batch_now // 2)
-        wait = self.retry_interval_s * min(self.MAX_BACKOFF, 2 ** (self._failures - 1))
+        wait = self.retry_interval_s * min(self.MAX_BACKOFF, 2 ** min(self._failures - 1, 10))
         with self._lock:
             self._wake.wait_for(lambda: self._stop, timeout=wait)
             return not self._stop
