@@ -10,6 +10,10 @@ from pathlib import Path
 
 from gateway.config import Settings
 
+# Tokens of the apps with auth on (token:role:name). Here, not in conftest.py: a test that imports
+# from "conftest" gets whichever conftest.py was loaded last (tests/cli has one with other tokens).
+TOKENS = "tok-author:author:alice,tok-caller:caller:bob"
+
 
 def make_settings(tmp: Path, **api: object) -> Settings:
     rules_dir = tmp / "rules"

@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 
 from gateway.config import Settings
 
-from api_helpers import ServerThread, make_settings
+from api_helpers import TOKENS, ServerThread, make_settings
 from gw_testing import built_gateway
 
 
@@ -34,9 +34,6 @@ def engine(api_gateway):
 def client(api_gateway) -> Iterator[TestClient]:
     with TestClient(api_gateway.app) as c:
         yield c
-
-
-TOKENS = "tok-author:author:alice,tok-caller:caller:bob"
 
 
 @pytest.fixture(scope="session")

@@ -14,8 +14,7 @@ from typing import Any, Iterator
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import FACTS, files
-from conftest import TOKENS
+from api_helpers import FACTS, TOKENS, files
 from gateway.api.main import create_app
 
 AUTHOR = {"Authorization": "Bearer tok-author"}
