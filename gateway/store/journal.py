@@ -34,12 +34,13 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, Iterator
+from typing import Any, BinaryIO, Callable, Iterator, TypeVar
 
 import orjson
 
 log = logging.getLogger(__name__)
 
+T = TypeVar("T")
 SEGMENT_BYTES = 4 * 1024 * 1024
 NEW_SUFFIX = ".new"  # a segment being created (locked, then renamed to ``*.jsonl``)
 STALE_NEW_S = 60.0  # a ``*.new`` file this old was left by a creator that died
@@ -307,7 +308,7 @@ class Journal:
                     if left <= 0:
                         break
                     self._wake.wait(timeout=left)
-                batch = self._take_batch()
+                batch = self._take(self._pending, lambda entry: entry.line)
                 self._in_hand = batch
             if batch and not self._ship_batch(batch):
                 with self._lock:
@@ -324,16 +325,16 @@ class Journal:
             if not self._ship_adopted() and not self._back_off():
                 return
 
-    def _take_batch(self) -> list[Entry]:
-        """(lock held) The next entries to ship: at most ``_batch_now`` of them and ``batch_bytes``
-        bytes (at least one)."""
-        batch: list[Entry] = []
+    def _take(self, queue: deque[T], line_of: Callable[[T], bytes]) -> list[T]:
+        """The next writes of ``queue`` to ship (this process's, or adopted ones): at most
+        ``_batch_now`` of them and ``batch_bytes`` bytes (at least one)."""
+        batch: list[T] = []
         size = 0
-        while self._pending and len(batch) < self._batch_now:
-            size += len(self._pending[0].line)
+        while queue and len(batch) < self._batch_now:
+            size += len(line_of(queue[0]))
             if batch and size > self.batch_bytes:
                 break
-            batch.append(self._pending.popleft())
+            batch.append(queue.popleft())
         return batch
 
     def _back_off(self) -> bool:
@@ -441,7 +442,7 @@ class Journal:
     def _ship_adopted(self) -> bool:
         """Ship what was adopted from dead processes; False if a try failed (retried later)."""
         while self._adopted:
-            chunk = [self._adopted.popleft() for _ in range(min(self._batch_now, len(self._adopted)))]
+            chunk = self._take(self._adopted, lambda adopted: adopted[2])
             groups: dict[tuple[str, str], list[bytes]] = {}
             for database, collection, line in chunk:
                 groups.setdefault((database, collection), []).append(line)
