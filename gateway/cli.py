@@ -117,17 +117,32 @@ def serve(
     _run_or_explain(lambda: run(settings, rest=True, ros=ros, host=host, port=port))
 
 
-@app.command("ros")
+@app.command("ros", context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
 def ros_node(
+    ctx: typer.Context,
     rest: bool = typer.Option(False, "--rest/--no-rest", help="Also serve the REST API and workbench."),
     port: Optional[int] = typer.Option(None, help="Listen port with --rest (default: settings.api.port)."),
     config: Optional[Path] = ConfigOption,
 ) -> None:
-    """The ROS launcher (no `ros2 launch` here): the gateway with its ROS node, until Ctrl-C."""
+    """The ROS launcher (no `ros2 launch` here): the gateway with its ROS node, until Ctrl-C.
+
+    Arguments after ``--ros-args`` go to the node as on ``ros2 run``, e.g. ``printeps ros --ros-args
+    -p call_timeout_s:=3.0 -p robots:="[pepper=/pepper]"``."""
     from gateway.app import run
 
+    settings = _settings(config)
+    settings.ros.args = ros_arguments(ctx.args)
     sys.setswitchinterval(0.001)
-    _run_or_explain(lambda: run(_settings(config), rest=rest, ros=True, port=port))
+    _run_or_explain(lambda: run(settings, rest=rest, ros=True, port=port))
+
+
+def ros_arguments(extra: list[str]) -> list[str]:
+    """The ROS part of the command line: ``--ros-args`` and what follows; anything else is a usage error."""
+    if not extra:
+        return []
+    if extra[0] != "--ros-args":
+        _fail(f"printeps ros: unexpected argument {extra[0]!r} (ROS arguments go after --ros-args)", code=2)
+    return list(extra)
 
 
 def _run_or_explain(start: Any) -> None:

@@ -160,6 +160,10 @@ class RosSettings(BaseModel):
         default=None, description="Run the ROS node in `printeps serve`; default: when rclpy is importable.")
     domain_id: int | None = Field(default=None, description="ROS_DOMAIN_ID (default: the environment's).")
     node_name: str = "printeps_gateway"
+    args: list[str] = Field(
+        default_factory=list,
+        description="ROS command-line arguments for the node's context, e.g. "
+                    "['--ros-args', '-p', 'call_timeout_s:=3.0'] (`printeps ros --ros-args ...` fills it).")
     subscriptions: list[RosSubscription] = Field(default_factory=_default_subscriptions)
     heartbeats: list[str] = Field(
         default_factory=lambda: [TABLES_STREAM],

@@ -50,7 +50,8 @@ class RosGateway:
         cfg = settings.ros
         self.settings = settings
         self.streams = streams
-        self.runtime = RosRuntime(domain_id=cfg.domain_id if cfg.domain_id is not None else domain_id)
+        self.runtime = RosRuntime(args=list(cfg.args) or None,
+                                  domain_id=cfg.domain_id if cfg.domain_id is not None else domain_id)
         self.problems = register_topic_mappings(cfg.subscriptions, mappings)
         self.ingress = Ingress(cfg.subscriptions, mappings.mapper, streams, store, named_checks=checks(cfg),
                                queue_size=cfg.queue_size, on_event=on_event)
@@ -63,7 +64,11 @@ class RosGateway:
         self.caller = self.node.caller
         self.dispatcher = ActionDispatcher(self.caller, dict(cfg.robots), timeout_s=cfg.call_timeout_s,
                                            retries=cfg.call_retries)
-        self.node.dispatcher = self.dispatcher
+        try:
+            self.node.attach_dispatcher(self.dispatcher)
+        except ValueError:  # a bad start-up parameter: leave no context or shared memory behind
+            self.runtime.shutdown()
+            raise
         for module in self.dispatcher.modules:
             actions.register(module, self.dispatcher.dispatch)
         self.ingress.start()

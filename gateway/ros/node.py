@@ -75,6 +75,18 @@ class RosServiceCaller:
         return status, message
 
 
+def parameter_problem(params: list[Parameter]) -> str | None:
+    """What is wrong with the first bad value among ``params`` (None when all are acceptable)."""
+    for p in params:
+        if p.name == "robots" and any("=" not in item for item in p.value if item):
+            return "robots: each item must be name=/namespace"
+        if p.name == "call_timeout_s" and not 0 < float(p.value) <= 60:
+            return "call_timeout_s: must be in (0, 60]"
+        if p.name == "call_retries" and not 0 <= int(p.value) <= 10:
+            return "call_retries: must be in [0, 10]"
+    return None
+
+
 class GatewayNode(Node):
     """Subscribes the configured topics, serves fire_business_rules, calls robot services."""
 
@@ -101,6 +113,19 @@ class GatewayNode(Node):
         self.create_service(FireBusinessRules, "fire_business_rules", self._on_fire, callback_group=group)
 
     # ---- parameters --------------------------------------------------------------------------
+    def attach_dispatcher(self, dispatcher: Any) -> None:
+        """Hand the robot calls to ``dispatcher`` and apply the node's parameters to it.
+
+        Why now: the parameters are declared (and start-up overrides such as ``--ros-args -p
+        call_timeout_s:=3.0`` read) before the dispatcher exists, so until it is attached only
+        ``ruleset`` can take effect. A start-up value the live setter would refuse is refused here too."""
+        params = self.get_parameters(["ruleset", "call_timeout_s", "call_retries", "robots"])
+        problem = parameter_problem(params)
+        if problem is not None:
+            raise ValueError(f"ROS parameter {problem}")
+        self.dispatcher = dispatcher
+        self._apply(params)
+
     def _apply(self, params: list[Parameter]) -> None:
         for p in params:
             if p.name == "ruleset":
@@ -115,13 +140,9 @@ class GatewayNode(Node):
                 self.dispatcher.robots = dict(item.split("=", 1) for item in p.value if "=" in item)
 
     def _on_params(self, params: list[Parameter]) -> SetParametersResult:
-        for p in params:
-            if p.name == "robots" and any("=" not in item for item in p.value):
-                return SetParametersResult(successful=False, reason="robots: each item must be name=/namespace")
-            if p.name == "call_timeout_s" and not 0 < float(p.value) <= 60:
-                return SetParametersResult(successful=False, reason="call_timeout_s: must be in (0, 60]")
-            if p.name == "call_retries" and not 0 <= int(p.value) <= 10:
-                return SetParametersResult(successful=False, reason="call_retries: must be in [0, 10]")
+        problem = parameter_problem(params)
+        if problem is not None:
+            return SetParametersResult(successful=False, reason=problem)
         self._apply(params)
         return SetParametersResult(successful=True)
 

@@ -22,10 +22,12 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(description="PRINTEPS gateway ROS node (the same gateway as `printeps serve`, no HTTP)")
     ap.add_argument("--config", default=None)
-    args, _ros_args = ap.parse_known_args(sys.argv[1:] if argv is None else argv)
+    args, ros_args = ap.parse_known_args(sys.argv[1:] if argv is None else argv)
+    settings = load_settings(args.config)
+    settings.ros.args = ros_args  # --ros-args -p name:=value ... reach the node (start-up overrides)
     sys.setswitchinterval(0.001)  # GIL hand-offs between executor and worker threads: see docs/ros.md
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    run(load_settings(args.config), rest=False, ros=True)
+    run(settings, rest=False, ros=True)
     return 0
 
 

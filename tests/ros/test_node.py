@@ -241,3 +241,23 @@ def test_leaving_seat_over_ros_clears_the_table(domain_id, settings, mongo, tmp_
         outcome = gateway.decisions.get(decisions[0]["decision_id"])["outcomes"][0]
         assert outcome["status"] == "ok" and outcome["run_id"]
         assert gateway.robots.position("pepper") == "counter"
+
+
+def test_start_up_parameter_overrides_reach_the_dispatcher(domain_id, settings, mongo, tmp_path) -> None:
+    """``--ros-args -p`` values given at start-up are applied once the dispatcher exists (they were
+    read while it did not, and only ``ruleset`` took effect)."""
+    settings.ros.args = ["--ros-args", "-p", "call_timeout_s:=0.7", "-p", "call_retries:=0",
+                         "-p", "robots:=[pepper=/elsewhere]", "-p", "ruleset:=reception_greetings"]
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway:
+        dispatcher = gateway.ros.dispatcher
+        assert dispatcher.timeout_s == 0.7
+        assert dispatcher.retries == 0
+        assert dispatcher.robots == {"pepper": "/elsewhere"}
+        assert gateway.ros.node.ruleset == "reception_greetings"
+
+
+def test_a_start_up_parameter_out_of_range_is_refused_by_name(domain_id, settings, mongo, tmp_path) -> None:
+    settings.ros.args = ["--ros-args", "-p", "call_retries:=99"]
+    with pytest.raises(ValueError, match="call_retries: must be in"):
+        with ros_gateway(settings, mongo, tmp_path, domain_id):
+            pass
