@@ -24,6 +24,7 @@ from gateway.rdf.mapping import Mapper, MappingError
 from gateway.ros.convert import stamp_ms
 from gateway.ros.readings import ReadingError, validate_entrance
 from gateway.store.store import RDF_EVENTS, SENSOR_MESSAGES
+from gateway.stream.engine import StreamError
 
 log = logging.getLogger(__name__)
 
@@ -104,21 +105,28 @@ class Ingress:
                 self.checks[sub.check](body)
             triples = self.mapper.map(body, stamp, _mapping_name(sub))
         except (ReadingError, MappingError) as exc:
-            self.stats["rejected"] += 1
             error = exc.to_dict() if isinstance(exc, ReadingError) else {"field": exc.where, "message": exc.message}
-            log.error("rejected a message from %s: %s", sub.topic, exc)
-            self._record(SENSOR_MESSAGES, {"source": sub.topic, "type": sub.type, "message": message, "error": error},
-                         "printeps/RejectedMessage")
-            self.on_event("rejected", {"source": sub.topic, "error": str(exc)})
-            return None
+            return self._reject(sub, message, error, exc)
+        try:
+            report = self.streams.push(sub.stream, stamp, triples)
+        except StreamError as exc:  # the stream refused it (too many triples, ...): still recorded, with why
+            return self._reject(sub, message, {"field": "", "message": str(exc)}, exc)
         self.stats["readings"] += 1
-        report = self.streams.push(sub.stream, stamp, triples)
         self._record(SENSOR_MESSAGES, {"source": sub.topic, "type": sub.type, "stamp_ms": stamp, "message": message},
                      sub.type)
         self._record(RDF_EVENTS, {"stream": sub.stream, "stamp_ms": stamp, "source": sub.topic,
                                   "triples": [[str(t) for t in triple] for triple in triples]},
                      "printeps/RdfStreamItem")
         return report
+
+    def _reject(self, sub: RosSubscription, message: dict[str, Any], error: dict[str, Any], exc: Exception) -> None:
+        """Count, log, record and announce a message that did not reach the stream."""
+        self.stats["rejected"] += 1
+        log.error("rejected a message from %s: %s", sub.topic, exc)
+        self._record(SENSOR_MESSAGES, {"source": sub.topic, "type": sub.type, "message": message, "error": error},
+                     "printeps/RejectedMessage")
+        self.on_event("rejected", {"source": sub.topic, "error": str(exc)})
+        return None
 
     def _record(self, collection: str, doc: dict[str, Any], stored_type: str) -> None:
         if self.store is not None:

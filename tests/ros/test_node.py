@@ -32,11 +32,11 @@ def entrance_message(reading: dict) -> dict:
     return to_dict(dict_to_entrance(reading))
 
 
-def handle(gateway, reading: dict) -> None:
+def handle(gateway, reading: dict):
     """Feed one reading through the ingress of the ``entrance`` subscription (as the node does)."""
     sub = gateway.settings.ros.subscriptions[0]
     assert sub.topic == "entrance"
-    gateway.ros.ingress.handle(sub, entrance_message(reading))
+    return gateway.ros.ingress.handle(sub, entrance_message(reading))
 
 
 def _one_group(customers=("a", "b")):
@@ -261,3 +261,18 @@ def test_a_start_up_parameter_out_of_range_is_refused_by_name(domain_id, setting
     with pytest.raises(ValueError, match="call_retries: must be in"):
         with ros_gateway(settings, mongo, tmp_path, domain_id):
             pass
+
+
+def test_a_message_the_stream_refuses_is_still_recorded_with_why(domain_id, settings, mongo, tmp_path) -> None:
+    """A reading that maps but is refused by the stream engine (here: more triples than a message may
+    hold) is recorded as rejected with the stream's reason, never lost silently."""
+    settings.streams.max_message_triples = 3
+    with ros_gateway(settings, mongo, tmp_path, domain_id) as gateway:
+        reading = {"id": "big", "stamp": 5.0,
+                   "customers": [{"id": c, "distance": 2.0, "age": 30, "gender": "female"} for c in "abc"]}
+        assert handle(gateway, reading) is None
+        assert gateway.ros.stats["rejected"] == 1 and gateway.ros.stats["readings"] == 0
+        assert gateway.store.flush()
+        rejected = gateway.store.query("sensor_messages", type="printeps/RejectedMessage")
+    assert [d["message"]["id"] for d in rejected] == ["big"]
+    assert "at most 3 triples" in rejected[0]["error"]["message"]
