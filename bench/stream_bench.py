@@ -40,6 +40,7 @@ from table_scenarios import mapper as table_mapper
 
 from gateway.config import StreamSettings  # noqa: E402
 from gateway.rdf import Mapper  # noqa: E402
+from gateway.rdf.mapping import mappings_from_folder  # noqa: E402
 from gateway.stream import StreamEngine  # noqa: E402
 from gateway.stream.evaluate import WindowData, evaluate_rdflib  # noqa: E402
 
@@ -156,7 +157,7 @@ def rdflib_window(text: str, window: WindowData, timeout: float) -> float | None
 
 def papers_query(say: Callable[[str], None], seconds: float, general_seconds: float, rdflib_timeout: float) -> dict:
     msgs = entrance_scenario(PEOPLE, 30, seconds)
-    m = Mapper()
+    m = Mapper(mappings_from_folder(ROOT / "ontology" / "mappings"))
     mapped = [(ts, m.map(x, ts, "entrance")) for ts, x in msgs]
     fast = run(CUSTOMER_QUERY, ENTRANCE, mapped, True)
     general = run(CUSTOMER_QUERY, ENTRANCE, mapped[: int(general_seconds * 30)], False)
@@ -204,7 +205,7 @@ def growth(say: Callable[[str], None], quick: bool) -> dict:
     say("| window | " + " | ".join(f"{r} Hz" for r in rates) + " |")
     say("|---|" + "---|" * len(rates))
     table: dict[str, Any] = {}
-    m = Mapper()
+    m = Mapper(mappings_from_folder(ROOT / "ontology" / "mappings"))
     for rng in ranges:
         cells = []
         for hz in rates:

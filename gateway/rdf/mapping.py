@@ -28,7 +28,10 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Mapping
+
+import yaml
 
 from pyoxigraph import BlankNode, NamedNode
 
@@ -59,23 +62,6 @@ class NodeMap:
     children: Mapping[str, tuple[str, "NodeMap"]] = field(default_factory=dict)
 
 
-CUSTOMER = NodeMap(
-    subject="printeps:{id}",
-    rdf_type="printeps:Customer",
-    fields={"age": "printeps:age", "gender": "printeps:gender"},
-    timed={"distance": "printeps:distance"},
-)
-
-ENTRANCE = NodeMap(
-    subject="printeps:entrance_{id}",
-    rdf_type="printeps:EntranceObservation",
-    fields={"number_of_customers": "printeps:numberOfCustomers"},
-    children={"customers": ("printeps:hasCustomer", CUSTOMER)},
-)
-
-# Entrance sensing (Entrance.msg: id, number_of_customers, customers: Customer[], stamp); the same
-# mapping ships as data in ontology/mappings/entrance.yaml, which is what a gateway serves.
-BUILTIN_MAPPINGS: dict[str, NodeMap] = {"entrance": ENTRANCE, "customer": CUSTOMER}
 SPEC_KEYS = {"subject", "type", "fields", "timed", "timed_link", "children", "message_type", "description",
              "link", "mapping"}
 
@@ -110,12 +96,14 @@ def _plain(value: Any, where: str, depth: int) -> Any:
 
 
 class Mapper:
-    """Maps messages to triples with named mappings (built-ins plus any added or replaced)."""
+    """Maps messages to triples with named mappings.
+
+    There are no built-in mappings: the teahouse's (``ontology/mappings/*.yaml``) are data, seeded
+    into the Information State and served from it, so a deleted mapping stays deleted."""
 
     def __init__(self, mappings: Mapping[str, NodeMap] | None = None,
                  prefixes: Mapping[str, str] | None = None) -> None:
-        self.mappings: dict[str, NodeMap] = dict(BUILTIN_MAPPINGS)
-        self.mappings.update(mappings or {})
+        self.mappings: dict[str, NodeMap] = dict(mappings or {})
         self.prefixes = dict(DEFAULT_PREFIXES)
         self.prefixes.update(prefixes or {})
         self._iri_cache: dict[str, NamedNode] = {}
@@ -245,6 +233,17 @@ def _iri_safe(text: str) -> str:
 
 
 # --------------------------------------------------------------------------- mappings as data
+
+
+def mappings_from_folder(folder: str | Path) -> dict[str, NodeMap]:
+    """The mappings of a folder of ``<name>.yaml`` specs (as ``ontology/mappings``), by name, for
+    tools that map messages without a gateway (benchmarks, tests); a gateway serves them from the
+    Information State instead. A spec may name one read before it (``mapping: customer``)."""
+    mappings: dict[str, NodeMap] = {}
+    for path in sorted(Path(folder).glob("*.yaml")):
+        spec = yaml.safe_load(path.read_text(encoding="utf-8"))
+        mappings[path.stem] = node_map_from_spec(spec, path.name, resolve=mappings)
+    return mappings
 
 
 def node_map_from_spec(spec: Any, where: str = "mapping", resolve: Mapping[str, NodeMap] | None = None,

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import yaml
 
-from gateway.rdf.mapping import BUILTIN_MAPPINGS, Mapper, MappingError, NodeMap, check_against, node_map_from_spec, spec_of
+from gateway.rdf.mapping import Mapper, MappingError, NodeMap, check_against, node_map_from_spec, spec_of
 from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
@@ -248,7 +248,7 @@ class MappingService:
         return sorted(self.mapper.mappings)
 
     def get(self, name: str) -> dict[str, Any]:
-        """A mapping's data form, its version (None for the built-ins) and its message type."""
+        """A mapping's data form, its version and its message type."""
         if name not in self.mapper.mappings:
             raise MappingError("mapping", f"no mapping named {name!r}; known: {self.names()}")
         spec = self._specs.get(name) or spec_of(self.mapper.mappings[name])
@@ -319,10 +319,7 @@ class MappingService:
         if not self._served.set(name, None, seq):
             return
         self._specs.pop(name, None)
-        if name in BUILTIN_MAPPINGS:
-            self.mapper.mappings[name] = BUILTIN_MAPPINGS[name]
-        else:
-            self.mapper.mappings.pop(name, None)
+        self.mapper.mappings.pop(name, None)
 
     def sync(self, name: str) -> None:
         with self._lock:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gateway.rdf import Mapper
+from gateway.rdf.mapping import mappings_from_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 CUSTOMER_QUERY = (ROOT / "ontology" / "queries" / "customer_detection.rq").read_text(encoding="utf-8")
@@ -49,7 +50,7 @@ def replay(engine, msgs: list[tuple[int, dict]], stream: str = ENTRANCE, flush_m
     """Push the messages, collect result events (and close the last windows with a heartbeat)."""
     events: list[dict] = []
     token = engine.subscribe(events.append)
-    mapper = Mapper()
+    mapper = Mapper(mappings_from_folder(ROOT / "ontology" / "mappings"))
     try:
         for ts, msg in msgs:
             engine.push(stream, ts, mapper.map(msg, ts, "entrance"))

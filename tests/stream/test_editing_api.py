@@ -118,3 +118,14 @@ def test_mapping_text_saves_previews_and_rolls_back(client):
     live = client.post("/api/mappings/edit_table/preview", json={"message": message}).json()["triples"]
     assert any("hasPerson" in t[1] for t in live)
     assert client.post("/api/mappings/edit_table/rollback", json={"version": 7}).status_code == 404
+
+
+def test_a_deleted_mapping_stays_deleted(client):
+    """The entrance mapping is data (seeded from ontology/mappings): deleting it stops serving it;
+    no copy in code comes back in its place."""
+    message = {"id": "e1", "number_of_customers": 1, "customers": [{"id": "c1", "distance": 2.0}]}
+    preview = client.post("/api/mappings/entrance/preview", json={"message": message, "timestamp": 1000})
+    assert preview.status_code == 200, preview.text
+    assert client.delete("/api/mappings/entrance").status_code == 200
+    assert client.get("/api/mappings/entrance").status_code == 404
+    assert "entrance" not in [m["name"] for m in client.get("/api/mappings").json()]

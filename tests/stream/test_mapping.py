@@ -7,10 +7,19 @@ from types import SimpleNamespace
 import pytest
 from pyoxigraph import BlankNode, Literal, NamedNode
 
+from pathlib import Path
+
 from gateway.rdf import Mapper, MappingError, TermError, parse_triple
+from gateway.rdf.mapping import mappings_from_folder
 from gateway.rdf.terms import RDF_TYPE, XSD_DECIMAL, XSD_INTEGER
 
 P = "http://printeps.org/cafe/entrance/"
+TEAHOUSE = mappings_from_folder(Path(__file__).resolve().parents[2] / "ontology" / "mappings")
+
+
+def teahouse_mapper() -> Mapper:
+    """A mapper with the teahouse's mappings as the repository ships them (data, not code)."""
+    return Mapper(TEAHOUSE)
 
 
 def n(local: str) -> NamedNode:
@@ -19,7 +28,7 @@ def n(local: str) -> NamedNode:
 
 def test_entrance_message_matches_the_papers_rdf_stream():
     msg = {"id": "e1", "number_of_customers": 1, "customers": [{"id": "c1", "distance": 2.5, "age": 30}]}
-    triples = set(Mapper().map(msg, 1500, "entrance"))
+    triples = set(teahouse_mapper().map(msg, 1500, "entrance"))
     assert {
         (n("c1"), RDF_TYPE, n("Customer")),
         (n("c1"), n("positionAtTime"), n("c1_t1500")),
@@ -40,12 +49,12 @@ class FakeRosMessage(SimpleNamespace):
 def test_ros_message_objects_are_mapped_like_dicts():
     msg = FakeRosMessage(id="e1", number_of_customers=1,
                          customers=[FakeRosMessage(id="c9", distance=1.25, age=7, gender="female")])
-    triples = Mapper().map(msg, 10, "entrance")
+    triples = teahouse_mapper().map(msg, 10, "entrance")
     assert (n("c9_t10"), n("distance"), Literal("1.25", datatype=XSD_DECIMAL)) in triples
 
 
 def test_generic_default_uses_field_names():
-    triples = Mapper().map({"id": "cup1", "level": 0.25, "tags": ["a", "b"], "pos": {"x": 1}}, 0)
+    triples = teahouse_mapper().map({"id": "cup1", "level": 0.25, "tags": ["a", "b"], "pos": {"x": 1}}, 0)
     assert (n("cup1"), n("level"), Literal("0.25", datatype=XSD_DECIMAL)) in triples
     assert (n("cup1"), n("tags"), Literal("b")) in triples
     (pos,) = [o for s, p, o in triples if p == n("pos")]
@@ -62,7 +71,7 @@ def test_generic_default_uses_field_names():
 ])
 def test_bad_messages_name_the_field(msg, mapping, where):
     with pytest.raises(MappingError) as info:
-        Mapper().map(msg, 0, mapping)
+        teahouse_mapper().map(msg, 0, mapping)
     assert info.value.where == where
 
 

@@ -13,7 +13,7 @@ State and followed by every gateway process; ``ontology/mappings/*.yaml`` only s
     POST   /api/mappings/validate        {"spec": {...} | "text": "<YAML>"} -> {"ok", "errors"}
     POST   /api/mappings/{name}/preview  {"message": {...}, "timestamp": ms, "spec"|"text"?} -> the triples
                                          it makes (with the draft spec when one is given)
-    DELETE /api/mappings/{name}          back to the built-in of that name, if any
+    DELETE /api/mappings/{name}          no longer served (messages for it are rejected); history kept
     GET    /api/mappings/{name}/versions
     GET    /api/mappings/{name}/versions/{version}  {"version", …, "spec", "text", "current"}
     POST   /api/mappings/{name}/rollback {"version"}
