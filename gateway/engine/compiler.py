@@ -309,10 +309,6 @@ def _parse(source: _Source) -> tuple[list[CompileError], str | None]:
         return [], None
 
 
-def _syntax_errors(source: _Source) -> list[CompileError]:
-    return _parse(source)[0]
-
-
 def _parser_position(err: Any, message: str) -> tuple[int, int]:
     match = _LINE_COL.search(message)
     if match:

@@ -164,10 +164,6 @@ class StatefulSession:
         """Inserts one event stamped with its time; the session clock moves forward to it."""
         _check(self._call("insertAt", encode_facts([fact], self._max_facts), int(timestamp_ms)))
 
-    def insert_events(self, facts: list[dict[str, Any]], timestamp_ms: int) -> int:
-        data = _check(self._call("insertAt", encode_facts(facts, self._max_facts), int(timestamp_ms)))
-        return int(data["inserted"])
-
     def push(self, facts: list[dict[str, Any]], timestamp_ms: int | None = None, return_facts: bool = False) -> FireResult:
         """Inserts ``facts`` (stamped with ``timestamp_ms`` if given) and fires, in one JVM call.
 

@@ -164,16 +164,6 @@ def parse_triple(raw: Any, where: str, prefixes: dict[str, str] | None = None) -
     return (s, p, o)
 
 
-def numeric_value(term: Term) -> Decimal | None:
-    """The exact value of an integer/decimal literal, else None (doubles are not exact)."""
-    if isinstance(term, Literal) and term.datatype.value in NUMERIC_DATATYPES:
-        try:
-            return Decimal(term.value)
-        except InvalidOperation:
-            return None
-    return None
-
-
 def term_to_json(term: Term | None) -> Any:
     """A term as a JSON value: IRIs as strings, numbers as numbers, booleans, plain strings."""
     if term is None:

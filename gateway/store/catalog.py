@@ -262,11 +262,3 @@ class MongoCatalog:
         except PyMongoError as exc:
             raise CatalogUnavailable(f"the Information State is unreachable: {type(exc).__name__}: {exc}") from exc
 
-
-def is_replica_set(db: Any) -> bool:
-    """True when the server says it is a replica set member (change streams are possible)."""
-    try:
-        return bool(db.client.admin.command("hello").get("setName"))
-    except PyMongoError:
-        return False
-

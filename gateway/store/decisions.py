@@ -104,10 +104,6 @@ class DecisionRecord:
             "process": self.process,
         }
 
-    def record_outcome(self, outcome: dict[str, Any], stored_type: str, inserted_by: str) -> None:
-        """A robot action's outcome (it carries the ``decision_id`` it belongs to, if any)."""
-        self.store.record(ACTIONS, outcome, stored_type=stored_type, inserted_by=inserted_by)
-
     # ---- reading -------------------------------------------------------------------------------
     def find(self, *, ruleset: str | None = None, version: int | None = None, origin: str | None = None,
              rule: str | None = None, since: datetime | None = None, until: datetime | None = None,

@@ -15,7 +15,7 @@ import os
 import re
 import socket
 import time
-from datetime import datetime, timezone
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -46,10 +46,6 @@ class StoreError(ValueError):
 
 class StoreUnavailable(RuntimeError):
     """A read needed the database and it is unreachable right now (writes are spooled, reads are not)."""
-
-
-def utcnow() -> datetime:
-    return datetime.now(timezone.utc)
 
 
 def check_collection(name: str) -> str:

@@ -152,10 +152,6 @@ class ContinuousQuery:
         """The input streams, each once, in order of appearance."""
         return list(dict.fromkeys(w.stream for w in self.windows))
 
-    @property
-    def window_names(self) -> list[str]:
-        return [w.name for w in self.windows if w.name is not None]
-
     def executable(self, values: dict[str, str]) -> str:
         """The SPARQL text with each parameter variable replaced by its value's SPARQL text."""
         spans = sorted((s, e, values[name]) for name, lst in self.var_spans.items()

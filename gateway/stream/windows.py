@@ -88,19 +88,10 @@ class StreamBuffer:
             self.pane_ms = ms
             self._panes.clear()
 
-    @property
-    def last_ts(self) -> int | None:
-        return self.stamps[-1] if self.stamps else None
-
     def first_at_or_after(self, start: int, until: int) -> int | None:
         """The oldest timestamp in ``[start, until)`` (None: nothing there)."""
         i = bisect.bisect_left(self.stamps, start)
         return self.stamps[i] if i < len(self.stamps) and self.stamps[i] < until else None
-
-    def has_content(self, start: int, until: int) -> bool:
-        """Any message with ``start <= ts < until``?"""
-        i = bisect.bisect_left(self.stamps, start)
-        return i < len(self.stamps) and self.stamps[i] < until
 
     # -- windows ---------------------------------------------------------------------------------
     def time_segments(self, start: int, until: int, sealed_until: int | None) -> list[Segment]:

@@ -54,8 +54,9 @@ def test_other_processes_writes_reach_a_watched_feed_and_its_own_do_not(store: I
         decision_id = str(ObjectId())
         record.on_engine_event("fire", {"decision_id": decision_id, "ruleset": "reception", "version": 2,
                                         "origin": "ros", "fired": ["greet"], "actions": [{"module": "say"}]})
-        record.record_outcome({"action": {"module": "say", "params": {"text": "hi"}}, "status": "ok",
-                               "decision_id": decision_id, "ruleset": "reception"}, "printeps/Action/ok", "gateway")
+        store.record("actions", {"action": {"module": "say", "params": {"text": "hi"}}, "status": "ok",
+                                 "decision_id": decision_id, "ruleset": "reception"},
+                     stored_type="printeps/Action/ok", inserted_by="gateway")
         store.record("query_results", {"query": "entry", "window": 3, "rows": [{"p": "g1"}], "solutions": 1},
                      stored_type="printeps/QueryResult/entry", inserted_by="stream_engine")
         store.record("sensor_messages", {"source": "/entrance"}, stored_type="x", inserted_by="ros")  # not relayed
