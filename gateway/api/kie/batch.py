@@ -141,13 +141,18 @@ def _step(index: int, name: str, raw: Any) -> Step:
             raise BatchError("agenda filters are not supported: put the rules in an agenda group and send set-focus", index, name)
         return Step(index, name, {"op": "fire", "max": _int(args.get("max", -1), index, name, "max"), "out": out}, out, out)
     if name == "get-objects":
-        return Step(index, name, {"op": "get_objects", "type": _class_filter(args, index, name), "out": out}, out, out)
+        # KieSession.getObjects() reads the default entry point's object store only
+        return Step(index, name, {"op": "get_objects", "type": _class_filter(args, index, name), "ep": "DEFAULT", "out": out},
+                    out, out)
     if name == "get-object":
         return Step(index, name, {"op": "get_object", "handle": fact_handle_text(args, index, name), "out": out}, out, out)
     if name in ("retract", "delete"):
         return Step(index, name, {"op": "delete", "handle": fact_handle_text(args, index, name)})
     if name == "modify":
-        return Step(index, name, {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name)})
+        # KIE's ModifyCommand sets the fields, then update(handle, object) with no property names:
+        # every rule on the type is re-evaluated, as after a whole-fact update
+        return Step(index, name, {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name),
+                                  "whole": True})
     if name == "update":
         fact = fact_from_kie(_required(args, "object", index, name), index, name)
         return Step(index, name, {"op": "update", "handle": fact_handle_text(args, index, name), "fact": fact})
@@ -186,7 +191,7 @@ def _step(index: int, name: str, raw: Any) -> Step:
         key = out or "session-currenttime"
         return Step(index, name, {"op": "get_time", "out": key}, key, key)
     if name == "get-fact-handles":
-        return Step(index, name, {"op": "get_fact_handles", "out": out}, out, out)
+        return Step(index, name, {"op": "get_fact_handles", "ep": "DEFAULT", "out": out}, out, out)  # as getObjects()
     if name == "dispose":
         return Step(index, name, {"op": "dispose"})
     known = ("insert, insert-elements, fire-all-rules, get-objects, get-object, retract (delete), modify, update, "

@@ -31,11 +31,11 @@ import org.kie.api.time.SessionPseudoClock;
  * shows its state at the end of the batch.
  *
  * Commands (JSON objects, key "op"): insert {facts, ep, out, ret}, fire {max, out},
- * get_objects {type, out, handles}, get_object {handle, out}, delete {handle},
- * modify {handle, set: [[field, value]...]}, update {handle, fact}, set_global {name, value, out},
+ * get_objects {type, ep, out, handles}, get_object {handle, out}, delete {handle},
+ * modify {handle, set: [[field, value]...], whole (update without property names, as KIE's ModifyCommand)}, update {handle, fact}, set_global {name, value, out},
  * get_global {name, out}, query {name, args, out}, set_focus {group}, clear_agenda_group {group},
  * clear_agenda, clear_activation_group {group}, advance {ms, out}, get_time {out},
- * get_fact_handles {out}, fact_count {out}, dispose.
+ * get_fact_handles {ep, out}, fact_count {out}, dispose.
  */
 final class Batch {
     private final Session s;
@@ -360,7 +360,7 @@ final class Batch {
                 TypeRegistry.TypeInfo info = type instanceof String ? types.type((String) type) : null;
                 List<FactHandle> listed = new ArrayList<FactHandle>();
                 List<Object> objects = new ArrayList<Object>();
-                for (FactHandle h : Handles.all(ks)) {
+                for (FactHandle h : handlesIn(p)) {
                     Object f = ((org.drools.core.common.InternalFactHandle) h).getObject();
                     if (f instanceof Actions) continue;
                     if (type != null && (info == null || !info.cls.isInstance(f))) continue;
@@ -393,7 +393,8 @@ final class Batch {
                     names[k++] = f.name;
                 }
                 EntryPoint ep = ks.getEntryPoint(((org.drools.core.common.InternalFactHandle) p.handle).getEntryPointName());
-                ep.update(p.handle, fact, names);
+                if (Boolean.TRUE.equals(p.cmd.get("whole"))) ep.update(p.handle, fact);  // KIE's ModifyCommand
+                else ep.update(p.handle, fact, names);  // only the rules that react to these fields
                 o.value = fact;
                 o.hasValue = p.out != null;
                 break;
@@ -458,7 +459,7 @@ final class Batch {
             case "fact_count": o.value = ks.getFactCount(); o.hasValue = true; break;
             case "get_fact_handles": {
                 List<Object> texts = new ArrayList<Object>();
-                for (FactHandle h : Handles.all(ks)) {
+                for (FactHandle h : handlesIn(p)) {
                     if (!(((org.drools.core.common.InternalFactHandle) h).getObject() instanceof Actions)) texts.add(Handles.external(h));
                 }
                 o.value = texts;
@@ -468,6 +469,18 @@ final class Batch {
             case "dispose": s.dispose(); break;
             default: throw new Refused(p.index, p.op, "commands", null, "unknown command '" + p.op + "'");
         }
+    }
+
+    /** The handles a listing command reads: of its entry point "ep" only (KIE's getObjects() and
+     *  getFactHandles() read the default entry point), else of every entry point (the REST API). */
+    private List<FactHandle> handlesIn(Prepared p) {
+        Object ep = p.cmd.get("ep");
+        if (ep == null) return Handles.all(ks);
+        List<FactHandle> out = new ArrayList<FactHandle>();
+        for (FactHandle h : Handles.all(ks)) {
+            if (ep.equals(((org.drools.core.common.InternalFactHandle) h).getEntryPointName())) out.add(h);
+        }
+        return out;
     }
 
     private Object live(Prepared p) throws Refused {
