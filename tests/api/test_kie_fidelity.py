@@ -466,3 +466,50 @@ def test_no_lookup_reaches_the_default_stateful_ksession_in_kie_mode(kie, api_ga
         dispose(kie, "fidelity")
     finally:
         settings.no_lookup = saved
+
+
+def test_a_bare_string_is_the_out_identifier(kie):
+    """KIE Server reads ``{"fire-all-rules": ""}`` with the command's one-String constructor
+    (``FireAllRulesCommand(String outIdentifier)``): the count comes back under the key "" (as a
+    real KIE Server answer shows); ``get-session-time`` likewise. An object without
+    ``out-identifier`` reports nothing."""
+    out = results(batch(kie, "fidelity", [{"insert": {"object": customer("b", 30)}}, {"fire-all-rules": ""},
+                                          {"get-session-time": "now"}]))
+    assert out[""] == 2 and out["now"] == 0
+    out = results(batch(kie, "fidelity", [{"insert": {"object": customer("b", 30)}}, {"fire-all-rules": "n"}]))
+    assert out["n"] == 2
+    out = results(batch(kie, "fidelity", [{"insert": {"object": customer("b", 30)}}, {"fire-all-rules": {}},
+                                          {"get-session-time": {}}]))
+    assert "" not in out and out["session-currenttime"] == 0
+
+
+def test_query_results_carry_their_fact_handles(kie, client):
+    """KIE's ``FlatQueryResults``: for each row, ``idFactHandleMaps`` holds the
+    ``DisconnectedFactHandle`` of every identifier that has one (with its object), next to
+    ``idResultMaps``; ``identifiers`` has the query's parameters and bindings."""
+    qfiles = files("Q1")
+    qfiles["queries.drl"] = f"""package {APKG};
+
+query "older than" (int limit)
+    $c : Customer( age > limit )
+end
+"""
+    assert client.put("/api/rulesets/fidelityq", json={"files": qfiles}).status_code == 201
+    r = batch(kie, "fidelityq", [{"insert": {"object": customer("q1", 70), "out-identifier": "q1"}},
+                                 {"insert": {"object": customer("q2", 10)}},
+                                 {"query": {"name": "older than", "arguments": [50], "out-identifier": "older"}}],
+              "defaultKieSession")
+    flat = results(r)["older"]["org.drools.core.runtime.rule.impl.FlatQueryResults"]
+    handle = fact_keys(r)["q1"][HANDLE]["external-form"]
+    assert sorted(flat["identifiers"]["element"]) == ["$c", "limit"]
+    [row] = flat["idResultMaps"]["element"]
+    values = {e["key"]: e["value"] for e in row["element"]}
+    assert values["$c"] == {f"{APKG}.Customer": {"id": "q1", "age": 70, "category": None}}
+    [handles] = flat["idFactHandleMaps"]["element"]
+    assert handles["type"] == "MAP" and flat["idFactHandleMaps"]["type"] == "LIST"
+    by_id = {e["key"]: e["value"]["org.drools.core.common.DisconnectedFactHandle"] for e in handles["element"]}
+    assert set(by_id) == set(values)
+    c = by_id["$c"]
+    assert c["external-form"] == handle and c["id"] == int(handle.split(":")[1]) and c["traitType"] == "NON_TRAIT"
+    assert c["object"] == values["$c"] and {"identityHashCode", "objectHashCode", "recency"} <= set(c)
+    dispose(kie, "fidelityq")

@@ -25,10 +25,12 @@ from typing import Any
 
 FACT_HANDLE = "org.drools.core.common.DefaultFactHandle"
 FLAT_QUERY_RESULTS = "org.drools.core.runtime.rule.impl.FlatQueryResults"
+DISCONNECTED_HANDLE = "org.drools.core.common.DisconnectedFactHandle"
 PROCESS_COMMANDS = ("start-process", "signal-event", "complete-work-item", "abort-work-item", "abort-process-instance",
                     "create-process-instance", "start-process-instance", "get-process-instance", "get-work-item")
 TIME_UNITS_MS = {"NANOSECONDS": 1e-6, "MICROSECONDS": 1e-3, "MILLISECONDS": 1, "SECONDS": 1000, "MINUTES": 60_000,
                  "HOURS": 3_600_000, "DAYS": 86_400_000}
+STRING_OUT_IDENTIFIER = ("fire-all-rules", "get-session-time")  # FireAllRulesCommand(String), GetSessionTimeCommand(String)
 NO_ARGUMENTS = ("fire-all-rules", "dispose", "get-objects", "clear-agenda", "get-session-time", "get-fact-handles")
 
 
@@ -121,8 +123,13 @@ def _step(index: int, name: str, raw: Any) -> Step:
         raise BatchError("fire-until-halt would hold the session until halted: send fire-all-rules", index, name)
     if name == "apply-pmml-model-command":
         raise BatchError("PMML models are not supported", index, name)
-    args = _args(index, name, raw)
-    out = _out(args)
+    if isinstance(raw, str) and name in STRING_OUT_IDENTIFIER:
+        # KIE Server's JSON reader builds these with their one-String constructor: the text is the
+        # out-identifier, "" too (a real KIE Server answers {"fire-all-rules": ""} under the key "")
+        args, out = {}, raw
+    else:
+        args = _args(index, name, raw)
+        out = _out(args)
     if name == "insert":
         fact = fact_from_kie(_required(args, "object", index, name), index, name)
         ret = args.get("return-object", args.get("returnObject", True)) is not False
@@ -348,12 +355,27 @@ class Marshal:
         return {FACT_HANDLE: {"external-form": text}}
 
     def query(self, value: dict[str, Any]) -> dict[str, Any]:
-        rows = [{"element": [{"key": k, "value": self.object(v)} for k, v in row.items()]} for row in value["rows"]]
+        """KIE's ``FlatQueryResults``: per row, the values and the ``DisconnectedFactHandle`` of each
+        identifier that has a fact handle (query parameters included, as KIE)."""
+        rows = [_map([(k, self.object(v)) for k, v in row.items()]) for row in value["rows"]]
+        handles = [_map([(k, {DISCONNECTED_HANDLE: self.disconnected(h)}) for k, h in row.items()])
+                   for row in value.get("handles") or [{} for _ in rows]]
         return {FLAT_QUERY_RESULTS: {
-            "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": []},
+            "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": handles},
             "idResultMaps": {"type": "LIST", "componentType": None, "element": rows},
             "identifiers": {"type": "SET", "componentType": None, "element": value["identifiers"]},
         }}
+
+    def disconnected(self, handle: dict[str, Any]) -> dict[str, Any]:
+        """A fact handle as KIE Server's JSON writes a ``DisconnectedFactHandle`` (object included)."""
+        return {"id": handle["id"], "identityHashCode": handle["identityHashCode"], "objectHashCode": handle["objectHashCode"],
+                "recency": handle["recency"], "object": self.object(handle.get("object")), "traitType": handle["traitType"],
+                "external-form": handle["external"]}
+
+
+def _map(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A map as KIE's JAXB list adapter writes it in JSON."""
+    return {"type": "MAP", "componentType": None, "element": [{"key": k, "value": v} for k, v in pairs]}
 
 
 def execution_results(batch: Batch, results: list[dict[str, Any]], marshal: Marshal) -> dict[str, Any]:

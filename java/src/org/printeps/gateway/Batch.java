@@ -424,15 +424,26 @@ final class Batch {
                     throw new Refused(p.index, p.op, "query", "name", "query '" + p.cmd.get("name") + "' failed: " + Runner.rootMessage(e));
                 }
                 List<Object> rows = new ArrayList<Object>();
+                List<Object> handles = new ArrayList<Object>();
                 String[] ids = results.getIdentifiers();
                 for (QueryResultsRow row : results) {
+                    // as KIE's FlatQueryResults: the identifiers that have a fact handle, with it
                     java.util.LinkedHashMap<String, Object> r = new java.util.LinkedHashMap<String, Object>();
-                    for (String id : ids) r.put(id, row.get(id));
+                    java.util.LinkedHashMap<String, Object> hs = new java.util.LinkedHashMap<String, Object>();
+                    for (String id : ids) {
+                        FactHandle h = row.getFactHandle(id);
+                        if (h == null) continue;
+                        Object v = row.get(id);
+                        r.put(id, v);
+                        hs.put(id, disconnected((org.drools.core.common.InternalFactHandle) h, v));
+                    }
                     rows.add(r);
+                    handles.add(hs);
                 }
                 java.util.LinkedHashMap<String, Object> value = new java.util.LinkedHashMap<String, Object>();
                 value.put("identifiers", java.util.Arrays.asList(ids));
                 value.put("rows", rows);
+                value.put("handles", handles);
                 o.value = value;
                 o.hasValue = true;
                 break;
@@ -469,6 +480,20 @@ final class Batch {
             case "dispose": s.dispose(); break;
             default: throw new Refused(p.index, p.op, "commands", null, "unknown command '" + p.op + "'");
         }
+    }
+
+    /** A query row's fact handle as KIE's DisconnectedFactHandle carries it; its object is the row's
+     *  value (for a query parameter the handle is the query's own, whose object is not a fact). */
+    private static Map<String, Object> disconnected(org.drools.core.common.InternalFactHandle h, Object value) {
+        Map<String, Object> out = new java.util.LinkedHashMap<String, Object>();
+        out.put("id", h.getId());
+        out.put("identityHashCode", h.getIdentityHashCode());
+        out.put("objectHashCode", h.getObjectHashCode());
+        out.put("recency", h.getRecency());
+        out.put("object", value);
+        out.put("traitType", String.valueOf(h.getTraitType()));
+        out.put("external", h.toExternalForm());
+        return out;
     }
 
     /** The handles a listing command reads: of its entry point "ep" only (KIE's getObjects() and
