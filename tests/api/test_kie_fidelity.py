@@ -513,3 +513,45 @@ end
     assert c["external-form"] == handle and c["id"] == int(handle.split(":")[1]) and c["traitType"] == "NON_TRAIT"
     assert c["object"] == values["$c"] and {"identityHashCode", "objectHashCode", "recency"} <= set(c)
     dispose(kie, "fidelityq")
+
+
+CALENDAR = {"calendar.drl": f"""package {CEP}.calendar;
+import org.printeps.gateway.Actions;
+global Actions actions;
+
+declare Guest
+    id : String
+end
+
+rule "since 2020" date-effective "01-Jan-2020"
+when Guest( ) then actions.say("pepper", "since 2020"); end
+
+rule "from 2099" date-effective "01-Jan-2099"
+when Guest( ) then actions.say("pepper", "from 2099"); end
+
+rule "until 2020" date-expires "01-Jan-2020"
+when Guest( ) then actions.say("pepper", "until 2020"); end
+
+rule "until 2099" date-expires "01-Jan-2099"
+when Guest( ) then actions.say("pepper", "until 2099"); end
+"""}
+
+
+def test_date_effective_and_date_expires_follow_the_calendar(kie, client):
+    """Drools compares date-effective/date-expires with the session clock. KIE's sessions run on a
+    realtime clock; the gateway's pseudo clocks start at the wall-clock time when the rule base
+    uses these attributes (at 0, 1970, a rule effective since 2020 would never fire)."""
+    assert client.put("/api/rulesets/calendar", json={"files": CALENDAR}).status_code == 201
+    expected = ["since 2020", "until 2099"]
+    fired = client.post("/api/rulesets/calendar/fire", json={"facts": [{"type": "Guest", "id": "g"}]}).json()
+    assert sorted(a["params"]["text"] for a in fired["actions"]) == expected
+    for lookup in (None, "defaultKieSession"):
+        out = results(batch(kie, "calendar", [{"insert": {"object": {f"{CEP}.calendar.Guest": {"id": "g"}}}},
+                                              {"fire-all-rules": ""}, {"get-session-time": {}}], lookup))
+        assert sorted(a["params"]["text"] for a in out["actions"]) == expected
+        assert abs(out["session-currenttime"] - time.time() * 1000) < 600_000
+    dispose(kie, "calendar")
+    base = "/api/rulesets/calendar/sessions"
+    sid = client.post(base, json={"facts": [{"type": "Guest", "id": "g"}]}).json()["id"]
+    assert sorted(a["params"]["text"] for a in client.post(f"{base}/{sid}/fire").json()["actions"]) == expected
+    client.delete(f"{base}/{sid}")
