@@ -555,3 +555,30 @@ def test_date_effective_and_date_expires_follow_the_calendar(kie, client):
     sid = client.post(base, json={"facts": [{"type": "Guest", "id": "g"}]}).json()["id"]
     assert sorted(a["params"]["text"] for a in client.post(f"{base}/{sid}/fire").json()["actions"]) == expected
     client.delete(f"{base}/{sid}")
+
+
+def test_get_objects_with_an_unknown_class_is_refused(kie):
+    """KIE's get-objects loads the filter's class (a ClassNotFoundException fails the batch); an
+    empty list would hide the typo."""
+    r = batch(kie, "fidelity", [{"insert": {"object": customer("u", 30)}},
+                                {"get-objects": {"class-object-filter": {"string": f"{APKG}.Custmer"}, "out-identifier": "o"}}])
+    assert r.status_code == 422
+    assert "command 1 (get-objects)" in r.json()["msg"] and f"'{APKG}.Custmer'" in r.json()["msg"]
+    out = results(batch(kie, "fidelity", [{"insert": {"object": customer("u", 30)}},
+                                          {"get-objects": {"class-object-filter": {"string": "java.lang.Object"}, "out-identifier": "all"}},
+                                          {"get-objects": {"class-object-filter": f"{APKG}.Customer", "out-identifier": "c"}}]))
+    assert len(out["all"]) == 1 and len(out["c"]) == 1
+
+
+def test_a_negated_fact_that_is_not_an_event_has_no_window(client):
+    """Why the issue's escalation fired at 0 s: Drools computes temporal distances among *event*
+    patterns only (BuildUtils.calculateTemporalDistance selects the event patterns), so with
+    ``Ack`` declared without ``@role(event)`` the ``not`` is true at once, in KIE Server too.
+    Declaring both types as events (the ALARMS rule set above) makes the rule wait."""
+    files_ = {"acks.drl": ALARMS["alarms.drl"].replace("declare Ack\n    @role(event)\n", "declare Ack\n")}
+    assert "declare Ack\n    id" in files_["acks.drl"]
+    assert client.put("/api/rulesets/ackfact", json={"files": files_}).status_code == 201
+    base = "/api/rulesets/ackfact/sessions"
+    sid = client.post(base, json={"facts": [{"type": "Alarm", "id": "f1"}]}).json()["id"]
+    assert client.post(f"{base}/{sid}/fire").json()["fire_count"] == 1
+    client.delete(f"{base}/{sid}")

@@ -128,6 +128,7 @@ final class Batch {
                 if (p.op.equals("update")) p.objects = build(p, Collections.singletonList(p.cmd.get("fact")));
                 break;
             }
+            case "get_objects": p.value = filterClass(p); break;
             case "set_global": p.value = globalValue(p); break;
             case "query": p.args = queryArgs(p); break;
             case "advance":
@@ -138,7 +139,7 @@ final class Batch {
                 }
                 if (number(p, "ms") < 0) throw new Refused(p.index, p.op, "clock", "amount", "the clock cannot be moved back");
                 break;
-            case "fire": case "get_objects": case "get_global": case "set_focus": case "clear_agenda_group":
+            case "fire": case "get_global": case "set_focus": case "clear_agenda_group":
             case "clear_agenda": case "clear_activation_group": case "get_time": case "get_fact_handles":
             case "fact_count": case "dispose":
                 break;
@@ -241,6 +242,22 @@ final class Batch {
             if (text.equals("false")) return Boolean.FALSE;
         }
         return v;
+    }
+
+    /** get_objects' class filter (null: none): a declared type, or a Java class such as
+     *  java.lang.Number; an unknown name is refused, as KIE's ClassObjectFilter fails to load it. */
+    private Class<?> filterClass(Prepared p) throws Refused {
+        Object type = p.cmd.get("type");
+        if (type == null) return null;
+        String name = String.valueOf(type);
+        TypeRegistry.TypeInfo info = types.type(name);
+        if (info != null) return info.cls;
+        try {
+            return Class.forName(name, false, Session.class.getClassLoader());
+        } catch (ClassNotFoundException | LinkageError e) {
+            throw new Refused(p.index, p.op, "facts", "class-object-filter", "unknown class '" + name
+                    + "' in the class-object-filter (the rule set declares: " + types.knownTypes() + ")");
+        }
     }
 
     private Object globalValue(Prepared p) throws Refused {
@@ -356,14 +373,13 @@ final class Batch {
                 break;
             }
             case "get_objects": {
-                Object type = p.cmd.get("type");
-                TypeRegistry.TypeInfo info = type instanceof String ? types.type((String) type) : null;
+                Class<?> type = (Class<?>) p.value;
                 List<FactHandle> listed = new ArrayList<FactHandle>();
                 List<Object> objects = new ArrayList<Object>();
                 for (FactHandle h : handlesIn(p)) {
                     Object f = ((org.drools.core.common.InternalFactHandle) h).getObject();
                     if (f instanceof Actions) continue;
-                    if (type != null && (info == null || !info.cls.isInstance(f))) continue;
+                    if (type != null && !type.isInstance(f)) continue;
                     listed.add(h);
                     objects.add(f);
                 }
