@@ -18,13 +18,32 @@ import tempfile
 import time
 from pathlib import Path
 
+import os
+
 from common import Clock, emit, rss_mb
-from growth_rules import drl_files as _drl_files
-from growth_rules import expected_firings, sample_facts
 
+# GROWTH_GENERATOR=business: the second, independent generator (business_rules.py, seeded by
+# GROWTH_SEED) instead of growth_rules.py; everything else measures the same way.
+GENERATOR = os.environ.get("GROWTH_GENERATOR", "growth")
+SEED = int(os.environ.get("GROWTH_SEED", "1"))
 
-def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
-    return _drl_files(n, variants, examples=True)  # a rule set with examples, as authors write them
+if GENERATOR == "business":
+    from business_rules import BusinessRules
+
+    def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
+        return BusinessRules(SEED, n, variants=variants or {}).drl_files()
+
+    def sample_facts(k: int = 0) -> list[dict]:
+        return BusinessRules(SEED, 0).facts(k, applicants=2, loans=3)  # 5 facts, as the first generator's
+
+    def expected_firings(n: int, facts: list[dict], variants: dict[int, int] | None = None) -> dict[str, int]:
+        return {r: len(t) for r, t in BusinessRules(SEED, n, variants=variants or {}).expected(facts).items()}
+else:
+    from growth_rules import drl_files as _drl_files
+    from growth_rules import expected_firings, sample_facts
+
+    def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
+        return _drl_files(n, variants, examples=True)  # a rule set with examples, as authors write them
 
 EDITS = 5
 WARM_FIRES = 2000
@@ -115,7 +134,8 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     with Clock() as wall:
         result = engine.fire("growth", sample_facts(0))
     first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000}
-    out = {"peer": "gateway", "mode": "incremental" if incremental else "whole", "rules": n, "jvm_start_s": jvm_s,
+    out = {"peer": "gateway", "generator": GENERATOR, "mode": "incremental" if incremental else "whole", "rules": n,
+           "jvm_start_s": jvm_s,
            "cold_deploy": first, "first_fire_after_cold_deploy": first_fire}
     if archive and incremental:
         from gateway.engine import compiler
