@@ -12,13 +12,12 @@ Usage (project venv): .venv/bin/python bench/peers/growth_gateway_peer.py MODE N
 
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
-
-import os
 
 from common import Clock, emit, rss_mb
 

@@ -20,7 +20,7 @@ from gateway.engine.results import encode_facts
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench" / "peers"))
-from business_rules import SHAPES, BusinessRules  # noqa: E402
+from business_rules import SHAPES, BusinessRules
 
 RULES = 1000
 REQUESTS = 4

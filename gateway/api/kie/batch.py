@@ -158,8 +158,9 @@ def _step(index: int, name: str, raw: Any) -> Step:
     if name == "modify":
         # KIE's ModifyCommand sets the fields, then update(handle, object) with no property names:
         # every rule on the type is re-evaluated, as after a whole-fact update
-        return Step(index, name, {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name),
-                                  "whole": True})
+        command = {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name),
+                   "whole": True}
+        return Step(index, name, command)
     if name == "update":
         fact = fact_from_kie(_required(args, "object", index, name), index, name)
         return Step(index, name, {"op": "update", "handle": fact_handle_text(args, index, name), "fact": fact})
