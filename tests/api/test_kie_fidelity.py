@@ -585,3 +585,17 @@ def test_a_negated_fact_that_is_not_an_event_has_no_window(client):
     sid = client.post(base, json={"facts": [{"type": "Alarm", "id": "f1"}]}).json()["id"]
     assert client.post(f"{base}/{sid}/fire").json()["fire_count"] == 1
     client.delete(f"{base}/{sid}")
+
+
+def test_one_result_per_out_identifier(kie):
+    """KIE's ExecutionResultImpl keeps results and fact handles in maps: a key used twice holds the
+    last value once (two bare ``fire-all-rules`` both answer under "")."""
+    r = batch(kie, "fidelity", [{"insert": {"object": customer("d1", 30), "out-identifier": "c"}},
+                                {"fire-all-rules": {"max": 1}}, {"fire-all-rules": ""},
+                                {"insert": {"object": customer("d2", 5), "out-identifier": "c"}}, {"fire-all-rules": ""}])
+    keys = [x["key"] for x in r.json()["result"]["execution-results"]["results"]]
+    assert keys.count("") == 1 and keys.count("c") == 1
+    out = results(r)
+    assert out[""] == 0 and out["c"][f"{APKG}.Customer"]["id"] == "d2"  # the last fire found nothing left
+    facts = r.json()["result"]["execution-results"]["facts"]
+    assert [x["key"] for x in facts] == ["c"] and facts[0]["value"][HANDLE]["external-form"].endswith(f"{APKG}.Customer")

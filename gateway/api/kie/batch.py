@@ -380,10 +380,11 @@ def _map(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def execution_results(batch: Batch, results: list[dict[str, Any]], marshal: Marshal) -> dict[str, Any]:
-    """``{"results": [{"key", "value"}], "facts": [{"key", "value"}]}`` as KIE Server answers."""
+    """``{"results": [{"key", "value"}], "facts": [{"key", "value"}]}`` as KIE Server answers: one
+    entry per key (KIE's ``ExecutionResultImpl`` keeps maps, so a key used twice holds the last value)."""
     by_index = {r["i"]: r for r in results}
-    out_results: list[dict[str, Any]] = []
-    out_facts: list[dict[str, Any]] = []
+    out_results: dict[str, Any] = {}
+    out_facts: dict[str, Any] = {}
     for step in batch.steps:
         if step.command is None:
             continue
@@ -405,11 +406,12 @@ def execution_results(batch: Batch, results: list[dict[str, Any]], marshal: Mars
                 value = marshal.object(result["value"])
             else:
                 continue
-            out_results.append({"key": step.value_key, "value": value})
+            out_results[step.value_key] = value
         if step.fact_key is not None and result.get("handles"):
             handles = [marshal.handle(h) for h in result["handles"]]
-            out_facts.append({"key": step.fact_key, "value": handles if step.many else handles[0]})
-    return {"results": out_results, "facts": out_facts}
+            out_facts[step.fact_key] = handles if step.many else handles[0]
+    return {"results": [{"key": k, "value": v} for k, v in out_results.items()],
+            "facts": [{"key": k, "value": v} for k, v in out_facts.items()]}
 
 
 def _command_index(batch: Batch, step: Step) -> int:
