@@ -79,3 +79,35 @@ def test_a_random_thousand_rule_business_base_fires_as_its_model(seed, options):
         edited = compiler.compile_files(edited_rules.drl_files(), f"business{seed}", options)
         assert edited.stats.units_reused > 0
         check(edited, edited_rules)
+
+
+def test_a_new_version_is_warmed_on_the_last_requests(tmp_path):
+    """A rule base without examples.json: made-up facts stop at its first constraint, so the new
+    version of a one-rule edit is also warmed on the facts of the last requests the previous one
+    served (bounded), and reaches the joins and accumulates real requests reach before it serves."""
+    from gateway.config import Settings
+    from gateway.engine import Engine
+
+    engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine={"rules_dir": str(tmp_path / "rules"),
+                                                                     "compile_cache_dir": str(tmp_path / "units")}))
+    rules = BusinessRules(4, 60)
+    engine.deploy("warmbiz", rules.drl_files())
+    requests = [rules.facts(k) for k in range(Engine.RECENT_REQUESTS + 3)]
+    for facts in requests:
+        fired = engine.fire("warmbiz", facts)
+        assert {r: len(t) for r, t in rules.expected(facts).items()} == _counts(fired.fired)
+    kept = engine.recent_requests("warmbiz")
+    assert [json.loads(k) for k in kept] == requests[3:]  # the last ones, oldest first
+    edited = BusinessRules(4, 60, variants={30: 1})
+    engine.deploy("warmbiz", edited.drl_files())
+    _, compiled = engine.live_compiled("warmbiz")
+    assert compiled.warm_stats.recent == Engine.RECENT_REQUESTS and compiled.warm_stats.fires >= 1
+    facts = requests[-1]
+    assert _counts(engine.fire("warmbiz", facts).fired) == {r: len(t) for r, t in edited.expected(facts).items()}
+
+
+def _counts(fired: list[dict]) -> dict[str, int]:
+    out: dict[str, int] = defaultdict(int)
+    for f in fired:
+        out[f["rule"]] += 1
+    return dict(out)
