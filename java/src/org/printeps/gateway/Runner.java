@@ -67,9 +67,6 @@ public final class Runner {
         return false;
     }
 
-    /** Whether this rule base's pseudo clocks start at the wall-clock time (see {@link #calendarRules}). */
-    public boolean startsAtWallClock() { return calendarRules; }
-
     /** Moves a pseudo clock to the wall-clock time (never back) when the rule base has calendar rules. */
     private KieSession startClock(KieSession s) {
         if (calendarRules && s.getSessionClock() instanceof org.kie.api.time.SessionPseudoClock) {
