@@ -599,3 +599,28 @@ def test_one_result_per_out_identifier(kie):
     assert out[""] == 0 and out["c"][f"{APKG}.Customer"]["id"] == "d2"  # the last fire found nothing left
     facts = r.json()["result"]["execution-results"]["facts"]
     assert [x["key"] for x in facts] == ["c"] and facts[0]["value"][HANDLE]["external-form"].endswith(f"{APKG}.Customer")
+
+
+def test_doc_sliding_window_of_time_over_a_kie_batch(kie):
+    D = f"{CEP}.docs"
+    reading = lambda t: {"insert": {"object": {f"{D}.SensorReading": {"temperature": t}}}}
+    out = results(batch(kie, "cepdocs", [
+        {"insert": {"object": {f"{D}.TemperatureThreshold": {"max": 50.0}}}}, reading(80.0),
+        {"fire-all-rules": {"out-identifier": "at0"}},
+        {"advance-session-time": {"amount": 600_001}}, reading(20.0), {"fire-all-rules": {"out-identifier": "cool"}},
+        reading(90.0), {"fire-all-rules": {"out-identifier": "hot"}},
+    ], "defaultKieSession"))
+    assert (out["at0"], out["cool"], out["hot"]) == (1, 0, 1)
+    assert [a["params"]["text"] for a in out["actions"]] == ["hot (10m)", "hot (10m)"]
+    dispose(kie, "cepdocs")
+
+
+def test_doc_expires_over_rest(client):
+    base, sid = _docs_session(client)
+    try:
+        client.post(f"{base}/{sid}/facts", json={"facts": [{"type": "Heartbeat", "source": "pepper"}]})
+        assert client.post(f"{base}/{sid}/advance", json={"ms": 9_000, "fire": True}).json()["fact_count"] == 1
+        assert client.post(f"{base}/{sid}/advance", json={"ms": 2_000, "fire": True}).json()["fact_count"] == 0
+        assert client.get(f"{base}/{sid}/facts").json()["facts"] == []
+    finally:
+        client.delete(f"{base}/{sid}")
