@@ -343,6 +343,35 @@ def plot(r: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+BUSINESS_RESULTS = ROOT / "bench" / "results" / "growth_bench_business.json"
+
+
+def business(args: argparse.Namespace) -> None:
+    """The gateway's build run (cold deploy, one-rule redeploys, first fire after each, fire
+    latency, RSS; each process checks its firings against the generator's model) on the second
+    generator's rule bases, one process per size; the rows go to BUSINESS_RESULTS."""
+    env = {"GROWTH_GENERATOR": "business", "GROWTH_SEED": str(args.seed)}
+    results = {"generator": "business", "seed": args.seed, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
+               "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "runs": {}}
+    work = Path(tempfile.mkdtemp(prefix="printeps-growth-business-"))
+    for n in [int(s) for s in args.sizes.split(",")]:
+        print(f"{n} rules (business generator, seed {args.seed})", flush=True)
+        results["runs"][str(n)] = run(sys.executable, "growth_gateway_peer.py", "build", str(n), str(work / f"cache-{n}"),
+                                      str(work / f"set-{n}.bin"), env=env)
+    results["load_end"] = os.getloadavg()
+    BUSINESS_RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    BUSINESS_RESULTS.write_text(json.dumps(results, indent=1), encoding="utf-8")
+    for n, r in results["runs"].items():
+        if "error" in r:
+            print(f"{n}: {r['error']}")
+            continue
+        stats = r["cold_deploy"]["stats"]
+        print(f"{n}: cold deploy {r['cold_deploy']['seconds']:.1f} s (built {stats.get('rules_built')}, compiled "
+              f"{stats.get('rules_compiled')}), redeploy median {r['redeploy']['median_s']:.2f} s, first fire after it "
+              f"{r['redeploy']['first_fire_median_ms']:.2f} ms, fire p50/p99 {r['fire']['p50_ms']:.2f}/{r['fire']['p99_ms']:.2f} ms, "
+              f"correct {r['fire']['correct']}, peak RSS {r.get('peak_rss_mb')} MB, load {r['load_before']:.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", default="100,1000,10000")
@@ -353,7 +382,14 @@ def main() -> None:
     parser.add_argument("--only", default=",".join(ALL_RUNS),
                         help=f"which runs (of {', '.join(ALL_RUNS)}); with --merge, the others are kept from the saved results")
     parser.add_argument("--merge", action="store_true", help="update the saved results instead of starting new ones")
+    parser.add_argument("--generator", choices=("growth", "business"), default="growth",
+                        help="business: the second generator (bench/peers/business_rules.py), gateway runs only, "
+                             "saved to bench/results/growth_bench_business.json (reported by hand in docs/benchmarks.md)")
+    parser.add_argument("--seed", type=int, default=1, help="the business generator's seed")
     args = parser.parse_args()
+    if args.generator == "business":
+        business(args)
+        return
     if args.from_results:
         results = json.loads(RESULTS.read_text(encoding="utf-8"))
     else:

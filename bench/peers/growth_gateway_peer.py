@@ -12,6 +12,7 @@ Usage (project venv): .venv/bin/python bench/peers/growth_gateway_peer.py MODE N
 
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import tempfile
@@ -19,12 +20,29 @@ import time
 from pathlib import Path
 
 from common import Clock, emit, rss_mb
-from growth_rules import drl_files as _drl_files
-from growth_rules import expected_firings, sample_facts
 
+# GROWTH_GENERATOR=business: the second, independent generator (business_rules.py, seeded by
+# GROWTH_SEED) instead of growth_rules.py; everything else measures the same way.
+GENERATOR = os.environ.get("GROWTH_GENERATOR", "growth")
+SEED = int(os.environ.get("GROWTH_SEED", "1"))
 
-def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
-    return _drl_files(n, variants, examples=True)  # a rule set with examples, as authors write them
+if GENERATOR == "business":
+    from business_rules import BusinessRules
+
+    def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
+        return BusinessRules(SEED, n, variants=variants or {}).drl_files()
+
+    def sample_facts(k: int = 0) -> list[dict]:
+        return BusinessRules(SEED, 0).facts(k, applicants=2, loans=3)  # 5 facts, as the first generator's
+
+    def expected_firings(n: int, facts: list[dict], variants: dict[int, int] | None = None) -> dict[str, int]:
+        return {r: len(t) for r, t in BusinessRules(SEED, n, variants=variants or {}).expected(facts).items()}
+else:
+    from growth_rules import drl_files as _drl_files
+    from growth_rules import expected_firings, sample_facts
+
+    def drl_files(n: int, variants: dict[int, int] | None = None) -> dict[str, str]:
+        return _drl_files(n, variants, examples=True)  # a rule set with examples, as authors write them
 
 EDITS = 5
 WARM_FIRES = 2000
@@ -65,8 +83,9 @@ def deploy(engine, files) -> dict:
     return {"seconds": clock.seconds, "stats": stats}
 
 
-def fire_latency(engine, n: int) -> dict:
-    """Engine.fire of 5 facts (the default answer: actions, fired rules with their facts, facts)."""
+def fire_latency(engine, n: int, variants: dict[int, int] | None = None) -> dict:
+    """Engine.fire of 5 facts (the default answer: actions, fired rules with their facts, facts);
+    checked against the model of the live set (``variants``: the last redeploy's edit)."""
     facts = [sample_facts(k) for k in range(50)]
     for k in range(WARM_FIRES):
         engine.fire("growth", facts[k % 50])
@@ -75,7 +94,7 @@ def fire_latency(engine, n: int) -> dict:
         t = time.perf_counter()
         engine.fire("growth", facts[k % 50])
         samples.append((time.perf_counter() - t) * 1000)
-    correct = all(_counts(engine.fire("growth", facts[k])) == expected_firings(n, facts[k]) for k in range(10))
+    correct = all(_counts(engine.fire("growth", facts[k])) == expected_firings(n, facts[k], variants) for k in range(10))
     firings = statistics.fmean(len(engine.fire("growth", f).fired) for f in facts)
     return {"p50_ms": percentile(samples, 0.5), "p99_ms": percentile(samples, 0.99), "mean_ms": statistics.fmean(samples),
             "max_ms": max(samples), "correct": correct, "firings_per_request": firings, "requests": REQUESTS}
@@ -102,6 +121,7 @@ def redeploys(engine, n: int, edits: int = EDITS) -> dict:
         out["stats"].append(done["stats"])
         out["first_fire_ms"].append(result.duration_ms)
         out["first_fire_wall_ms"].append(wall.seconds * 1000)
+    out["live_variants"] = {rule: edits} if edits else {}  # the set now live: the last edit only
     out["median_s"] = statistics.median(out["seconds"])
     out["first_fire_median_ms"] = statistics.median(out["first_fire_ms"])
     return out
@@ -115,7 +135,8 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     with Clock() as wall:
         result = engine.fire("growth", sample_facts(0))
     first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000}
-    out = {"peer": "gateway", "mode": "incremental" if incremental else "whole", "rules": n, "jvm_start_s": jvm_s,
+    out = {"peer": "gateway", "generator": GENERATOR, "mode": "incremental" if incremental else "whole", "rules": n,
+           "jvm_start_s": jvm_s,
            "cold_deploy": first, "first_fire_after_cold_deploy": first_fire}
     if archive and incremental:
         from gateway.engine import compiler
@@ -129,7 +150,7 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
         out["export"] = {"seconds": exported.seconds, "bytes": len(data)}
     # the whole path recompiles everything per edit: at 10,000 rules one edit tells enough
     out["redeploy"] = redeploys(engine, n, EDITS if incremental or n < 10_000 else 1)
-    out["fire"] = fire_latency(engine, n)
+    out["fire"] = fire_latency(engine, n, out["redeploy"]["live_variants"])
     from gateway import jvm
 
     runtime = jvm.jclass("java.lang.Runtime").getRuntime()

@@ -58,6 +58,7 @@ class CompiledRuleSet:
     plan: dict[str, Any] = field(default_factory=dict)  # which cached units it was assembled from
     stats: Any = None  # incremental.BuildStats: what the build compiled and reused, and how long it took
     warmed: bool = False  # set by warmup.warm once its classes are loaded and its paths exercised
+    warm_stats: Any = None  # warmup.WarmStats of that warm-up (None: not warmed)
     unit_cache: Any = field(default=None, repr=False)  # the UnitCache holding its units (for export)
 
 

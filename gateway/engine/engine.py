@@ -16,6 +16,7 @@ newer version.
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import threading
@@ -89,6 +90,7 @@ class Engine:
         self._lock = threading.RLock()
         self._listeners: list[Listener] = []
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
+        self._recent: dict[str, collections.deque[str]] = {}  # rule set -> its last requests' facts (warm-up samples)
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
         self._warm_up_stop = threading.Event()
         self._warm_up_thread: threading.Thread | None = None
@@ -124,8 +126,24 @@ class Engine:
             raise CompileFailed(problems)
         self._declared[compiled.hash] = kmodule.declarations(files)
         if warm:
-            warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s)
+            warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s, recent=self.recent_requests(label))
         return compiled
+
+    RECENT_REQUESTS = 8  # per rule set: the warm-up samples a new version gets from real traffic
+    RECENT_MAX_BYTES = 64 * 1024  # a bigger request is not kept (warming is about paths, not volume)
+
+    def recent_requests(self, name: str) -> list[str]:
+        """The facts (JSON) of the last stateless fires of ``name`` in this process, oldest first."""
+        kept = self._recent.get(name)
+        return list(kept) if kept else []
+
+    def _remember(self, name: str, facts_json: str) -> None:
+        if name == DRAFT or len(facts_json) > self.RECENT_MAX_BYTES:
+            return
+        kept = self._recent.get(name)
+        if kept is None:
+            kept = self._recent.setdefault(name, collections.deque(maxlen=self.RECENT_REQUESTS))
+        kept.append(facts_json)
 
     def validate(self, name: str, files: dict[str, str],
                  on_progress: Callable[[int, int, str], None] | None = None) -> list[CompileError]:
@@ -390,6 +408,7 @@ class Engine:
         record_facts: bool,
     ) -> FireResult:
         facts_json = encode_facts(facts, self.settings.engine.max_facts)
+        self._remember(name, facts_json)
         limit = int(fire_limit or self.settings.engine.fire_limit)
         started = time.perf_counter()
         answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts))

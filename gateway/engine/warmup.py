@@ -7,7 +7,10 @@ hundred times, and the Java helpers meet its declared types for the first time. 
 sample facts before the swap moves that cost from the first customer to the deploy.
 
 Sample facts are the rule set's ``examples.json`` fact lists when it has them (they exercise the
-paths real requests take), plus one fact of each declared type with plain values. Firing errors
+paths real requests take), the last requests the previous version served (``recent``: whatever
+the rules' shapes, they reach the joins, accumulates and negations real requests reach, which
+made-up facts stopped at the first constraint do not), plus one fact of each declared type with
+plain values. Firing errors
 (a then-part that throws on made-up facts, a loop) are ignored: warming must never fail a deploy.
 """
 
@@ -38,10 +41,12 @@ class WarmStats:
     first_ms: float = 0.0
     last_ms: float = 0.0
     seconds: float = 0.0
+    samples: int = 0  # fact lists fired
+    recent: int = 0  # of which the last requests the previous version served
 
 
 def warm(compiled: CompiledRuleSet, files: dict[str, str] | None = None, budget_s: float = 0.25,
-         max_fires: int = 300, fire_limit: int = 1000) -> WarmStats:
+         max_fires: int = 300, fire_limit: int = 1000, recent: list[str] | None = None) -> WarmStats:
     """Fires ``compiled`` on sample facts until it answers as fast as it is going to (the last
     rounds no slower than twice the best), ``max_fires`` or ``budget_s``; once per compiled rule
     set (later calls return at once).
@@ -54,7 +59,10 @@ def warm(compiled: CompiledRuleSet, files: dict[str, str] | None = None, budget_
             return stats
         compiled.warmed = True
     samples = [json.dumps(facts) for facts in example_fact_sets(files or {})]
+    samples.extend(recent or ())
     samples.append(json.dumps(plain_facts(compiled.types)))
+    stats.samples, stats.recent = len(samples), len(recent or ())
+    compiled.warm_stats = stats
     started = time.perf_counter()
     runner = compiled.runner
     best = [float("inf")] * len(samples)  # per sample: requests differ in cost, compare like with like

@@ -25,10 +25,12 @@ from typing import Any
 
 FACT_HANDLE = "org.drools.core.common.DefaultFactHandle"
 FLAT_QUERY_RESULTS = "org.drools.core.runtime.rule.impl.FlatQueryResults"
+DISCONNECTED_HANDLE = "org.drools.core.common.DisconnectedFactHandle"
 PROCESS_COMMANDS = ("start-process", "signal-event", "complete-work-item", "abort-work-item", "abort-process-instance",
                     "create-process-instance", "start-process-instance", "get-process-instance", "get-work-item")
 TIME_UNITS_MS = {"NANOSECONDS": 1e-6, "MICROSECONDS": 1e-3, "MILLISECONDS": 1, "SECONDS": 1000, "MINUTES": 60_000,
                  "HOURS": 3_600_000, "DAYS": 86_400_000}
+STRING_OUT_IDENTIFIER = ("fire-all-rules", "get-session-time")  # FireAllRulesCommand(String), GetSessionTimeCommand(String)
 NO_ARGUMENTS = ("fire-all-rules", "dispose", "get-objects", "clear-agenda", "get-session-time", "get-fact-handles")
 
 
@@ -121,8 +123,13 @@ def _step(index: int, name: str, raw: Any) -> Step:
         raise BatchError("fire-until-halt would hold the session until halted: send fire-all-rules", index, name)
     if name == "apply-pmml-model-command":
         raise BatchError("PMML models are not supported", index, name)
-    args = _args(index, name, raw)
-    out = _out(args)
+    if isinstance(raw, str) and name in STRING_OUT_IDENTIFIER:
+        # KIE Server's JSON reader builds these with their one-String constructor: the text is the
+        # out-identifier, "" too (a real KIE Server answers {"fire-all-rules": ""} under the key "")
+        args, out = {}, raw
+    else:
+        args = _args(index, name, raw)
+        out = _out(args)
     if name == "insert":
         fact = fact_from_kie(_required(args, "object", index, name), index, name)
         ret = args.get("return-object", args.get("returnObject", True)) is not False
@@ -141,13 +148,19 @@ def _step(index: int, name: str, raw: Any) -> Step:
             raise BatchError("agenda filters are not supported: put the rules in an agenda group and send set-focus", index, name)
         return Step(index, name, {"op": "fire", "max": _int(args.get("max", -1), index, name, "max"), "out": out}, out, out)
     if name == "get-objects":
-        return Step(index, name, {"op": "get_objects", "type": _class_filter(args, index, name), "out": out}, out, out)
+        # KieSession.getObjects() reads the default entry point's object store only
+        return Step(index, name, {"op": "get_objects", "type": _class_filter(args, index, name), "ep": "DEFAULT", "out": out},
+                    out, out)
     if name == "get-object":
         return Step(index, name, {"op": "get_object", "handle": fact_handle_text(args, index, name), "out": out}, out, out)
     if name in ("retract", "delete"):
         return Step(index, name, {"op": "delete", "handle": fact_handle_text(args, index, name)})
     if name == "modify":
-        return Step(index, name, {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name)})
+        # KIE's ModifyCommand sets the fields, then update(handle, object) with no property names:
+        # every rule on the type is re-evaluated, as after a whole-fact update
+        command = {"op": "modify", "handle": fact_handle_text(args, index, name), "set": _setters(args, index, name),
+                   "whole": True}
+        return Step(index, name, command)
     if name == "update":
         fact = fact_from_kie(_required(args, "object", index, name), index, name)
         return Step(index, name, {"op": "update", "handle": fact_handle_text(args, index, name), "fact": fact})
@@ -186,7 +199,7 @@ def _step(index: int, name: str, raw: Any) -> Step:
         key = out or "session-currenttime"
         return Step(index, name, {"op": "get_time", "out": key}, key, key)
     if name == "get-fact-handles":
-        return Step(index, name, {"op": "get_fact_handles", "out": out}, out, out)
+        return Step(index, name, {"op": "get_fact_handles", "ep": "DEFAULT", "out": out}, out, out)  # as getObjects()
     if name == "dispose":
         return Step(index, name, {"op": "dispose"})
     known = ("insert, insert-elements, fire-all-rules, get-objects, get-object, retract (delete), modify, update, "
@@ -343,19 +356,35 @@ class Marshal:
         return {FACT_HANDLE: {"external-form": text}}
 
     def query(self, value: dict[str, Any]) -> dict[str, Any]:
-        rows = [{"element": [{"key": k, "value": self.object(v)} for k, v in row.items()]} for row in value["rows"]]
+        """KIE's ``FlatQueryResults``: per row, the values and the ``DisconnectedFactHandle`` of each
+        identifier that has a fact handle (query parameters included, as KIE)."""
+        rows = [_map([(k, self.object(v)) for k, v in row.items()]) for row in value["rows"]]
+        handles = [_map([(k, {DISCONNECTED_HANDLE: self.disconnected(h)}) for k, h in row.items()])
+                   for row in value.get("handles") or [{} for _ in rows]]
         return {FLAT_QUERY_RESULTS: {
-            "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": []},
+            "idFactHandleMaps": {"type": "LIST", "componentType": None, "element": handles},
             "idResultMaps": {"type": "LIST", "componentType": None, "element": rows},
             "identifiers": {"type": "SET", "componentType": None, "element": value["identifiers"]},
         }}
 
+    def disconnected(self, handle: dict[str, Any]) -> dict[str, Any]:
+        """A fact handle as KIE Server's JSON writes a ``DisconnectedFactHandle`` (object included)."""
+        return {"id": handle["id"], "identityHashCode": handle["identityHashCode"], "objectHashCode": handle["objectHashCode"],
+                "recency": handle["recency"], "object": self.object(handle.get("object")), "traitType": handle["traitType"],
+                "external-form": handle["external"]}
+
+
+def _map(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A map as KIE's JAXB list adapter writes it in JSON."""
+    return {"type": "MAP", "componentType": None, "element": [{"key": k, "value": v} for k, v in pairs]}
+
 
 def execution_results(batch: Batch, results: list[dict[str, Any]], marshal: Marshal) -> dict[str, Any]:
-    """``{"results": [{"key", "value"}], "facts": [{"key", "value"}]}`` as KIE Server answers."""
+    """``{"results": [{"key", "value"}], "facts": [{"key", "value"}]}`` as KIE Server answers: one
+    entry per key (KIE's ``ExecutionResultImpl`` keeps maps, so a key used twice holds the last value)."""
     by_index = {r["i"]: r for r in results}
-    out_results: list[dict[str, Any]] = []
-    out_facts: list[dict[str, Any]] = []
+    out_results: dict[str, Any] = {}
+    out_facts: dict[str, Any] = {}
     for step in batch.steps:
         if step.command is None:
             continue
@@ -377,11 +406,12 @@ def execution_results(batch: Batch, results: list[dict[str, Any]], marshal: Mars
                 value = marshal.object(result["value"])
             else:
                 continue
-            out_results.append({"key": step.value_key, "value": value})
+            out_results[step.value_key] = value
         if step.fact_key is not None and result.get("handles"):
             handles = [marshal.handle(h) for h in result["handles"]]
-            out_facts.append({"key": step.fact_key, "value": handles if step.many else handles[0]})
-    return {"results": out_results, "facts": out_facts}
+            out_facts[step.fact_key] = handles if step.many else handles[0]
+    return {"results": [{"key": k, "value": v} for k, v in out_results.items()],
+            "facts": [{"key": k, "value": v} for k, v in out_facts.items()]}
 
 
 def _command_index(batch: Batch, step: Step) -> int:

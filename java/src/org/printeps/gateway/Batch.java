@@ -31,11 +31,11 @@ import org.kie.api.time.SessionPseudoClock;
  * shows its state at the end of the batch.
  *
  * Commands (JSON objects, key "op"): insert {facts, ep, out, ret}, fire {max, out},
- * get_objects {type, out, handles}, get_object {handle, out}, delete {handle},
- * modify {handle, set: [[field, value]...]}, update {handle, fact}, set_global {name, value, out},
+ * get_objects {type, ep, out, handles}, get_object {handle, out}, delete {handle},
+ * modify {handle, set: [[field, value]...], whole (update without property names, as KIE's ModifyCommand)}, update {handle, fact}, set_global {name, value, out},
  * get_global {name, out}, query {name, args, out}, set_focus {group}, clear_agenda_group {group},
  * clear_agenda, clear_activation_group {group}, advance {ms, out}, get_time {out},
- * get_fact_handles {out}, fact_count {out}, dispose.
+ * get_fact_handles {ep, out}, fact_count {out}, dispose.
  */
 final class Batch {
     private final Session s;
@@ -128,6 +128,7 @@ final class Batch {
                 if (p.op.equals("update")) p.objects = build(p, Collections.singletonList(p.cmd.get("fact")));
                 break;
             }
+            case "get_objects": p.value = filterClass(p); break;
             case "set_global": p.value = globalValue(p); break;
             case "query": p.args = queryArgs(p); break;
             case "advance":
@@ -138,7 +139,7 @@ final class Batch {
                 }
                 if (number(p, "ms") < 0) throw new Refused(p.index, p.op, "clock", "amount", "the clock cannot be moved back");
                 break;
-            case "fire": case "get_objects": case "get_global": case "set_focus": case "clear_agenda_group":
+            case "fire": case "get_global": case "set_focus": case "clear_agenda_group":
             case "clear_agenda": case "clear_activation_group": case "get_time": case "get_fact_handles":
             case "fact_count": case "dispose":
                 break;
@@ -241,6 +242,22 @@ final class Batch {
             if (text.equals("false")) return Boolean.FALSE;
         }
         return v;
+    }
+
+    /** get_objects' class filter (null: none): a declared type, or a Java class such as
+     *  java.lang.Number; an unknown name is refused, as KIE's ClassObjectFilter fails to load it. */
+    private Class<?> filterClass(Prepared p) throws Refused {
+        Object type = p.cmd.get("type");
+        if (type == null) return null;
+        String name = String.valueOf(type);
+        TypeRegistry.TypeInfo info = types.type(name);
+        if (info != null) return info.cls;
+        try {
+            return Class.forName(name, false, Session.class.getClassLoader());
+        } catch (ClassNotFoundException | LinkageError e) {
+            throw new Refused(p.index, p.op, "facts", "class-object-filter", "unknown class '" + name
+                    + "' in the class-object-filter (the rule set declares: " + types.knownTypes() + ")");
+        }
     }
 
     private Object globalValue(Prepared p) throws Refused {
@@ -356,14 +373,13 @@ final class Batch {
                 break;
             }
             case "get_objects": {
-                Object type = p.cmd.get("type");
-                TypeRegistry.TypeInfo info = type instanceof String ? types.type((String) type) : null;
+                Class<?> type = (Class<?>) p.value;
                 List<FactHandle> listed = new ArrayList<FactHandle>();
                 List<Object> objects = new ArrayList<Object>();
-                for (FactHandle h : Handles.all(ks)) {
+                for (FactHandle h : handlesIn(p)) {
                     Object f = ((org.drools.core.common.InternalFactHandle) h).getObject();
                     if (f instanceof Actions) continue;
-                    if (type != null && (info == null || !info.cls.isInstance(f))) continue;
+                    if (type != null && !type.isInstance(f)) continue;
                     listed.add(h);
                     objects.add(f);
                 }
@@ -393,7 +409,8 @@ final class Batch {
                     names[k++] = f.name;
                 }
                 EntryPoint ep = ks.getEntryPoint(((org.drools.core.common.InternalFactHandle) p.handle).getEntryPointName());
-                ep.update(p.handle, fact, names);
+                if (Boolean.TRUE.equals(p.cmd.get("whole"))) ep.update(p.handle, fact);  // KIE's ModifyCommand
+                else ep.update(p.handle, fact, names);  // only the rules that react to these fields
                 o.value = fact;
                 o.hasValue = p.out != null;
                 break;
@@ -423,15 +440,26 @@ final class Batch {
                     throw new Refused(p.index, p.op, "query", "name", "query '" + p.cmd.get("name") + "' failed: " + Runner.rootMessage(e));
                 }
                 List<Object> rows = new ArrayList<Object>();
+                List<Object> handles = new ArrayList<Object>();
                 String[] ids = results.getIdentifiers();
                 for (QueryResultsRow row : results) {
+                    // as KIE's FlatQueryResults: the identifiers that have a fact handle, with it
                     java.util.LinkedHashMap<String, Object> r = new java.util.LinkedHashMap<String, Object>();
-                    for (String id : ids) r.put(id, row.get(id));
+                    java.util.LinkedHashMap<String, Object> hs = new java.util.LinkedHashMap<String, Object>();
+                    for (String id : ids) {
+                        FactHandle h = row.getFactHandle(id);
+                        if (h == null) continue;
+                        Object v = row.get(id);
+                        r.put(id, v);
+                        hs.put(id, disconnected((org.drools.core.common.InternalFactHandle) h, v));
+                    }
                     rows.add(r);
+                    handles.add(hs);
                 }
                 java.util.LinkedHashMap<String, Object> value = new java.util.LinkedHashMap<String, Object>();
                 value.put("identifiers", java.util.Arrays.asList(ids));
                 value.put("rows", rows);
+                value.put("handles", handles);
                 o.value = value;
                 o.hasValue = true;
                 break;
@@ -458,7 +486,7 @@ final class Batch {
             case "fact_count": o.value = ks.getFactCount(); o.hasValue = true; break;
             case "get_fact_handles": {
                 List<Object> texts = new ArrayList<Object>();
-                for (FactHandle h : Handles.all(ks)) {
+                for (FactHandle h : handlesIn(p)) {
                     if (!(((org.drools.core.common.InternalFactHandle) h).getObject() instanceof Actions)) texts.add(Handles.external(h));
                 }
                 o.value = texts;
@@ -468,6 +496,32 @@ final class Batch {
             case "dispose": s.dispose(); break;
             default: throw new Refused(p.index, p.op, "commands", null, "unknown command '" + p.op + "'");
         }
+    }
+
+    /** A query row's fact handle as KIE's DisconnectedFactHandle carries it; its object is the row's
+     *  value (for a query parameter the handle is the query's own, whose object is not a fact). */
+    private static Map<String, Object> disconnected(org.drools.core.common.InternalFactHandle h, Object value) {
+        Map<String, Object> out = new java.util.LinkedHashMap<String, Object>();
+        out.put("id", h.getId());
+        out.put("identityHashCode", h.getIdentityHashCode());
+        out.put("objectHashCode", h.getObjectHashCode());
+        out.put("recency", h.getRecency());
+        out.put("object", value);
+        out.put("traitType", String.valueOf(h.getTraitType()));
+        out.put("external", h.toExternalForm());
+        return out;
+    }
+
+    /** The handles a listing command reads: of its entry point "ep" only (KIE's getObjects() and
+     *  getFactHandles() read the default entry point), else of every entry point (the REST API). */
+    private List<FactHandle> handlesIn(Prepared p) {
+        Object ep = p.cmd.get("ep");
+        if (ep == null) return Handles.all(ks);
+        List<FactHandle> out = new ArrayList<FactHandle>();
+        for (FactHandle h : Handles.all(ks)) {
+            if (ep.equals(((org.drools.core.common.InternalFactHandle) h).getEntryPointName())) out.add(h);
+        }
+        return out;
     }
 
     private Object live(Prepared p) throws Refused {

@@ -35,6 +35,14 @@ public final class Runner {
      * deleted again keeps those memories, empty, and is back in the state of a fresh one.
      */
     private final java.util.concurrent.ConcurrentLinkedQueue<KieSession> idle;
+    /**
+     * Whether a rule uses date-effective or date-expires. Drools compares those with the session
+     * clock; KIE's sessions run on a realtime clock, so a rule effective "since 2020" fires there.
+     * The gateway's pseudo clocks start at 0 (1970) for reproducible replays: for such a rule base
+     * they start at the wall-clock time instead (see {@link #startClock}), or those rules would
+     * never (or always) fire.
+     */
+    private final boolean calendarRules;
     static final int IDLE_SESSIONS = 8;
     static final int REUSE_MAX_FACTS = 1000;
 
@@ -45,6 +53,29 @@ public final class Runner {
         this.sessionConf = KieServices.Factory.get().newKieSessionConfiguration();
         this.sessionConf.setOption(ClockTypeOption.get("pseudo"));
         this.idle = reusable(kieBase, types) ? new java.util.concurrent.ConcurrentLinkedQueue<KieSession>() : null;
+        this.calendarRules = usesCalendarAttributes(kieBase);
+    }
+
+    static boolean usesCalendarAttributes(KieBase kb) {
+        for (KiePackage p : kb.getKiePackages()) {
+            for (org.kie.api.definition.rule.Rule r : p.getRules()) {
+                if (!(r instanceof org.drools.core.definitions.rule.impl.RuleImpl)) continue;
+                org.drools.core.definitions.rule.impl.RuleImpl rule = (org.drools.core.definitions.rule.impl.RuleImpl) r;
+                if (rule.getDateEffective() != null || rule.getDateExpires() != null) return true;
+            }
+        }
+        return false;
+    }
+
+    /** Moves a pseudo clock to the wall-clock time (never back) when the rule base has calendar rules. */
+    private KieSession startClock(KieSession s) {
+        if (calendarRules && s.getSessionClock() instanceof org.kie.api.time.SessionPseudoClock) {
+            long behind = System.currentTimeMillis() - s.getSessionClock().getCurrentTime();
+            if (behind > 0) {
+                ((org.kie.api.time.SessionPseudoClock) s.getSessionClock()).advanceTime(behind, java.util.concurrent.TimeUnit.MILLISECONDS);
+            }
+        }
+        return s;
     }
 
     /**
@@ -84,7 +115,7 @@ public final class Runner {
 
     KieSession takeSession() {
         KieSession s = idle == null ? null : idle.poll();
-        return s != null ? s : newSession();
+        return s != null ? startClock(s) : newSession();
     }
 
     /** Deletes what a request left (its facts, and what its rules inserted) and keeps the session
@@ -128,7 +159,7 @@ public final class Runner {
     }
 
     KieSession newSession() {
-        return kieBase.newKieSession(sessionConf, null);
+        return startClock(kieBase.newKieSession(sessionConf, null));
     }
 
     /** A session with a realtime clock (KIE's default) or, as {@link #newSession()}, a pseudo clock. */
