@@ -24,6 +24,15 @@ app.add_typer(workflow_app, name="workflow")
 
 DEFAULT_SERVER = "http://127.0.0.1:8080"
 ConfigOption = typer.Option(None, "--config", "-c", help="Settings YAML (default: $PRINTEPS_CONFIG).")
+def _role(value: str) -> str:
+    if value not in ("developer", "author"):
+        raise typer.BadParameter("use 'developer' or 'author'")
+    return value
+
+
+RoleOption = typer.Option("developer", "--role", callback=_role,
+                          help="Check as this role: 'author' also applies the rule policy, as a gateway does "
+                               "for an author's deploy (a local run is a developer's).")
 
 
 def _settings(config: Optional[Path]):
@@ -105,6 +114,7 @@ def serve(
     """Run the gateway: REST API, KIE Server compatible API, workbench, stream engine and the ROS
     node, over the Information State (MONGO_URI, or the embedded database)."""
     settings = _settings(config)
+    _keep_open_mode_local(settings, host or settings.api.host)
     if workers > 1:
         from gateway.serve import Supervisor, config_path
 
@@ -126,8 +136,23 @@ def ros_node(
     """The ROS launcher (no `ros2 launch` here): the gateway with its ROS node, until Ctrl-C."""
     from gateway.app import run
 
+    settings = _settings(config)
+    if rest:
+        _keep_open_mode_local(settings, settings.api.host)
     sys.setswitchinterval(0.001)
-    _run_or_explain(lambda: run(_settings(config), rest=rest, ros=True, port=port))
+    _run_or_explain(lambda: run(settings, rest=rest, ros=True, port=port))
+
+
+def _keep_open_mode_local(settings: Any, host: str) -> None:
+    """Open mode (no tokens) listens on this machine only: exit 2 saying how to configure tokens,
+    or warn at every start when PRINTEPS_API_OPEN=1 forces it (see gateway.serve.open_mode_check)."""
+    from gateway.serve import open_mode_check
+
+    refusal, warning = open_mode_check(settings.api, host)
+    if refusal:
+        _fail(refusal, code=2)
+    if warning:
+        typer.echo(warning, err=True)
 
 
 def _run_or_explain(start: Any) -> None:
@@ -231,9 +256,11 @@ def _open_store_or_fail(open_store: Any, settings: Any) -> Any:
 @rules_app.command("validate")
 def rules_validate(
     path: Path = typer.Argument(..., help="A rule set folder or a single .drl/.dslr file."),
+    role: str = RoleOption,
     config: Optional[Path] = ConfigOption,
 ) -> None:
-    """Compile locally; print ``file:line:col: message`` per problem and exit 1 if there is any."""
+    """Compile locally; print ``file:line:col: message`` per problem and exit 1 if there is any.
+    With ``--role author``, first what the rule policy refuses (as a gateway would for an author)."""
     from gateway.engine import Engine, EngineError
 
     name, files = read_ruleset(path)
@@ -243,7 +270,7 @@ def rules_validate(
 
     progress = TerminalProgress() if sys.stderr.isatty() else None  # big sets take a while: show how far
     try:
-        errors = [e.to_dict() for e in engine.validate(name, files, on_progress=progress)]
+        errors = [e.to_dict() for e in engine.validate(name, files, on_progress=progress, role=role)]
     except EngineError as exc:
         body = exc.to_dict()
         errors = body.get("errors") or [{"file": "", "line": 0, "column": 0, "message": str(exc)}]
@@ -269,6 +296,7 @@ def rules_test(
     version: Optional[int] = typer.Option(None, help="With --server and no PATH: this stored version (default: current)."),
     token: Optional[str] = typer.Option(None, help="Token (default: $PRINTEPS_TOKEN)."),
     junit: Optional[Path] = typer.Option(None, "--junit", help="Also write the results as JUnit XML to this file."),
+    role: str = RoleOption,
     config: Optional[Path] = ConfigOption,
 ) -> None:
     """Run a rule set's test scenarios; print green/red per scenario and the rules no scenario
@@ -296,7 +324,7 @@ def rules_test(
 
         engine = Engine(_settings(config))
         try:
-            report = run_scenarios(engine, files, name).to_dict()
+            report = run_scenarios(engine, files, name, role=role).to_dict()
         except EngineError as exc:
             body = exc.to_dict()
             for line in format_errors(body.get("errors") or [{"message": str(exc)}], folder):

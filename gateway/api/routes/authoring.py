@@ -56,10 +56,11 @@ class TableWriteBody(TableBody):
 
 
 @router.post("/api/rulesets/{name}/test")
-def test_ruleset(name: RuleSetName, engine: EngineDep, _: Caller, body: TestBody | None = None) -> JSON:
+def test_ruleset(name: RuleSetName, engine: EngineDep, who: Caller, body: TestBody | None = None) -> JSON:
     """Run the rule set's test scenarios: ``{"ok", "summary", "passed", "failed", "errors",
     "results": [{name, file, line, status, failures, given, expected, actual}], "coverage":
-    {"rules", "fired", "not_fired"}}``. Deploys nothing."""
+    {"rules", "fired", "not_fired"}}``. Deploys nothing. For any role but developer the rule policy
+    checks the files first (422 ``{"kind": "policy"}``: nothing compiled, no scenario ran)."""
     body = body or TestBody()
     if body.files is not None and body.version is not None:
         raise ApiError(422, "give either 'files' (a draft) or 'version', not both")
@@ -68,7 +69,7 @@ def test_ruleset(name: RuleSetName, engine: EngineDep, _: Caller, body: TestBody
     else:
         stored = engine.version(name, body.version) if body.version is not None else engine.current(name)
         files, version = dict(stored.files), stored.info.version
-    return JSON(run_scenarios(engine, files, name, version).to_dict())
+    return JSON(run_scenarios(engine, files, name, version, role=who.role).to_dict())
 
 
 @router.post("/api/decision-tables/read")
