@@ -34,6 +34,7 @@ compiler maps it to the author's file (a ``.dslr`` line, a decision table cell) 
 from __future__ import annotations
 
 import re
+import unicodedata
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -116,7 +117,7 @@ _JAVA_LANG = frozenset({
 _TOKEN = re.compile(r'''
     (?P<ws>[ \t\r\f]+|\n)
   | (?P<comment>//[^\n]*|\#[^\n]*|/\*.*?(?:\*/|\Z))
-  | (?P<str>"""(?:\\.|[^\\])*?(?:"""|\Z)|"(?:\\.|[^"\\\n])*"?|'(?:\\.|[^'\\\n])*'?)
+  | (?P<str>"""[ \t\f]*\r?\n(?:\\.|[^\\])*?(?:"""|\Z)|"(?:\\.|[^"\\\n])*"?|'(?:\\.|[^'\\\n])*'?)
   | (?P<num>\d[\w]*(?:\.\d[\w]*)?(?:[eE][+-]?\d\w*)?)
   | (?P<id>(?:[^\W\d]|\$)(?:\w|\$)*)
   | (?P<op>->|::|==|!=|<=|>=|&&|\|\||:=|\S)
@@ -131,9 +132,28 @@ class Token:
     column: int
 
 
+_UNICODE_ESCAPE = re.compile(r"(?<!\\)((?:\\\\)*)\\u+([0-9a-fA-F]{4})")
+_CONTROL_IGNORABLE = re.compile("[\x00-\x08\x0e-\x1b\x7f-\x9f]")
+_NON_ASCII = re.compile(r"[^\x00-\x7f]+")
+
+
+def _java_text(text: str) -> str:
+    """The text as javac reads it: ``\\uXXXX`` escapes translated first (so ``"\\u0022`` closes a
+    string, as it does for the compiler), then the characters Java ignores inside identifiers
+    removed (``Character.isIdentifierIgnorable``: ``Sys<U+200B>tem`` *is* ``System`` to javac)."""
+    if "\\u" in text:
+        text = _UNICODE_ESCAPE.sub(lambda m: m.group(1) + chr(int(m.group(2), 16)), text)
+    text = _CONTROL_IGNORABLE.sub("", text)
+    if not text.isascii():
+        text = _NON_ASCII.sub(lambda m: "".join(c for c in m.group() if unicodedata.category(c) != "Cf"), text)
+    return text
+
+
 def tokenize(text: str) -> list[Token]:
     """The tokens of a DRL/Java text: identifiers, numbers, strings and operators with their 1-based
-    line and column; whitespace and comments dropped (``//``, ``/* */`` and DRL's ``#``)."""
+    line and column; whitespace and comments dropped (``//``, ``/* */`` and DRL's ``#``). The text
+    is read as javac reads it (:func:`_java_text`)."""
+    text = _java_text(text)
     out: list[Token] = []
     line, line_start = 1, 0
     for match in _TOKEN.finditer(text):
@@ -214,7 +234,8 @@ class _Known:
     their fields, globals and functions."""
 
     def __init__(self) -> None:
-        self.types: set[str] = set()
+        self.types: set[str] = set()  # simple names, any package (to tell patterns)
+        self.declared: set[tuple[str, str]] = set()  # (package, simple name): what a simple name resolves to
         self.qualified: set[str] = set()
         self.fields: set[str] = set()
         self.globals: set[str] = set()
@@ -244,6 +265,8 @@ class _Known:
                     names, _ = _dotted(tokens, j)
                     if names:
                         self.types.add(names[-1])
+                        self.declared.add((package, names[-1]) if len(names) == 1 else
+                                          (".".join(names[:-1]), names[-1]))
                         self.qualified.add(".".join(names) if len(names) > 1 else f"{package}.{names[0]}".lstrip("."))
                     self.fields.update(_declared_fields(tokens, j))
                 elif tok.text == "function":
@@ -253,6 +276,9 @@ class _Known:
                 elif tok.text == "query" and i + 1 < len(tokens):  # called from when-parts like a function
                     self.functions.add(tokens[i + 1].text.strip("\"'"))
             i += 1
+
+
+_ITEM_WORDS = frozenset({"package", "import", "global", "declare", "function", "rule", "query"})
 
 
 def _at_item_start(tokens: list[Token], i: int) -> bool:
@@ -307,6 +333,7 @@ class _FileChecker:
         self.policy = policy
         self.known = known
         self.tokens = tokens
+        self.package = ""
         self.imports: dict[str, str] = {}  # simple name -> qualified name (allowed or not)
         self.static_imports: set[str] = set()
         self.found: list[Violation] = []
@@ -330,10 +357,10 @@ class _FileChecker:
         i = 0
         while i < len(toks):
             tok = toks[i]
-            word = tok.text if tok.kind == "id" and _at_item_start(toks, i) else ""
+            word = tok.text if tok.kind == "id" else ""
             if word == "package":
                 names, i = _dotted(toks, i + 1)
-                package = ".".join(names)
+                package = self.package = ".".join(names)
                 if any(package == r or package.startswith(r + ".") for r in RESERVED_PACKAGES):
                     self.refuse(tok, package, f"rule policy: a rule set may not declare itself in package "
                                               f"'{package}' (its names would resolve to the JDK's classes)")
@@ -347,8 +374,14 @@ class _FileChecker:
                 i = self.declare(i + 1)
             elif word in ("function", "rule", "query"):
                 i = self.block(i, word)
-            else:
+            elif tok.text in (";", "end"):
                 i += 1
+            else:  # anything else (a top-level attribute, a stray word): names in it are checked like code
+                j = i + 1
+                while j < len(toks) and not (toks[j].kind == "id" and toks[j].text in _ITEM_WORDS):
+                    j += 1
+                self.code(i, j, mode="java")
+                i = j
         return self.found
 
     def import_(self, i: int) -> int:
@@ -502,8 +535,8 @@ class _FileChecker:
         in_fact = "pattern" in stack or "modify" in stack
         if head in JAVA_KEYWORDS and head not in ("this", "super"):
             return i + 1
-        if head.startswith("$") or head in self.known.globals or head in ("this", "super"):
-            return after  # a value: its members were checked above
+        if head.startswith("$") or head in ("this", "super"):
+            return after  # a value: its members are checked by chain()
         if head in ("drools", "kcontext"):
             if len(names) > 1 and names[1] not in DROOLS_METHODS:
                 self.refuse(toks[i + 2], f"{head}.{names[1]}",
@@ -531,7 +564,7 @@ class _FileChecker:
 
     def simple_type(self, tok: Token, name: str, used_as: str) -> None:
         """A capitalised simple name: a declared type, an import, a static import, or java.lang."""
-        if name in self.known.types or name in self.static_imports:
+        if (self.package, name) in self.known.declared or name in self.static_imports:
             return
         qualified = self.imports.get(name)
         if qualified is not None:

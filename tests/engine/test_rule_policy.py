@@ -146,7 +146,39 @@ def test_who_is_checked():
 
 
 def test_the_lexer_keeps_positions_and_skips_strings_chars_and_comments():
-    tokens = tokenize('a.b("x\\"y", \'c\') // z\n  /* q\n r */ """t\nu""" d')
+    tokens = tokenize('a.b("x\\"y", \'c\') // z\n  /* q\n r */ """\nt u""" d')
     assert [(t.kind, t.text) for t in tokens][:6] == [("id", "a"), ("op", "."), ("id", "b"), ("op", "("),
                                                       ("str", '"x\\"y"'), ("op", ",")]
-    assert tokens[-1].text == "d" and (tokens[-1].line, tokens[-1].column) == (4, 6)
+    assert tokens[-1].text == "d" and (tokens[-1].line, tokens[-1].column) == (4, 8)
+    assert [t.kind for t in tokenize('""" x')] == ["str", "str"]  # no line break: "" and an open string
+
+
+def test_names_are_read_as_javac_reads_them():
+    # a unicode escape closes the string for javac, so what follows is code
+    assert [n for _, _, n in violations(rule('actions.say("a", "\\u0022); System.exit(0); //");'))] == \
+        ["java.lang.System"]
+    assert violations(rule('actions.say("a", "caf\\u00e9 \\\\u0022 System.exit(0)");')) == []  # an escaped backslash
+    # characters javac ignores inside identifiers do not split a name
+    assert [n for _, _, n in violations(rule('new java\u200b.io.File("x").delete();'))] == ["java.io.File"]
+    assert [n for _, _, n in violations(rule('Sys\u00adtem.exit(0);'))] == ["java.lang.System"]
+    # three quotes open a text block only before a line break (else: "" and a string)
+    assert [n for _, _, n in violations(rule('String s = """" + Runtime.getRuntime() + """";'))] == \
+        ["java.lang.Runtime"]
+
+
+def test_a_type_declared_in_another_package_does_not_shadow_java_lang():
+    other = "package org.example.elsewhere;\ndeclare Runtime\n    id : String\nend\n"
+    here = 'package org.example.shop;\nrule "r" when then Runtime.getRuntime().exec("x"); end\n'
+    found = RulePolicy().check([("a.drl", other), ("b.drl", here)])
+    assert [v.name for v in found["b.drl"]] == ["java.lang.Runtime"] and found["a.drl"] == []
+    same = 'package org.example.elsewhere;\nrule "r" when then Runtime r = new Runtime(); end\n'
+    assert RulePolicy().check([("a.drl", other), ("c.drl", same)])["c.drl"] == []
+
+
+def test_nothing_at_the_top_level_escapes_the_check():
+    assert [n for _, _, n in violations(HEADER + 'import java.util.List function void f() { System.exit(0); }\n')] == \
+        ["java.lang.System"]
+    assert [n for _, _, n in violations(HEADER + 'dialect "java" java.lang.Runtime.getRuntime();\n')] == \
+        ["java.lang.Runtime"]
+    drl = HEADER + "global Actions java;\n" + 'rule "r" when then java.lang.Runtime.getRuntime(); end\n'
+    assert [n for _, _, n in violations(drl)] == ["java.lang.Runtime"]  # a global named like a package
