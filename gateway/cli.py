@@ -215,6 +215,9 @@ def import_cmd(
     folder: Path = typer.Argument(..., help="A folder in the seed layout (e.g. written by `printeps export`)."),
     comment: str = typer.Option("", help="Version comment for what changes."),
     author: str = typer.Option(os.environ.get("USER", "import"), help="Author recorded with the new versions."),
+    role: Optional[str] = typer.Option(None, "--role", callback=lambda v: v if v is None else _role(v),
+                                       help="Import as this role: 'author' applies the rule policy to each rule set "
+                                            "(default: the machine's own rights, logged as 'local')."),
     config: Optional[Path] = ConfigOption,
 ) -> None:
     """Make each item of FOLDER that differs from the current version a new version, checked like a
@@ -230,7 +233,7 @@ def import_cmd(
     try:
         gateway = build_gateway(settings, rest=False, ros=False, store=store, seed=False, warm_up=False, follow=False)
         try:
-            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}")
+            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}", role=role)
         finally:
             gateway.close()
     finally:

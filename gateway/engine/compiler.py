@@ -295,8 +295,12 @@ def policy_errors(files: dict[str, str], rule_policy: Any) -> list[CompileError]
         check_files(files)
     except InvalidRuleSet:
         return []
-    with _compile_lock:
-        sources, _, errors = _sources(files)
+    dsl_key = content_hash({f: t for f, t in files.items() if f.endswith(".dsl")})
+    if all((f, t, dsl_key) in _expansions for f, t in files.items() if f.endswith(".dslr")):
+        sources, _, errors = _sources(files)  # no JVM needed: a build in progress does not hold this up
+    else:
+        with _compile_lock:
+            sources, _, errors = _sources(files)
     if errors:
         return []
     by_file = {s.file: s for s in sources}

@@ -221,3 +221,31 @@ def test_the_docs_drl_examples_pass_the_policy():
     reception = read_folder(PROJECT / "rules" / "drl" / "reception")
     found = RulePolicy().check([("types.drl", reception["types.drl"]), *blocks])
     assert {f: v for f, v in found.items() if v} == {}
+
+
+def test_import_checks_each_rule_set_for_the_role_it_is_given(api, api_gateway, tmp_path):
+    from gateway.transfer import import_from
+
+    marker = tmp_path / "marker"
+    folder = tmp_path / "export" / "rules" / "drl" / "probe-imported"
+    folder.mkdir(parents=True)
+    for fname, text in probe_files("import", marker).items():
+        (folder / fname).write_text(text)
+    report = import_from(api_gateway, tmp_path / "export", author="alice", comment="from git", role="author")
+    assert len(report) == 1 and report[0][1].startswith("failed: ") and "rule policy" in report[0][1], report
+    assert "probe.drl:2:" in report[0][1] and not marker.exists()
+    report = import_from(api_gateway, tmp_path / "export", author="ops", comment="from git")  # the machine's rights
+    assert report == [("rule set probe-imported", "deployed v1")]
+    history = api.get("/api/rulesets/probe-imported/history", headers=CALLER).json()
+    assert [(e["event"], e["author"], e["role"]) for e in history] == [("refused", "alice", "author"),
+                                                                        ("deploy", "ops", "local")]
+
+
+def test_an_author_tests_a_stored_developer_version_as_it_serves(api, tmp_path):
+    files = probe_files("static call", tmp_path / "marker")
+    files["tests/probe.yaml"] = "- name: probe\n  given:\n    - {type: Customer, id: c}\n  expect:\n    fired: [probe]\n"
+    assert api.put("/api/rulesets/probe-stored", json={"files": files}, headers=DEV).status_code == 201
+    report = api.post("/api/rulesets/probe-stored/test", json={}, headers=AUTHOR)
+    assert report.status_code == 200 and report.json()["ok"] is True, report.text
+    draft = api.post("/api/rulesets/probe-stored/test", json={"files": files}, headers=AUTHOR)
+    assert draft.status_code == 422 and draft.json()["kind"] == "policy"
