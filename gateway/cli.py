@@ -233,7 +233,8 @@ def import_cmd(
     try:
         gateway = build_gateway(settings, rest=False, ros=False, store=store, seed=False, warm_up=False, follow=False)
         try:
-            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}", role=role)
+            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}",
+                                 role=role)
         finally:
             gateway.close()
     finally:

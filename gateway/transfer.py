@@ -96,7 +96,8 @@ def import_from(gateway: Any, folder: Path, *, author: str, comment: str,
     rules = folder / RULES
     if rules.is_dir():
         for sub in sorted(p for p in rules.iterdir() if p.is_dir()):
-            attempt(f"rule set {sub.name}", lambda sub=sub: gateway.engine.import_folder(sub, author, comment, role=role))
+            attempt(f"rule set {sub.name}",
+                    lambda sub=sub: gateway.engine.import_folder(sub, author, comment, role=role))
     knowledge = gateway.knowledge
     for kind, suffixes in (("ontology", (".ttl", ".owl", ".rdf")), ("swrl", (".swrl",))):
         files = sorted(p for p in (folder / ONTOLOGY).glob("*") if p.suffix in suffixes) if (folder / ONTOLOGY).is_dir() else []

@@ -132,7 +132,8 @@ def deploy(name: RuleSetName, body: DeployBody, request: Request, engine: Engine
     """Compile and make live on every gateway process; 422 with ``errors`` (file, line, column,
     message) if it does not compile, 422 ``{"kind": "scenarios", ...}`` if one of its test
     scenarios is red (unless ``force``), 422 ``{"kind": "policy", "errors": [...]}`` if the principal
-    is an author and the rule policy refuses the files (nothing compiled), 409 ``{"error": "base version changed", "current": n}``
+    is an author and the rule policy refuses the files (nothing compiled), 409
+    ``{"error": "base version changed", "current": n}``
     if ``base_version`` is stale. With ``Prefer: respond-async`` (or ``?async=true``): 202 and a
     build job (``Location: /api/jobs/{id}``) whose result or error is the same."""
     if wants_async(request):
