@@ -155,7 +155,9 @@ class Engine:
         gateway itself, ``role=None``). Runs before anything compiles: see gateway.engine.policy."""
         if not policy.applies_to(role):
             return []
-        return compiler.policy_errors(files, self.rule_policy)
+        errors = compiler.policy_errors(files, self.rule_policy)
+        self._policy_verdicts[content_hash(files)] = not errors  # GET /api/rulesets need not check it again
+        return errors
 
     def check_policy(self, name: str, files: dict[str, str], role: str | None, *, author: str = "",
                      audit: bool = False) -> None:
