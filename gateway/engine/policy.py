@@ -336,6 +336,7 @@ class _FileChecker:
         self.package = ""
         self.imports: dict[str, str] = {}  # simple name -> qualified name (allowed or not)
         self.static_imports: set[str] = set()
+        self.static_star = False  # an allowed class's static members, imported by ``import static a.B.*``
         self.found: list[Violation] = []
         self._seen: set[tuple[int, int]] = set()
 
@@ -403,6 +404,8 @@ class _FileChecker:
                 self.static_imports.add(names[-1])
             if not self._allowed(owner):
                 self.refuse_class(start, owner, qualified + (".*" if star else ""))
+            elif star:
+                self.static_star = True
         elif kind == "accumulate":
             if not self._allowed(qualified):
                 self.refuse_class(start, qualified, "")
@@ -586,6 +589,8 @@ class _FileChecker:
         if name in REFLECTION_MEMBERS:
             self.refuse(tok, name, f"rule policy: reflection ('{name}') is not allowed for an author")
         elif name in self.known.functions or name in self.static_imports or name in BUILTIN_CALLS or in_fact:
+            return
+        elif self.static_star:  # a member of an allowed class (or of nothing: then it does not compile)
             return
         elif mode in ("lhs", "declare") and name in LHS_CALLS:
             return

@@ -249,3 +249,21 @@ def test_an_author_tests_a_stored_developer_version_as_it_serves(api, tmp_path):
     assert report.status_code == 200 and report.json()["ok"] is True, report.text
     draft = api.post("/api/rulesets/probe-stored/test", json={"files": files}, headers=AUTHOR)
     assert draft.status_code == 422 and draft.json()["kind"] == "policy"
+
+
+def test_a_decision_table_cell_that_calls_java_is_refused_at_the_cell(api):
+    import sys
+
+    sys.path.insert(0, str(PROJECT / "tests" / "engine"))
+    from authoring_samples import ROWS, csv_text, files_with
+
+    rows = [list(r) for r in ROWS]
+    rows[0][3] = "2 && java.lang.Runtime.getRuntime() != null"  # the first rule's "At least" cell: row 11, column D
+    answer = api.post("/api/rulesets/table-probe/validate", json={"files": files_with("greetings.csv", csv_text(rows))},
+                      headers=AUTHOR).json()
+    assert answer["ok"] is False
+    first = answer["errors"][0]
+    assert first["file"] == "greetings.csv" and first["cell"] == "D11" and "java.lang.Runtime" in first["message"], first
+    clean = api.post("/api/rulesets/table-probe/validate", json={"files": files_with("greetings.csv", csv_text())},
+                     headers=AUTHOR).json()
+    assert clean == {"ok": True, "errors": []}

@@ -182,3 +182,10 @@ def test_nothing_at_the_top_level_escapes_the_check():
         ["java.lang.Runtime"]
     drl = HEADER + "global Actions java;\n" + 'rule "r" when then java.lang.Runtime.getRuntime(); end\n'
     assert [n for _, _, n in violations(drl)] == ["java.lang.Runtime"]  # a global named like a package
+
+
+def test_static_imports_of_allowed_classes():
+    drl = HEADER.replace("import org", "import static java.lang.Math.*;\nimport static java.lang.String.valueOf;\nimport org")
+    assert violations(drl + 'rule "r" when then actions.say("a", valueOf(max(1, abs(-2)))); end\n') == []
+    refused = HEADER.replace("import org", "import static java.lang.System.*;\nimport org")
+    assert [n for _, _, n in violations(refused + 'rule "r" when then exit(0); end\n')] == ["java.lang.System", "exit"]
