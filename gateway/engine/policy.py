@@ -273,8 +273,14 @@ class _Known:
                     j = _skip_type(tokens, i + 1)
                     if j < len(tokens) and tokens[j].kind == "id":
                         self.functions.add(tokens[j].text)
-                elif tok.text == "query" and i + 1 < len(tokens):  # called from when-parts like a function
-                    self.functions.add(tokens[i + 1].text.strip("\"'"))
+                    while j < len(tokens) and tokens[j].text != "{":
+                        j += 1
+                    i = _matching(tokens, j) if j < len(tokens) else j  # a body declares nothing
+                elif tok.text in ("rule", "query"):
+                    if tok.text == "query" and i + 1 < len(tokens):  # called from when-parts like a function
+                        self.functions.add(tokens[i + 1].text.strip("\"'"))
+                    while i + 1 < len(tokens) and not (tokens[i + 1].text == "end" and tokens[i + 1].kind == "id"):
+                        i += 1  # nothing inside a rule declares a type, a global or a function
             i += 1
 
 

@@ -189,3 +189,8 @@ def test_static_imports_of_allowed_classes():
     assert violations(drl + 'rule "r" when then actions.say("a", valueOf(max(1, abs(-2)))); end\n') == []
     refused = HEADER.replace("import org", "import static java.lang.System.*;\nimport org")
     assert [n for _, _, n in violations(refused + 'rule "r" when then exit(0); end\n')] == ["java.lang.System", "exit"]
+
+
+def test_only_top_level_items_declare_names():
+    drl = HEADER + 'rule "r" when then\n    int x = 0;\n    declare Runtime = null;\nend\nrule "s" when then Runtime.getRuntime(); end\n'
+    assert "java.lang.Runtime" in [n for _, _, n in violations(drl)]
