@@ -156,8 +156,13 @@ class Engine:
         if not policy.applies_to(role):
             return []
         errors = compiler.policy_errors(files, self.rule_policy)
-        self._policy_verdicts[content_hash(files)] = not errors  # GET /api/rulesets need not check it again
+        self._remember_verdict(content_hash(files), not errors)  # GET /api/rulesets need not check it again
         return errors
+
+    def _remember_verdict(self, digest: str, passes: bool) -> None:
+        if len(self._policy_verdicts) >= 4096:  # drafts validated as an author types: keep it bounded
+            self._policy_verdicts.clear()
+        self._policy_verdicts[digest] = passes
 
     def check_policy(self, name: str, files: dict[str, str], role: str | None, *, author: str = "",
                      audit: bool = False) -> None:
@@ -183,7 +188,7 @@ class Engine:
         if verdict is None:
             files = self.version(info.name, info.version).files
             verdict = not compiler.policy_errors(files, self.rule_policy)
-            self._policy_verdicts[info.hash] = verdict
+            self._remember_verdict(info.hash, verdict)
         return "author" if verdict else "developer"
 
     def expand(self, name: str, files: dict[str, str]) -> dict[str, str]:
@@ -267,7 +272,8 @@ class Engine:
         return RuleSetVersion(stored.info, dict(stored.payload))
 
     def history(self, name: str) -> list[dict[str, Any]]:
-        """Deploys, rollbacks and deletes of ``name``, oldest first."""
+        """Deploys, rollbacks and deletes of ``name``, and the changes the rule policy refused
+        (``event: "refused"``), oldest first; each with who, in which role, from which process."""
         check_name(name)
         return [{"at": c.at, "ts": c.ts, "event": c.event, "version": c.version, "author": c.author,
                  "role": c.role, "comment": c.comment, "seq": c.seq, "origin": c.origin}
