@@ -61,7 +61,8 @@ DEFAULT_ALLOW: tuple[str, ...] = (
     "java.util.OptionalDouble", "java.util.Iterator", "java.util.ListIterator", "java.util.Queue",
     "java.util.Deque", "java.util.ArrayDeque", "java.util.PriorityQueue", "java.util.Comparator",
     "java.util.Date", "java.util.UUID", "java.util.Locale", "java.util.StringJoiner",
-    "java.util.NoSuchElementException",
+    "java.util.NoSuchElementException", "java.util.Random", "java.util.Calendar", "java.util.GregorianCalendar",
+    "java.util.TimeZone", "java.util.Currency", "java.text",
     # what the gateway hands to rules: the actions global
     "org.printeps.gateway.Actions",
 )
