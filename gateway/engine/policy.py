@@ -232,14 +232,13 @@ def _package_of(qualified: str) -> str:
 
 class _Known:
     """What the rule set itself declares, over all its files: types (simple and qualified names),
-    their fields, globals and functions."""
+    their fields and functions (a global is a variable: its name needs no knowing)."""
 
     def __init__(self) -> None:
         self.types: set[str] = set()  # simple names, any package (to tell patterns)
         self.declared: set[tuple[str, str]] = set()  # (package, simple name): what a simple name resolves to
         self.qualified: set[str] = set()
         self.fields: set[str] = set()
-        self.globals: set[str] = set()
         self.functions: set[str] = set()
 
     def collect(self, tokens: list[Token]) -> None:
@@ -255,10 +254,6 @@ class _Known:
             elif tok.kind == "id" and depth == 0 and _at_item_start(tokens, i):
                 if tok.text == "package":
                     package = ".".join(_dotted(tokens, i + 1)[0])
-                elif tok.text == "global":
-                    j = _skip_type(tokens, i + 1)
-                    if j < len(tokens) and tokens[j].kind == "id":
-                        self.globals.add(tokens[j].text)
                 elif tok.text == "declare":
                     j = i + 1
                     while j < len(tokens) and tokens[j].text in ("enum", "trait", "type", "window", "entry"):
