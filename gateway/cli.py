@@ -24,6 +24,15 @@ app.add_typer(workflow_app, name="workflow")
 
 DEFAULT_SERVER = "http://127.0.0.1:8080"
 ConfigOption = typer.Option(None, "--config", "-c", help="Settings YAML (default: $PRINTEPS_CONFIG).")
+def _role(value: str) -> str:
+    if value not in ("developer", "author"):
+        raise typer.BadParameter("use 'developer' or 'author'")
+    return value
+
+
+RoleOption = typer.Option("developer", "--role", callback=_role,
+                          help="Check as this role: 'author' also applies the rule policy, as a gateway does "
+                               "for an author's deploy (a local run is a developer's).")
 
 
 def _settings(config: Optional[Path]):
@@ -105,6 +114,7 @@ def serve(
     """Run the gateway: REST API, KIE Server compatible API, workbench, stream engine and the ROS
     node, over the Information State (MONGO_URI, or the embedded database)."""
     settings = _settings(config)
+    _keep_open_mode_local(settings, host or settings.api.host)
     if workers > 1:
         from gateway.serve import Supervisor, config_path
 
@@ -132,6 +142,8 @@ def ros_node(
 
     settings = _settings(config)
     settings.ros.args = ros_arguments(ctx.args)
+    if rest:
+        _keep_open_mode_local(settings, settings.api.host)
     sys.setswitchinterval(0.001)
     _run_or_explain(lambda: run(settings, rest=rest, ros=True, port=port))
 
@@ -143,6 +155,18 @@ def ros_arguments(extra: list[str]) -> list[str]:
     if extra[0] != "--ros-args":
         _fail(f"printeps ros: unexpected argument {extra[0]!r} (ROS arguments go after --ros-args)", code=2)
     return list(extra)
+
+
+def _keep_open_mode_local(settings: Any, host: str) -> None:
+    """Open mode (no tokens) listens on this machine only: exit 2 saying how to configure tokens,
+    or warn at every start when PRINTEPS_API_OPEN=1 forces it (see gateway.serve.open_mode_check)."""
+    from gateway.serve import open_mode_check
+
+    refusal, warning = open_mode_check(settings.api, host)
+    if refusal:
+        _fail(refusal, code=2)
+    if warning:
+        typer.echo(warning, err=True)
 
 
 def _run_or_explain(start: Any) -> None:
@@ -205,6 +229,9 @@ def import_cmd(
     folder: Path = typer.Argument(..., help="A folder in the seed layout (e.g. written by `printeps export`)."),
     comment: str = typer.Option("", help="Version comment for what changes."),
     author: str = typer.Option(os.environ.get("USER", "import"), help="Author recorded with the new versions."),
+    role: Optional[str] = typer.Option(None, "--role", callback=lambda v: v if v is None else _role(v),
+                                       help="Import as this role: 'author' applies the rule policy to each rule set "
+                                            "(default: the machine's own rights, logged as 'local')."),
     config: Optional[Path] = ConfigOption,
 ) -> None:
     """Make each item of FOLDER that differs from the current version a new version, checked like a
@@ -220,7 +247,8 @@ def import_cmd(
     try:
         gateway = build_gateway(settings, rest=False, ros=False, store=store, seed=False, warm_up=False, follow=False)
         try:
-            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}")
+            report = import_from(gateway, folder, author=author, comment=comment or f"imported from {folder}",
+                                 role=role)
         finally:
             gateway.close()
     finally:
@@ -246,9 +274,11 @@ def _open_store_or_fail(open_store: Any, settings: Any) -> Any:
 @rules_app.command("validate")
 def rules_validate(
     path: Path = typer.Argument(..., help="A rule set folder or a single .drl/.dslr file."),
+    role: str = RoleOption,
     config: Optional[Path] = ConfigOption,
 ) -> None:
-    """Compile locally; print ``file:line:col: message`` per problem and exit 1 if there is any."""
+    """Compile locally; print ``file:line:col: message`` per problem and exit 1 if there is any.
+    With ``--role author``, first what the rule policy refuses (as a gateway would for an author)."""
     from gateway.engine import Engine, EngineError
 
     name, files = read_ruleset(path)
@@ -258,7 +288,7 @@ def rules_validate(
 
     progress = TerminalProgress() if sys.stderr.isatty() else None  # big sets take a while: show how far
     try:
-        errors = [e.to_dict() for e in engine.validate(name, files, on_progress=progress)]
+        errors = [e.to_dict() for e in engine.validate(name, files, on_progress=progress, role=role)]
     except EngineError as exc:
         body = exc.to_dict()
         errors = body.get("errors") or [{"file": "", "line": 0, "column": 0, "message": str(exc)}]
@@ -284,6 +314,7 @@ def rules_test(
     version: Optional[int] = typer.Option(None, help="With --server and no PATH: this stored version (default: current)."),
     token: Optional[str] = typer.Option(None, help="Token (default: $PRINTEPS_TOKEN)."),
     junit: Optional[Path] = typer.Option(None, "--junit", help="Also write the results as JUnit XML to this file."),
+    role: str = RoleOption,
     config: Optional[Path] = ConfigOption,
 ) -> None:
     """Run a rule set's test scenarios; print green/red per scenario and the rules no scenario
@@ -311,7 +342,7 @@ def rules_test(
 
         engine = Engine(_settings(config))
         try:
-            report = run_scenarios(engine, files, name).to_dict()
+            report = run_scenarios(engine, files, name, role=role).to_dict()
         except EngineError as exc:
             body = exc.to_dict()
             for line in format_errors(body.get("errors") or [{"message": str(exc)}], folder):

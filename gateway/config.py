@@ -30,6 +30,21 @@ class JvmSettings(BaseModel):
     extra_options: list[str] = Field(default_factory=list)
 
 
+class RulePolicySettings(BaseModel):
+    """The rule policy (docs/operations.md, "Who may run code"): what an ``author``'s rules may name
+    beyond the built-in list (gateway.engine.policy.DEFAULT_ALLOW). A ``developer`` is not checked."""
+
+    allow: list[str] = Field(
+        default_factory=list,
+        description="More classes ('com.example.Pricing') or packages ('com.example.facts': the package and "
+        "its subpackages) an author's rules may name; env PRINTEPS_RULE_POLICY_ALLOW='a.b.C,d.e'.")
+
+    @field_validator("allow", mode="before")
+    @classmethod
+    def _allow_from_string(cls, value: Any) -> Any:
+        return [x.strip() for x in value.split(",") if x.strip()] if isinstance(value, str) else value
+
+
 class EngineSettings(BaseModel):
     """Rule sets: where they come from, where versions are kept, and firing limits."""
 
@@ -58,6 +73,7 @@ class EngineSettings(BaseModel):
         default=30.0, description="Shared rule units not used for this long are removed (TTL).")
     warm_budget_s: float = Field(
         default=0.25, description="Time spent firing a new version on sample facts before it serves.")
+    rule_policy: RulePolicySettings = Field(default_factory=RulePolicySettings)
     max_queued_jobs: int = Field(
         default=16, ge=1, description="Build jobs (asynchronous deploys/validations) waiting per process; "
         "beyond it a new one is refused with 429.")
@@ -182,18 +198,22 @@ class RosSettings(BaseModel):
         default_factory=lambda: {"pepper": "counter"}, description="Where each robot is at start (Robot facts).")
 
 
+Role = Literal["developer", "author", "caller"]
+
+
 class TokenEntry(BaseModel):
-    """Who a bearer token belongs to and what it may do (``author`` deploys, ``caller`` fires/reads)."""
+    """Who a bearer token belongs to and what it may do: ``caller`` fires and reads, ``author`` also
+    deploys rule sets the rule policy allows, ``developer`` deploys any rules (DRL is Java)."""
 
     name: str
-    role: Literal["author", "caller"]
+    role: Role
 
 
 class BasicUser(BaseModel):
     """A user/password pair for HTTP basic auth on the KIE Server compatible endpoints."""
 
     password: str
-    role: Literal["author", "caller"] = "caller"
+    role: Role = "caller"
 
 
 def _parse_triples(value: Any, what: str) -> Any:
@@ -350,6 +370,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),
     "PRINTEPS_API_OPEN": ("api", "open"),
+    "PRINTEPS_RULE_POLICY_ALLOW": ("engine", "rule_policy", "allow"),
     "PRINTEPS_ROS": ("ros", "enabled"),
     "PRINTEPS_ADVERTISE_URL": ("sessions", "advertise_url"),
 }

@@ -107,7 +107,7 @@ class ChangeFollower:
                 self.skipped += 1
                 log.error("change follower: skipped entry %d: unknown kind %r", change.seq, change.kind)
             return False
-        if change.event == "none":
+        if change.event in ("none", "refused"):  # nothing changed (a lost race; a policy refusal)
             return False
         try:
             service.sync(change.name)

@@ -124,12 +124,13 @@ class JobService:
 
     # ---- requests --------------------------------------------------------------------------------
     def submit(self, kind: str, ruleset: str, files: dict[str, str], *, author: str = "anonymous",
-               comment: str = "", base_version: int | None = None, force: bool = False) -> dict[str, Any]:
+               comment: str = "", base_version: int | None = None, force: bool = False,
+               role: str | None = None) -> dict[str, Any]:
         """A new queued job; the build starts when the jobs before it in this process are done."""
         if kind not in KINDS:
             raise JobError(422, f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
         job = {"id": uuid.uuid4().hex, "kind": kind, "ruleset": ruleset, "status": "queued",
-               "author": author, "comment": comment, "base_version": base_version, "force": force,
+               "author": author, "role": role, "comment": comment, "base_version": base_version, "force": force,
                "process": self.process, "created_at": _now(), "started_at": None, "finished_at": None,
                "updated_at": _now(), "progress": None, "result": None, "error": None}
         with self._cond:
@@ -213,10 +214,10 @@ class JobService:
             if job["kind"] == "deploy":
                 info = self.engine.deploy(job["ruleset"], files, author=job["author"], comment=job["comment"],
                                           base_version=job["base_version"], force=job["force"],
-                                          on_progress=progress)
+                                          on_progress=progress, role=job.get("role"))
                 outcome: dict[str, Any] = {"version": info.to_dict()}
             else:
-                errors = self.engine.validate(job["ruleset"], files, on_progress=progress)
+                errors = self.engine.validate(job["ruleset"], files, on_progress=progress, role=job.get("role"))
                 outcome = {"valid": not errors, "errors": [e.to_dict() for e in errors]}
         except BuildCancelled as exc:
             with self._cond:

@@ -14,6 +14,7 @@ only (one node per gateway: a topic read by N workers would greet every party N 
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import os
 import signal
@@ -28,6 +29,38 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 RESTART_BACKOFF_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+def is_loopback(host: str) -> bool:
+    """``host`` is reachable from this machine only (127.0.0.0/8, ::1, localhost)."""
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def open_mode_check(api: Any, host: str) -> tuple[str | None, str | None]:
+    """``(refusal, warning)`` for listening on ``host`` with these API settings.
+
+    Why: in open mode (no tokens) every caller is the developer ``anonymous``, who may deploy any
+    DRL — and DRL is Java, so whoever reaches the port can run code on this machine. Open mode
+    therefore stays on a loopback address: on any other address the gateway refuses to start
+    unless ``PRINTEPS_API_OPEN=1`` (``api.open: true``) asks for it on purpose, and then it warns at
+    every start."""
+    if not api.is_open or is_loopback(host):
+        return None, None
+    if api.open:  # forced on purpose
+        return None, (f"WARNING: the REST API is open (no authentication) on {host}, not only on this machine "
+                      f"(PRINTEPS_API_OPEN=1): anyone who reaches it acts as the developer 'anonymous' and can run "
+                      f"code on this host. Configure tokens (PRINTEPS_TOKENS) to stop this.")
+    return (f"printeps: refusing to listen on {host} in open mode: no tokens are configured, so anyone who "
+            f"reaches {host} could deploy rules, and rules are Java code that runs on this host.\n"
+            f"  Configure tokens, e.g. PRINTEPS_TOKENS='<secret>:developer:alice,<secret2>:author:owner' "
+            f"(or api.tokens in the config file; roles: developer, author, caller),\n"
+            f"  or listen on this machine only (--host 127.0.0.1),\n"
+            f"  or set PRINTEPS_API_OPEN=1 to run open on {host} on purpose (it warns at every start)."), None
 
 
 def local_url(host: str, port: int) -> str:

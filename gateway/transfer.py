@@ -80,9 +80,11 @@ def _plain_binding(binding: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in binding.items() if k not in defaults or defaults[k] != v}
 
 
-def import_from(gateway: Any, folder: Path, *, author: str, comment: str) -> list[tuple[str, str]]:
+def import_from(gateway: Any, folder: Path, *, author: str, comment: str,
+                role: str | None = None) -> list[tuple[str, str]]:
     """Import ``folder`` into the gateway's catalog; returns ``(item, outcome)`` lines, outcome
-    "unchanged vN", "deployed vN" or "failed: <what and where>"."""
+    "unchanged vN", "deployed vN" or "failed: <what and where>". Each rule set is deployed with
+    ``role`` (an author's: the rule policy applies; None: the machine's own rights)."""
     report: list[tuple[str, str]] = []
 
     def attempt(item: str, action: Any) -> None:
@@ -94,7 +96,8 @@ def import_from(gateway: Any, folder: Path, *, author: str, comment: str) -> lis
     rules = folder / RULES
     if rules.is_dir():
         for sub in sorted(p for p in rules.iterdir() if p.is_dir()):
-            attempt(f"rule set {sub.name}", lambda sub=sub: gateway.engine.import_folder(sub, author, comment))
+            attempt(f"rule set {sub.name}",
+                    lambda sub=sub: gateway.engine.import_folder(sub, author, comment, role=role))
     knowledge = gateway.knowledge
     for kind, suffixes in (("ontology", (".ttl", ".owl", ".rdf")), ("swrl", (".swrl",))):
         files = sorted(p for p in (folder / ONTOLOGY).glob("*") if p.suffix in suffixes) if (folder / ONTOLOGY).is_dir() else []

@@ -8,7 +8,9 @@ every process must see each of them within a second. The catalog keeps, per ``(k
 - its versions (immutable: number, author, comment, content hash, payload);
 - a head: which version is current (or that it was deleted), the last version number used, and
   the sequence number of the change that last moved it;
-- a change log: one entry per deploy / rollback / delete, numbered by a global sequence. Other
+- a change log: one entry per deploy / rollback / delete (and per refusal by the rule policy:
+  ``refused``, which changes nothing and is there for the audit), numbered by a global sequence,
+  each with who (``author``), in which role and from which process (``origin``). Other
   processes read it to learn *what* changed; they then read the head to learn *how things are
   now* (level-triggered: a missed or repeated entry can never leave a process on a wrong version,
   and a periodic reconcile catches anything a crash left unannounced).
@@ -80,13 +82,14 @@ class Change:
     seq: int
     kind: str
     name: str
-    event: str  # deploy | rollback | delete
+    event: str  # deploy | rollback | delete | refused (by the rule policy: nothing changed)
     version: int | None
     author: str
     comment: str
     at: str
     ts: float
-    origin: str = ""
+    origin: str = ""  # the process (host:pid, or the gateway's name) that made the change
+    role: str = ""  # the principal's role (developer, author, caller), "local" for the gateway itself
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -121,17 +124,22 @@ class Catalog(Protocol):
     def heads(self, kind: str) -> list[Head]: ...
 
     def save(self, kind: str, name: str, payload: Any, *, author: str, comment: str, hash: str,
-             base_version: int | None = None) -> tuple[VersionInfo, int]:
+             base_version: int | None = None, role: str = "") -> tuple[VersionInfo, int]:
         """Store a new version and make it current; returns it and the change's sequence number.
         ``base_version`` (0 = "nothing deployed yet") raises CatalogConflict when stale."""
         ...
 
-    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str) -> tuple[VersionInfo, int]:
+    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str,
+                    role: str = "") -> tuple[VersionInfo, int]:
         """Make a stored version current again (a rollback)."""
         ...
 
-    def delete(self, kind: str, name: str, *, author: str) -> int:
+    def delete(self, kind: str, name: str, *, author: str, role: str = "") -> int:
         """Stop serving ``(kind, name)``; versions and history stay."""
+        ...
+
+    def refuse(self, kind: str, name: str, *, author: str, role: str, comment: str) -> int:
+        """Log that a change by ``author`` was refused (``event: "refused"``); nothing else moves."""
         ...
 
     def load(self, kind: str, name: str, version: int) -> Version: ...
@@ -225,7 +233,7 @@ class MemoryCatalog:
         return [h for h in (self.head(kind, n) for n in names) if h is not None]
 
     def save(self, kind: str, name: str, payload: Any, *, author: str, comment: str, hash: str,
-             base_version: int | None = None) -> tuple[VersionInfo, int]:
+             base_version: int | None = None, role: str = "") -> tuple[VersionInfo, int]:
         with self._lock:
             item = self._items.setdefault((kind, name), _Item())
             current = item.current if not item.deleted else None
@@ -234,26 +242,31 @@ class MemoryCatalog:
             info = VersionInfo(name, len(item.versions) + 1, now_iso(), author, comment, hash)
             item.versions.append(Version(info, copy.deepcopy(payload)))
             item.current, item.deleted = info.version, False
-            seq = self._append(kind, name, "deploy", info.version, author, comment)
+            seq = self._append(kind, name, "deploy", info.version, author, comment, role)
             item.seq = seq
             return info, seq
 
-    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str) -> tuple[VersionInfo, int]:
+    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str,
+                    role: str = "") -> tuple[VersionInfo, int]:
         with self._lock:
             stored = self.load(kind, name, version)
             item = self._items[(kind, name)]
             item.current, item.deleted = version, False
-            item.seq = self._append(kind, name, "rollback", version, author, comment)
+            item.seq = self._append(kind, name, "rollback", version, author, comment, role)
             return stored.info, item.seq
 
-    def delete(self, kind: str, name: str, *, author: str) -> int:
+    def delete(self, kind: str, name: str, *, author: str, role: str = "") -> int:
         with self._lock:
             item = self._items.get((kind, name))
             if item is None or item.deleted or item.current is None:
                 raise VersionMissing(kind, name)
             item.current, item.deleted = None, True
-            item.seq = self._append(kind, name, "delete", None, author, "")
+            item.seq = self._append(kind, name, "delete", None, author, "", role)
             return item.seq
+
+    def refuse(self, kind: str, name: str, *, author: str, role: str, comment: str) -> int:
+        with self._lock:
+            return self._append(kind, name, "refused", None, author, comment, role)
 
     def load(self, kind: str, name: str, version: int) -> Version:
         with self._lock:
@@ -284,9 +297,10 @@ class MemoryCatalog:
         with self._lock:
             self._lock.wait_for(lambda: self.last_seq() > after_seq, timeout=timeout_s)
 
-    def _append(self, kind: str, name: str, event: str, version: int | None, author: str, comment: str) -> int:
+    def _append(self, kind: str, name: str, event: str, version: int | None, author: str, comment: str,
+                role: str = "") -> int:
         change = Change(len(self._log) + 1, kind, name, event, version, author, comment, now_iso(), time.time(),
-                        self.origin)
+                        self.origin, role)
         self._log.append(change)
         self._lock.notify_all()
         return change.seq

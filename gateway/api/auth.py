@@ -1,9 +1,13 @@
 """Who is calling and may they: bearer tokens with roles, basic auth for KIE Server clients.
 
-Roles: ``caller`` may fire and read; ``author`` may also deploy, roll back and delete. Tokens come
-from ``settings.api.tokens`` (``PRINTEPS_TOKENS``). With no tokens configured the API is *open* (dev
-mode for the embedded demo): every request acts as the author ``anonymous``. Missing/unknown
-credentials -> 401, a known identity without the role -> 403.
+Roles, each including the one before: ``caller`` may fire and read; ``author`` may also deploy, roll
+back and delete — rule sets the rule policy allows (gateway.engine.policy: DRL is Java, and an
+author's rules may not run arbitrary code on the server); ``developer`` may deploy and try any DRL.
+Tokens come from ``settings.api.tokens`` (``PRINTEPS_TOKENS``). With no tokens configured the API
+is *open* (dev mode for the embedded demo, which ``printeps serve`` keeps on a loopback address
+unless ``PRINTEPS_API_OPEN=1``): every request acts as the developer ``anonymous`` — whoever can
+reach a loopback port can run code on the machine anyway. Missing/unknown credentials -> 401, a
+known identity without the role -> 403.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBasic, HTTPBasicC
 from gateway.api.errors import ApiError
 from gateway.config import ApiSettings
 
-ROLE_RANK = {"caller": 1, "author": 2}
+ROLE_RANK = {"caller": 1, "author": 2, "developer": 3}
 
 _bearer = HTTPBearer(auto_error=False, description="A token from settings.api.tokens")
 KIE_CHALLENGE = 'Basic realm="kie-server"'
@@ -37,7 +41,7 @@ class Principal:
         return {"name": self.name, "role": self.role, "auth": self.via}
 
 
-ANONYMOUS = Principal("anonymous", "author", "open")
+ANONYMOUS = Principal("anonymous", "developer", "open")
 
 
 class Authenticator:

@@ -59,7 +59,8 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
 
 #: The status of an engine error by its ``kind`` — one table for errors raised here and for those
 #: that travel as records (a build job's): 503 "resources" is a server limit, not the author's text.
-KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "invalid": 422, "facts": 422,
+KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "policy": 422, "invalid": 422,
+               "facts": 422,
                "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503, "limit": 429,
                "gone": 410}
 

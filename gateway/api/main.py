@@ -70,5 +70,6 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
         app.add_middleware(FastPaths)  # inside the body limit (added last, so outermost)
     app.add_middleware(BodyLimit, max_bytes=settings.api.max_body_bytes)
     if settings.api.is_open:
-        log.warning("REST API is open (no tokens configured): every caller acts as author 'anonymous'")
+        log.warning("REST API is open (no tokens configured): every caller acts as developer 'anonymous' and may "
+                    "deploy and run any rule code")
     return app

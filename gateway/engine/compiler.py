@@ -282,6 +282,35 @@ def expand(files: dict[str, str]) -> dict[str, str]:
     return out
 
 
+# --------------------------------------------------------------------------- the rule policy
+
+
+def policy_errors(files: dict[str, str], rule_policy: Any) -> list[CompileError]:
+    """What ``rule_policy`` (a :class:`gateway.engine.policy.RulePolicy`) refuses in the expanded DRL
+    of every file (written, from a ``.dslr``, from a decision table), located like compile errors:
+    a ``.dslr`` line, a table's cell. Nothing is compiled here: a set that does not even expand
+    gets [] (its compile then fails on those errors before building anything)."""
+    from gateway.engine.errors import InvalidRuleSet
+
+    try:
+        check_files(files)
+    except InvalidRuleSet:
+        return []
+    dsl_key = content_hash({f: t for f, t in files.items() if f.endswith(".dsl")})
+    if all((f, t, dsl_key) in _expansions for f, t in files.items() if f.endswith(".dslr")):
+        sources, _, errors = _sources(files)  # no JVM needed: a build in progress does not hold this up
+    else:
+        with _compile_lock:
+            sources, _, errors = _sources(files)
+    if errors:
+        return []
+    by_file = {s.file: s for s in sources}
+    found = [CompileError(fname, by_file[fname].source_line(v.line), v.column, v.message)
+             for fname, violations in rule_policy.check((s.file, s.drl) for s in sources).items()
+             for v in violations]
+    return _sorted(_in_tables(found, sources))
+
+
 # --------------------------------------------------------------------------- DRL syntax
 
 

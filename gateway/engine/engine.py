@@ -29,13 +29,14 @@ from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler, kmodule, scenarios, warmup
+from gateway.engine import compiler, kmodule, policy, scenarios, warmup
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
     CompileFailed,
     EngineError,
     InvalidRuleSet,
+    PolicyRefused,
     RuleSetNotFound,
     VersionConflict,
     VersionNotFound,
@@ -92,6 +93,8 @@ class Engine:
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
         self._recent: dict[str, collections.deque[str]] = {}  # rule set -> its last requests' facts (warm-up samples)
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
+        self.rule_policy = policy.RulePolicy(tuple(self.settings.engine.rule_policy.allow))
+        self._policy_verdicts: dict[str, bool] = {}  # content hash -> passes the rule policy
         self._warm_up_stop = threading.Event()
         self._warm_up_thread: threading.Thread | None = None
         self.session_manager = SessionManager(self, self.settings.sessions)
@@ -146,16 +149,65 @@ class Engine:
         kept.append(facts_json)
 
     def validate(self, name: str, files: dict[str, str],
-                 on_progress: Callable[[int, int, str], None] | None = None) -> list[CompileError]:
+                 on_progress: Callable[[int, int, str], None] | None = None, *,
+                 role: str | None = None) -> list[CompileError]:
         """All compile errors of ``files`` ([] when they compile). Deploys nothing.
 
-        ``on_progress(done, total, stage)`` follows the build (see compiler.compile_files)."""
+        ``on_progress(done, total, stage)`` follows the build (see compiler.compile_files). For a
+        ``role`` the rule policy checks (an author), its violations are the errors and nothing is
+        compiled."""
         check_name(name)
+        refused = self.policy_errors(files, role)
+        if refused:
+            return refused
         try:
             self._compile(files, name, on_progress, warm=False)
         except CompileFailed as failed:
             return failed.errors
         return []
+
+    # ------------------------------------------------------------------ the rule policy
+
+    def policy_errors(self, files: dict[str, str], role: str | None) -> list[CompileError]:
+        """What the rule policy refuses in ``files`` for ``role`` ([] for a developer or for the
+        gateway itself, ``role=None``). Runs before anything compiles: see gateway.engine.policy."""
+        if not policy.applies_to(role):
+            return []
+        errors = compiler.policy_errors(files, self.rule_policy)
+        self._remember_verdict(content_hash(files), not errors)  # GET /api/rulesets need not check it again
+        return errors
+
+    def _remember_verdict(self, digest: str, passes: bool) -> None:
+        if len(self._policy_verdicts) >= 4096:  # drafts validated as an author types: keep it bounded
+            self._policy_verdicts.clear()
+        self._policy_verdicts[digest] = passes
+
+    def check_policy(self, name: str, files: dict[str, str], role: str | None, *, author: str = "",
+                     audit: bool = False) -> None:
+        """Raises :class:`PolicyRefused` when the policy refuses ``files`` for ``role``; with
+        ``audit`` the refusal goes into the catalog's change log (``event: "refused"``)."""
+        errors = self.policy_errors(files, role)
+        if not errors:
+            return
+        if audit:
+            first = errors[0]
+            more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+            try:
+                self.catalog.refuse(KIND, name, author=author, role=role or "", comment=f"{first}{more}"[:2000])
+            except Exception:  # the refusal stands even when the log cannot be written
+                log.exception("rule set %s: could not log the policy refusal", name)
+        log.warning("rule set %s: refused by the rule policy for %s (%s): %s", name, author or "?", role, errors[0])
+        raise PolicyRefused(errors)
+
+    def policy_of(self, info: VersionInfo) -> str:
+        """The least role that may deploy the version ``info`` as it stands: "author" when it passes
+        the rule policy, else "developer" (``GET /api/rulesets`` shows it). Cached by content."""
+        verdict = self._policy_verdicts.get(info.hash)
+        if verdict is None:
+            files = self.version(info.name, info.version).files
+            verdict = not compiler.policy_errors(files, self.rule_policy)
+            self._remember_verdict(info.hash, verdict)
+        return "author" if verdict else "developer"
 
     def expand(self, name: str, files: dict[str, str]) -> dict[str, str]:
         """The DRL each ``.dslr`` file expands to."""
@@ -238,10 +290,12 @@ class Engine:
         return RuleSetVersion(stored.info, dict(stored.payload))
 
     def history(self, name: str) -> list[dict[str, Any]]:
-        """Deploys, rollbacks and deletes of ``name``, oldest first."""
+        """Deploys, rollbacks and deletes of ``name``, and the changes the rule policy refused
+        (``event: "refused"``), oldest first; each with who, in which role, from which process."""
         check_name(name)
         return [{"at": c.at, "ts": c.ts, "event": c.event, "version": c.version, "author": c.author,
-                 "comment": c.comment, "seq": c.seq, "origin": c.origin} for c in self.catalog.history(KIND, name)]
+                 "role": c.role, "comment": c.comment, "seq": c.seq, "origin": c.origin}
+                for c in self.catalog.history(KIND, name)]
 
     def deploy(
         self,
@@ -252,6 +306,8 @@ class Engine:
         base_version: int | None = None,
         force: bool = False,
         on_progress: Callable[[int, int, str], None] | None = None,
+        *,
+        role: str | None = None,
     ) -> VersionInfo:
         """Compiles ``files`` and, only if that succeeds, makes them the live version of ``name``.
 
@@ -260,10 +316,13 @@ class Engine:
         The rule set's own test scenarios (``tests/*.yaml``) must pass: a red one raises
         :class:`ScenariosFailed` unless ``force``. Compiling happens before anything is stored:
         requests keep hitting the old version until the new one is ready. ``on_progress(done,
-        total, stage)`` follows the build (a deploy job reports it).
+        total, stage)`` follows the build (a deploy job reports it). ``role``: the deploying
+        principal's; an author's files must pass the rule policy first (:class:`PolicyRefused`,
+        logged in the history as ``refused``); None: the gateway itself (seeds, local imports).
         """
         check_name(name)
         started = time.perf_counter()
+        self.check_policy(name, files, role, author=author, audit=True)
         compiled = self._compile(files, name, on_progress)
         progress = on_progress or _no_progress
         if not force:
@@ -272,7 +331,7 @@ class Engine:
             progress(1, 1, "scenarios")
         try:
             info, seq = self.catalog.save(KIND, name, dict(files), author=author, comment=comment,
-                                          hash=compiled.hash, base_version=base_version)
+                                          hash=compiled.hash, base_version=base_version, role=_audit_role(role))
         except CatalogConflict as conflict:
             raise VersionConflict(name, conflict.base, conflict.current) from None
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
@@ -281,20 +340,24 @@ class Engine:
         self._notify("deploy", {**info.to_dict(), "rules": compiled.rule_count, "duration_ms": elapsed})
         return info
 
-    def rollback(self, name: str, version: int, author: str = "anonymous", comment: str = "") -> VersionInfo:
-        """Makes an earlier (or any stored) version live again; history keeps the rollback."""
+    def rollback(self, name: str, version: int, author: str = "anonymous", comment: str = "", *,
+                 role: str | None = None) -> VersionInfo:
+        """Makes an earlier (or any stored) version live again; history keeps the rollback. An
+        author may not bring back a version the rule policy refuses (one a developer deployed)."""
         stored = self.version(name, int(version))
+        self.check_policy(name, stored.files, role, author=author, audit=True)
         compiled = self._compile(stored.files, name)
-        info, seq = self.catalog.set_current(KIND, name, stored.info.version, author=author, comment=comment)
+        info, seq = self.catalog.set_current(KIND, name, stored.info.version, author=author, comment=comment,
+                                             role=_audit_role(role))
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
         self._notify("rollback", {**info.to_dict(), "by": author})
         return info
 
-    def delete(self, name: str, author: str = "anonymous") -> None:
+    def delete(self, name: str, author: str = "anonymous", *, role: str | None = None) -> None:
         """Stops serving ``name``. Its versions stay stored; a new deploy continues the numbering."""
         check_name(name)
         try:
-            seq = self.catalog.delete(KIND, name, author=author)
+            seq = self.catalog.delete(KIND, name, author=author, role=_audit_role(role))
         except VersionMissing:
             raise RuleSetNotFound(name) from None
         self._swap(name, None, seq)
@@ -391,9 +454,12 @@ class Engine:
                                   "context": context or {}, **_summary(result)})
         return decision_id
 
-    def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None) -> FireResult:
-        """Fires undeployed text (the workbench's "try it"): compile errors raise CompileFailed.
+    def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None, *,
+                   role: str | None = None) -> FireResult:
+        """Fires undeployed text (the workbench's "try it"): compile errors raise CompileFailed, an
+        author's text the rule policy refuses raises PolicyRefused before anything compiles.
         Not a decision: nothing is recorded."""
+        self.check_policy(DRAFT, files, role)
         compiled = self._compile(files, "draft")
         return self._fire(compiled, DRAFT, 0, facts, fire_limit, True, True)
 
@@ -580,7 +646,7 @@ class Engine:
             return f"failed: {failed}"
         return f"seeded v{info.version}"
 
-    def import_folder(self, folder: Path, author: str, comment: str) -> str:
+    def import_folder(self, folder: Path, author: str, comment: str, *, role: str | None = None) -> str:
         """Deploy ``folder`` as rule set ``folder.name`` when its files differ from the current
         version (``printeps import``). Returns "deployed vN" or "unchanged vN"."""
         name = check_name(folder.name)
@@ -588,7 +654,7 @@ class Engine:
         head = self.catalog.head(KIND, name)
         if head is not None and head.live and self.current(name).info.hash == content_hash(files):
             return f"unchanged v{head.current}"
-        info = self.deploy(name, files, author=author, comment=comment)
+        info = self.deploy(name, files, author=author, comment=comment, role=role)
         return f"deployed v{info.version}"
 
 
@@ -599,6 +665,12 @@ def _example_fact_sets(files: dict[str, str]) -> list[list[dict[str, Any]]]:
         return [e["facts"] for e in examples if isinstance(e, dict) and isinstance(e.get("facts"), list)]
     except (ValueError, TypeError, KeyError):
         return []
+
+
+def _audit_role(role: str | None) -> str:
+    """The role a change is logged with: the principal's, or "local" for the gateway itself and
+    local commands (seeds, ``printeps import``), which act with the machine's own rights."""
+    return role or "local"
 
 
 def _summary(result: FireResult) -> dict[str, Any]:

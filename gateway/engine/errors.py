@@ -81,6 +81,19 @@ class CompileFailed(EngineError):
         return {"error": str(self), "kind": self.kind, "errors": [e.to_dict() for e in self.errors]}
 
 
+class PolicyRefused(CompileFailed):
+    """The rule policy refuses the rule set for this principal (an ``author``): it names a class or
+    makes a call only a ``developer`` may deploy (:mod:`gateway.engine.policy`). Nothing was
+    compiled, nothing ran, and what serves is untouched. A 422, like a compile error."""
+
+    kind = "policy"
+
+    def __init__(self, errors: list[CompileError]):
+        super().__init__(errors)
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        EngineError.__init__(self, f"rule set refused by the rule policy: {errors[0] if errors else ''}{more}")
+
+
 class BuildCancelled(EngineError):
     """Someone cancelled the build (a build job) before it finished; nothing was deployed.
 

@@ -47,6 +47,8 @@ EXPECT_KEYS = ("fired", "not_fired", "actions", "no_other_actions", "ordered", "
 class _Engine(Protocol):  # what the runner needs of gateway.engine.Engine
     def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None) -> Any: ...
 
+    def check_policy(self, name: str, files: dict[str, str], role: str | None) -> None: ...
+
 
 # --------------------------------------------------------------------------- YAML with positions
 
@@ -516,12 +518,14 @@ def format_errors(files: dict[str, str]) -> list[CompileError]:
 
 
 def run_scenarios(engine: _Engine, files: dict[str, str], ruleset: str = "draft", version: int | None = None,
-                  fire_limit: int | None = None) -> TestReport:
+                  fire_limit: int | None = None, *, role: str | None = None) -> TestReport:
     """Runs every scenario of ``files`` on those files, compiled once (through the compile cache,
     so a deployed version's own build is reused). Raises CompileFailed when the rules do not
-    compile or a scenario file is malformed: then no scenario can say anything."""
+    compile or a scenario file is malformed: then no scenario can say anything; PolicyRefused,
+    before anything compiles, when ``role`` (an author) may not run these rules."""
     from gateway.engine import compiler
 
+    engine.check_policy(ruleset, files, role)
     scenarios, errors = parse_files(files)
     if errors:
         raise CompileFailed(errors)

@@ -6,7 +6,8 @@ Collections (see :mod:`gateway.versions` for the model):
   hash, payload}`` — immutable; the payload is kept as JSON text (file names such as
   ``types.drl`` would be dotted field names in a document);
 - ``catalog_heads``     ``{_id: "kind/name", kind, name, current, deleted, last, seq}``;
-- ``catalog_changes``   ``{_id: seq, kind, name, event, version, author, comment, at, ts, origin}``;
+- ``catalog_changes``   ``{_id: seq, kind, name, event, version, author, role, comment, at, ts, origin}``
+  (``event``: deploy, rollback, delete, or ``refused`` by the rule policy, which changes nothing);
 - ``catalog_counters``  the global change sequence.
 
 Concurrency without transactions (they need a replica set with a real oplog, and a single-node
@@ -68,7 +69,7 @@ def change_from_doc(doc: dict[str, Any]) -> Change:
     return Change(int(doc["seq"]), str(doc["kind"]), str(doc["name"]), str(doc["event"]),
                   None if version is None else int(version), str(doc.get("author", "")),
                   str(doc.get("comment", "")), str(doc.get("at", "")), float(doc.get("ts", 0.0)),
-                  str(doc.get("origin", "")))
+                  str(doc.get("origin", "")), str(doc.get("role", "")))
 
 
 class MongoCatalog:
@@ -136,7 +137,7 @@ class MongoCatalog:
 
     # ---- changing -------------------------------------------------------------------------------
     def save(self, kind: str, name: str, payload: Any, *, author: str, comment: str, hash: str,
-             base_version: int | None = None) -> tuple[VersionInfo, int]:
+             base_version: int | None = None, role: str = "") -> tuple[VersionInfo, int]:
         text = json.dumps(payload, ensure_ascii=False)
         skipped = 0  # numbers claimed by writers that died before moving the head
         for attempt in range(MAX_RETRIES):
@@ -158,7 +159,7 @@ class MongoCatalog:
             seq = self._next_seq()
             if self._move_head(kind, name, head, base_version is not None, {"current": number, "last": number,
                                                                              "deleted": False, "seq": seq}):
-                self._log(seq, kind, name, "deploy", number, author, comment)
+                self._log(seq, kind, name, "deploy", number, author, comment, role)
                 return info, seq
             self._call(self.db[VERSIONS].delete_one, {"_id": f"{_key(kind, name)}/{number}"})
             self._log(seq, kind, name, "none", None, author, "lost a race; retried")
@@ -176,22 +177,28 @@ class MongoCatalog:
             return True  # not written by this code: never a live deploy
         return (datetime.now(timezone.utc) - stored).total_seconds() > ORPHAN_AFTER_S
 
-    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str) -> tuple[VersionInfo, int]:
+    def set_current(self, kind: str, name: str, version: int, *, author: str, comment: str,
+                    role: str = "") -> tuple[VersionInfo, int]:
         stored = self.load(kind, name, version)
         seq = self._next_seq()
         self._call(self.db[HEADS].update_one, {"_id": _key(kind, name)},
                    {"$set": {"current": int(version), "deleted": False, "seq": seq}})
-        self._log(seq, kind, name, "rollback", int(version), author, comment)
+        self._log(seq, kind, name, "rollback", int(version), author, comment, role)
         return stored.info, seq
 
-    def delete(self, kind: str, name: str, *, author: str) -> int:
+    def delete(self, kind: str, name: str, *, author: str, role: str = "") -> int:
         head = self.head(kind, name)
         if head is None or not head.live:
             raise VersionMissing(kind, name)
         seq = self._next_seq()
         self._call(self.db[HEADS].update_one, {"_id": _key(kind, name)},
                    {"$set": {"current": None, "deleted": True, "seq": seq}})
-        self._log(seq, kind, name, "delete", None, author, "")
+        self._log(seq, kind, name, "delete", None, author, "", role)
+        return seq
+
+    def refuse(self, kind: str, name: str, *, author: str, role: str, comment: str) -> int:
+        seq = self._next_seq()
+        self._log(seq, kind, name, "refused", None, author, comment, role)
         return seq
 
     def _move_head(self, kind: str, name: str, seen: Head | None, check_current: bool, new: dict[str, Any]) -> bool:
@@ -215,9 +222,10 @@ class MongoCatalog:
                          upsert=True, return_document=ReturnDocument.AFTER)
         return int(doc["seq"])
 
-    def _log(self, seq: int, kind: str, name: str, event: str, version: int | None, author: str, comment: str) -> None:
+    def _log(self, seq: int, kind: str, name: str, event: str, version: int | None, author: str, comment: str,
+             role: str = "") -> None:
         self._call(self.db[CHANGES].insert_one, {"_id": seq, "seq": seq, "kind": kind, "name": name, "event": event,
-                                                 "version": version, "author": author, "comment": comment,
+                                                 "version": version, "author": author, "role": role, "comment": comment,
                                                  "at": now_iso(), "ts": time.time(), "origin": self.origin})
 
     # ---- following ------------------------------------------------------------------------------

@@ -117,7 +117,7 @@ def test_queued_jobs_can_be_cancelled_and_a_full_queue_refuses(api_gateway):
     gate = threading.Event()
 
     class SlowEngine:
-        def validate(self, name, files, on_progress=None):
+        def validate(self, name, files, on_progress=None, role=None):
             gate.wait(30)
             return []
 

@@ -52,6 +52,9 @@ def test_authenticator_roles():
     with pytest.raises(ApiError) as e:
         auth.check("author", _bearer("tc"))
     assert e.value.status == 403
+    with pytest.raises(ApiError) as e:
+        auth.check("developer", _bearer("ta"))  # an author is no developer
+    assert e.value.status == 403
     for bad in (_bearer("nope"), None):
         with pytest.raises(ApiError) as e:
             auth.check("caller", bad)
@@ -62,9 +65,17 @@ def test_authenticator_roles():
     assert e.value.status == 401
 
 
-def test_open_mode_is_anonymous_author_but_checks_presented_tokens():
-    auth = Authenticator(ApiSettings())
-    assert auth.check("author", None).to_dict() == {"name": "anonymous", "role": "author", "auth": "open"}
+def test_a_developer_may_do_what_an_author_may():
+    auth = Authenticator(ApiSettings.model_validate({"tokens": "td:developer:dora", "basic_users": "k:pw:developer"}))
+    assert auth.check("author", _bearer("td")).role == "developer"
+    assert auth.check("caller", None, HTTPBasicCredentials(username="k", password="pw")).role == "developer"
+    with pytest.raises(ValueError, match="role"):
+        ApiSettings.model_validate({"tokens": "tx:admin:eve"})
+
+
+def test_open_mode_is_anonymous_developer_but_checks_presented_tokens():
+    auth = Authenticator(ApiSettings())  # open mode stays on this machine (printeps serve), where code runs anyway
+    assert auth.check("developer", None).to_dict() == {"name": "anonymous", "role": "developer", "auth": "open"}
     with pytest.raises(ApiError):
         auth.check("caller", _bearer("made-up"))
 

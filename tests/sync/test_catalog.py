@@ -74,6 +74,25 @@ def test_versions_heads_conflicts_rollback_delete_history(catalogs):
     assert one.changes_since(0)[-1].seq == two.last_seq()
 
 
+
+def test_the_log_keeps_who_in_which_role_from_which_process_and_refusals(catalogs):
+    """The audit (issue 26): every deploy, rollback and delete with its principal, role and process;
+    a policy refusal is logged too, moves nothing, and a follower does not act on it."""
+    one, two = catalogs
+    one.save("ruleset", "audited", {"a.drl": "x"}, author="dora", comment="", hash="h1", role="developer")
+    seq = two.refuse("ruleset", "audited", author="alice", role="author", comment="r.drl:3:5: rule policy: …")
+    assert seq == one.last_seq() and one.head("ruleset", "audited").current == 1
+    one.set_current("ruleset", "audited", 1, author="dora", comment="", role="developer")
+    two.delete("ruleset", "audited", author="alice", role="author")
+    log = [(c.event, c.author, c.role, c.origin) for c in one.history("ruleset", "audited")]
+    p2 = "p1" if one is two else "p2"
+    assert log == [("deploy", "dora", "developer", "p1"), ("refused", "alice", "author", p2),
+                   ("rollback", "dora", "developer", "p1"), ("delete", "alice", "author", p2)]
+    recorder = Recorder()
+    follower = ChangeFollower(one, {"ruleset": recorder}, start_seq=0)
+    follower.poll()
+    assert recorder.synced.count("audited") == 3  # not for the refusal
+
 def test_concurrent_saves_never_share_a_version(store):
     import threading
 

@@ -33,7 +33,9 @@ const ctx = {
   user: null,
   rulesets: [],
   view: null,
-  isAuthor: () => ctx.user?.role === "author",
+  /** May change rules (a developer may do all an author may; the server checks an author's rules
+   * against the rule policy and answers why a rule is refused, shown like any compile error). */
+  isAuthor: () => ctx.user?.role === "author" || ctx.user?.role === "developer",
   /** The fragment of an item: ctx.href("workflows", "show_to_seat") -> "#/workflows/show_to_seat". */
   href: (section, item = "", params = "") =>
     `#/${section}${item ? `/${encodeURIComponent(item)}` : ""}${params ? `?${params}` : ""}`,
@@ -156,6 +158,8 @@ function renderList() {
     h("a", { href: ctx.href(target, r.name), "data-ruleset": r.name },
       h("span", { class: "name" }, r.name),
       h("span", { class: "meta" }, `version ${r.version} · ${when(r.deployed_at)}`),
+      r.policy === "developer" ? h("span", { class: "meta policy", title: "Deployed by a developer: its rules use Java "
+        + "beyond the rule policy. It keeps serving; an author's deploy of such rules is refused." }, "developer rules") : null,
       r.comment ? h("span", { class: "meta comment" }, r.comment) : null))),
   ctx.isAuthor() ? h("li", { class: "new-ruleset" }, newRulesetForm()) : null);
 }
@@ -205,7 +209,14 @@ function renderUser() {
     fill(userEl, h("a", { class: "button secondary", href: "#/signin" }, "Sign in"));
     return;
   }
-  fill(userEl, h("span", {}, "Signed in as ", h("b", {}, ctx.user.name || "?"), ` (${ctx.user.role})`),
+  const roleHint = {
+    developer: "A developer may deploy any rules: DRL is Java code that runs on the gateway.",
+    author: "An author may deploy rules within the rule policy: the rule set's own types, its actions, insert/modify/"
+      + "update/delete and plain values. A rule that goes beyond it is marked in the editor with the reason.",
+    caller: "A caller may look and try; changing rules needs an author or developer token.",
+  }[ctx.user.role] || "";
+  fill(userEl, h("span", { title: roleHint, "data-testid": "role" }, "Signed in as ", h("b", {}, ctx.user.name || "?"),
+    ` (${ctx.user.role})`),
     getToken() ? h("button", { class: "link", onclick: signOut }, "Sign out") : h("a", { class: "link", href: "#/signin" }, "Use a token"));
 }
 
@@ -246,7 +257,7 @@ function showSignIn() {
   };
   fill(mainEl, h("section", { class: "signin" },
     h("h1", {}, "Sign in"),
-    h("p", {}, "Paste the access token you were given. An author token lets you change rules, workflows and knowledge; a caller token lets you look and try."),
+    h("p", {}, "Paste the access token you were given. An author token lets you change rules (within the rule policy), workflows and knowledge; a developer token also lets you deploy rules that run any Java code; a caller token lets you look and try."),
     ctx.user ? null : h("p", { class: "muted" }, ctx.whoamiError || ""),
     h("form", { onsubmit: submit }, tokenEl, " ", h("button", { class: "big primary", type: "submit" }, "Sign in")),
     errorEl));

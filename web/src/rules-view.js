@@ -658,8 +658,11 @@ class RulesView {
     else if (err.errors && err.errors.length) {
       this.server = normalizeErrors(err.errors);
       this.renderProblems(false);
-      fill(this.deployResultEl, h("div", { class: "message error", role: "alert" },
-        `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
+      fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, err.body && err.body.kind === "policy"
+        ? `Not deployed: the rule policy refuses ${this.server.length} place(s) for your role (listed under the editor): `
+          + "an author's rules may use the rule set's own types, its actions and insert/modify/update/delete, not other "
+          + "Java. A developer may deploy such rules. Nothing was changed."
+        : `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
     } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
   }
 

@@ -250,7 +250,8 @@ async def create_container(container_id: str, request: Request, who: Principal =
         except (VersionNotFound, RuleSetNotFound):
             return failure(400, f"Failed to create container {container_id} with module "
                                 f"{external_release_id(container_id, wanted)}: no such version is stored")
-        info = engine.rollback(container_id, target, author=who.name, comment=f"KIE: container created with version {target}")
+        info = engine.rollback(container_id, target, author=who.name,
+                               comment=f"KIE: container created with version {target}", role=who.role)
         return JSON(service_response(True, f"Container {container_id} successfully deployed with module "
                                            f"{external_release_id(container_id, info.version)}.",
                                      {"kie-container": container_resource(info, sessions=_sessions_of(engine, container_id))}),
@@ -306,7 +307,7 @@ async def update_release_id(container_id: str, request: Request, who: Principal 
                                          {"release-id": release_id(container_id, current.version)}))
         info = current
         if target != current.version:
-            info = engine.rollback(container_id, target, author=who.name,
+            info = engine.rollback(container_id, target, role=who.role, author=who.name,
                                    comment=f"KIE: release id updated to version {target}")
         return JSON(service_response(True, "Release id successfully updated.",
                                      {"release-id": release_id(container_id, info.version)}))

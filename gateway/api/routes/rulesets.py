@@ -85,8 +85,11 @@ FIRE_SCHEMA: dict[str, Any] = {
 
 @router.get("/api/rulesets")
 def list_rulesets(engine: EngineDep, _: Caller) -> JSON:
-    """The current version of each rule set: name, version, deployed_at, author, comment."""
-    return JSON([info.to_dict() for info in engine.list_rulesets()])
+    """The current version of each rule set: name, version, deployed_at, author, comment, and
+    ``policy``: "author" when an author may deploy it as it stands, "developer" when the rule
+    policy refuses it (a developer deployed it; it keeps serving, an author's next deploy of such
+    text is refused)."""
+    return JSON([{**info.to_dict(), "policy": engine.policy_of(info)} for info in engine.list_rulesets()])
 
 
 @router.get("/api/rulesets/{name}")
@@ -109,7 +112,9 @@ def get_version(name: RuleSetName, version: Annotated[int, PathParam(ge=1)], eng
 
 @router.get("/api/rulesets/{name}/history")
 def history(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
-    """Every deploy, rollback and delete of the rule set, oldest first (from any gateway process)."""
+    """Every deploy, rollback and delete of the rule set, and every change the rule policy refused
+    (``event: "refused"``), oldest first, from any gateway process: who (``author``), in which
+    ``role`` and from which process (``origin``)."""
     events = engine.history(name)
     if not events:
         engine.versions(name)  # 404 for a rule set that never existed
@@ -126,14 +131,16 @@ def deploy(name: RuleSetName, body: DeployBody, request: Request, engine: Engine
            who: Author) -> JSON:
     """Compile and make live on every gateway process; 422 with ``errors`` (file, line, column,
     message) if it does not compile, 422 ``{"kind": "scenarios", ...}`` if one of its test
-    scenarios is red (unless ``force``), 409 ``{"error": "base version changed", "current": n}``
+    scenarios is red (unless ``force``), 422 ``{"kind": "policy", "errors": [...]}`` if the principal
+    is an author and the rule policy refuses the files (nothing compiled), 409
+    ``{"error": "base version changed", "current": n}``
     if ``base_version`` is stale. With ``Prefer: respond-async`` (or ``?async=true``): 202 and a
     build job (``Location: /api/jobs/{id}``) whose result or error is the same."""
     if wants_async(request):
         return accepted(jobs.submit("deploy", name, dict(body.files), author=who.name, comment=body.comment,
-                                    base_version=body.base_version, force=body.force))
+                                    base_version=body.base_version, force=body.force, role=who.role))
     info = engine.deploy(name, dict(body.files), author=who.name, comment=body.comment, base_version=body.base_version,
-                         force=body.force)
+                         force=body.force, role=who.role)
     return JSON({"name": info.name, "version": info.version}, status_code=201)
 
 
@@ -141,10 +148,11 @@ def deploy(name: RuleSetName, body: DeployBody, request: Request, engine: Engine
 def validate(name: RuleSetName, body: DeployBody, request: Request, engine: EngineDep, jobs: JobsDep,
              who: Caller) -> JSON:
     """Compile only (the body a deploy takes is accepted as is): ``{"ok": bool, "errors": [...]}``;
-    asynchronous as a job like the deploy."""
+    asynchronous as a job like the deploy. For any role but developer the errors are first those
+    of the rule policy (then nothing is compiled)."""
     if wants_async(request):
-        return accepted(jobs.submit("validate", name, dict(body.files), author=who.name))
-    errors = engine.validate(name, dict(body.files))
+        return accepted(jobs.submit("validate", name, dict(body.files), author=who.name, role=who.role))
+    errors = engine.validate(name, dict(body.files), role=who.role)
     return JSON({"ok": not errors, "errors": [e.to_dict() for e in errors]})
 
 
@@ -157,14 +165,14 @@ def expand(name: RuleSetName, body: FilesBody, engine: EngineDep, _: Caller) -> 
 @router.post("/api/rulesets/{name}/rollback")
 def rollback(name: RuleSetName, body: RollbackBody, engine: EngineDep, who: Author) -> JSON:
     """Make an earlier version current again (on every gateway process)."""
-    info = engine.rollback(name, body.version, author=who.name, comment=body.comment)
+    info = engine.rollback(name, body.version, author=who.name, comment=body.comment, role=who.role)
     return JSON({"name": info.name, "version": info.version})
 
 
 @router.delete("/api/rulesets/{name}")
 def delete(name: RuleSetName, engine: EngineDep, who: Author) -> JSON:
     """Undeploy the rule set (its fire endpoint answers 404 afterwards); its history stays."""
-    engine.delete(name, author=who.name)
+    engine.delete(name, author=who.name, role=who.role)
     return JSON({"name": name, "deleted": True})
 
 
@@ -251,11 +259,12 @@ def examples(name: RuleSetName, engine: EngineDep, settings: SettingsDep, _: Cal
 
 
 @router.post("/api/rulesets/{name}/try")
-def try_files(name: RuleSetName, body: TryBody, engine: EngineDep, settings: SettingsDep, _: Caller) -> JSON:
+def try_files(name: RuleSetName, body: TryBody, engine: EngineDep, settings: SettingsDep, who: Caller) -> JSON:
     """Fire undeployed text (the workbench's "try it", not a decision); 422 ``{"errors": [...]}`` if
-    it does not compile."""
+    it does not compile, 422 ``{"kind": "policy", ...}`` if the rule policy refuses it for the
+    caller's role (checked before anything compiles or runs)."""
     facts = facts_from_body({"facts": body.facts}, settings.engine.max_facts)
-    return JSON(engine.fire_files(dict(body.files), facts).to_dict())
+    return JSON(engine.fire_files(dict(body.files), facts, role=who.role).to_dict())
 
 
 @router.get("/api/rulesets/{name}/diff")
@@ -296,5 +305,5 @@ def _version_dict(rv: Any) -> dict[str, Any]:
 
 @router.get("/api/whoami")
 async def whoami(who: Caller) -> JSON:
-    """The identity and role of the presented token (``anonymous``/``author`` in open mode)."""
+    """The identity and role of the presented token (``anonymous``/``developer`` in open mode)."""
     return JSON(who.to_dict())
