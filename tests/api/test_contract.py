@@ -170,3 +170,27 @@ def test_every_json_body_route_of_the_openapi_document_refuses_bad_bodies_in_one
         if template not in OTHER_CONTENT_TYPES:
             _refusal(send(b"<a/>", "application/xml"), 415, "media_type", kie)
         _refusal(send(b'{"a": ' + b"[" * 100 + b"]" * 100 + b"}"), 400, "body", kie)
+
+
+def test_the_kie_401_asks_for_what_its_header_asks_for(secured, deployed):
+    """The KIE 401 body asked for a Bearer token while its WWW-Authenticate header asked for Basic."""
+    r = secured.post(f"{KIE}/containers/instances/contract", json={"commands": []})
+    assert r.status_code == 401 and r.headers["www-authenticate"].startswith("Basic")
+    assert "Authorization: Basic" in r.json()["msg"], r.json()
+    r = secured.post("/api/rulesets/contract/fire", json={"facts": []})
+    assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer" and r.json()["kind"] == "auth"
+    assert "Basic" not in r.json()["error"]
+
+
+def test_a_validate_job_answers_as_the_synchronous_validate(client, deployed):
+    """Validate answered ``ok``, its asynchronous job ``valid``: the job's result now has ``ok`` too."""
+    body = {"files": {"bad.drl": "rule \"x\" when Customer( age > ) then end"}}
+    now = client.post("/api/rulesets/contract/validate", json=body).json()
+    job = client.post("/api/rulesets/contract/validate?async=true", json=body)
+    assert job.status_code == 202
+    deadline = time.monotonic() + 120
+    while (done := client.get(job.headers["location"]).json())["status"] not in ("succeeded", "failed"):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert done["result"]["ok"] is now["ok"] is False and done["result"]["valid"] is False
+    assert done["result"]["errors"] == now["errors"]
