@@ -257,3 +257,14 @@ def test_422_request_shape_is_one_body_on_every_family(client, deployed):
                                ("POST", "/api/mappings/validate", {"spec": {}, "extra": 1})):
         r = _refusal(client.request(method, path, json=body), 422, "request", False)
         assert r["error"] == "invalid request" and r["errors"][0]["field"].startswith("body."), (path, r)
+
+
+def test_json_sent_as_text_plain_or_without_a_content_type_is_read_on_every_route_as_on_fire(client, deployed):
+    """The door reads what the fire route reads: JSON declared as JSON, as ``text/plain`` or not at all."""
+    for headers in ({"Content-Type": "text/plain"}, {}, {"Content-Type": "application/merge-patch+json"}):
+        r = client.post("/api/rulesets/contract/sessions", content=b'{"facts": [{"type": "Customer", "id": "t", "age": 40}]}',
+                        headers=headers)
+        assert r.status_code == 201 and r.json()["fact_count"] == 1, (headers, r.json())
+        assert client.delete(f"/api/rulesets/contract/sessions/{r.json()['id']}").status_code == 200
+        r = client.post("/api/rulesets/contract/fire", content=b'{"facts": []}', headers=headers)
+        assert r.status_code == 200, (headers, r.json())
