@@ -101,14 +101,14 @@ class Registration:
             raise ApiError(422, f"report: {exc.message}", field="report", line=exc.line, column=exc.column) from None
 
 
-#: Content types a query registration takes as its C-SPARQL text (else JSON; anything else: 415).
+#: Content types (and any text/*) a query registration takes as its C-SPARQL text (else JSON; anything else: 415).
 QUERY_TEXT_TYPES = ("text/plain", "application/sparql-query")
 
 
 async def _registration(request: Request) -> Registration:
     if not _is_json(request):
         content_type = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
-        if content_type not in QUERY_TEXT_TYPES:
+        if content_type not in QUERY_TEXT_TYPES and not content_type.startswith("text/"):
             raise BadBody(f"content type {content_type!r} is not supported; send the query as text/plain or "
                           "JSON (application/json)", status=415)
         return Registration((await request.body()).decode("utf-8", errors="replace"))
