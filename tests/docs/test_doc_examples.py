@@ -21,7 +21,7 @@ line before a fenced block, invisible when rendered:
 
 ``<!-- cli-example -->`` before an ``sh`` block — every line whose comment ends in ``→ exit N`` runs
 ``printeps`` with those arguments (``.venv/bin/`` dropped), from a folder where ``rules/`` is the
-repository's and ``facts.json`` holds the documented facts; ``--server URL`` is pointed at a test
+repository's (``workflows/`` too) and ``facts.json`` holds the documented facts; ``--server URL`` is pointed at a test
 gateway and ``--token …`` dropped (it runs open). Lines without ``→ exit`` (``serve``, ``ros``: they
 run until stopped) are not run.
 """
@@ -188,7 +188,8 @@ def test_a_cli_example_exits_as_documented(file, line, raw, server, tmp_path):
             skip = True
             continue
         args.append(server.url if k > 0 and command[k] == "--server" else arg)
-    (tmp_path / "rules").symlink_to(PROJECT_ROOT / "rules")
+    for folder in ("rules", "workflows"):
+        (tmp_path / folder).symlink_to(PROJECT_ROOT / folder)
     (tmp_path / "facts.json").write_text(json.dumps(FACTS))
     env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH", str(PROJECT_ROOT))}
     env.pop("PRINTEPS_SERVER", None)
