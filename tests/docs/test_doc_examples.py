@@ -196,3 +196,21 @@ def test_a_cli_example_exits_as_documented(file, line, raw, server, tmp_path):
     done = subprocess.run([sys.executable, "-m", "gateway.cli", *args], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=600)
     assert done.returncode == expected, f"{file}:{line}: {raw}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
+
+
+def test_the_documented_scenario_report_is_the_one_the_gateway_gives(client):
+    """docs/rest-api.md's test report: the pair scenario at line 191 of tests/reception.yaml fails at
+    the line of its expected action (it said 199, the line is 200) when the greeting changes."""
+    from gateway.engine.ruleset import read_folder
+
+    text = (PROJECT_ROOT / "docs" / "rest-api.md").read_text(encoding="utf-8")
+    scenario_line, failure_line = map(int, re.search(
+        r'"name": "pair: the papers\' greeting", "file": "tests/reception.yaml", "line": (\d+),.*?"failures": \[\{"line": (\d+)',
+        text, re.DOTALL).groups())
+    files = read_folder(PROJECT_ROOT / "rules" / "drl" / "reception")
+    files["reception.dslr"] = files["reception.dslr"].replace("Welcome. Two seats?", "Hi!")
+    assert files["reception.dslr"] != read_folder(PROJECT_ROOT / "rules" / "drl" / "reception")["reception.dslr"]
+    report = client.post("/api/rulesets/reception/test", json={"files": files}).json()
+    pair = next(r for r in report["results"] if r["name"] == "pair: the papers' greeting")
+    assert (pair["line"], pair["status"], pair["failures"][0]["line"]) == (scenario_line, "failed", failure_line)
+    assert 'expected action say {robot: pepper, text: "Welcome. Two seats?"} was not requested' in pair["failures"][0]["message"]
