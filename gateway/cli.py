@@ -211,12 +211,12 @@ def export_cmd(
     from the Information State into FOLDER (for git). Joins a running embedded database."""
     from gateway.store import open_store
     from gateway.store.catalog import MongoCatalog
-    from gateway.transfer import export_to
+    from gateway.transfer import export_to, seed_folders
 
     settings = _settings(config)
     store = _open_store_or_fail(open_store, settings)
     try:
-        written = export_to(MongoCatalog(store.db, "export"), folder)
+        written = export_to(MongoCatalog(store.db, "export"), folder, seed_folders(settings))
     finally:
         store.close()
     for rel in written:
@@ -417,8 +417,11 @@ def rules_deploy(
         for line in format_errors(data["errors"], folder):
             typer.echo(line)
         if data.get("kind") == "scenarios":  # issue 16: red test scenarios refuse the deploy
-            typer.echo(f"{data.get('error')}")
+            typer.echo(str(data.get("error")).replace('deploy with "force": true', "deploy with --force"))
         raise typer.Exit(1)
+    if status == 409 and isinstance(data, dict) and data.get("current") is not None:
+        _fail(f"{url}: HTTP 409: {data.get('error')}: the current version is {data['current']}"
+              f"{'' if base_version is None else f', not {base_version}'} (deploy again with --base-version {data['current']})")
     _fail(f"{url}: HTTP {status}: {data.get('error') if isinstance(data, dict) else data}")
 
 

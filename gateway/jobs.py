@@ -218,7 +218,8 @@ class JobService:
                 outcome: dict[str, Any] = {"version": info.to_dict()}
             else:
                 errors = self.engine.validate(job["ruleset"], files, on_progress=progress, role=job.get("role"))
-                outcome = {"valid": not errors, "errors": [e.to_dict() for e in errors]}
+                # the synchronous validate's answer ({"ok", "errors"}); "valid" is its older name here
+                outcome = {"ok": not errors, "valid": not errors, "errors": [e.to_dict() for e in errors]}
         except BuildCancelled as exc:
             with self._cond:
                 self._finish(job, "cancelled", error=exc.to_dict())

@@ -41,9 +41,27 @@ def _current(catalog: Catalog, kind: str) -> list[tuple[str, Any]]:
     return out
 
 
-def export_to(catalog: Catalog, folder: Path) -> list[str]:
-    """Write the current version of everything into ``folder``; returns the files written."""
+def seed_folders(settings: Any) -> dict[str, list[Path]]:
+    """The folders a gateway with ``settings`` seeds from, by item kind (see :func:`export_to`)."""
+    streams = settings.streams
+    return {"workflow": [Path(settings.workflows.source_dir)],
+            "query": [Path(streams.queries_dir)] if streams.queries_dir else [],
+            "mapping": [Path(streams.mappings_dir)] if streams.mappings_dir else []}
+
+
+def export_to(catalog: Catalog, folder: Path, seeds: dict[str, list[Path]] | None = None) -> list[str]:
+    """Write the current version of everything into ``folder``; returns the files written.
+
+    Files get the names and the bytes of the seed layout: an item a file in ``folder`` or in a seed
+    folder (``seeds``, see :func:`seed_folders`) already holds is written under that file's name
+    (``workflows/1_greeting.yaml`` for workflow ``greeting``, ``queries/customer_detection.rq`` for
+    query ``CustomerDetectionQuery``), and a YAML file whose content is the item's as it is
+    (a binding, a mapping) is written as that file's text, comments and all. Why: so export then
+    import is the identity, and exporting into a copy of the repository changes only what changed
+    (issue 32) — not a second file per item under another name.
+    """
     written: list[str] = []
+    seeds = seeds or {}
 
     def write(rel: Path, text: str) -> None:
         path = folder / rel
@@ -57,20 +75,71 @@ def export_to(catalog: Catalog, folder: Path) -> list[str]:
             path.parent.mkdir(parents=True, exist_ok=True)
             write_file(path, text)
             written.append(str(RULES / name / fname))
+    workflow_files = _files_by_item([folder / WORKFLOWS, *seeds.get("workflow", [])], "*.yaml", _workflow_name)
     for name, payload in _current(catalog, "workflow"):
-        write(WORKFLOWS / f"{name}.yaml", payload["text"])
+        write(WORKFLOWS / workflow_files.get(name, Path(f"{name}.yaml")).name, payload["text"])
     for name, payload in _current(catalog, "knowledge"):
         write(ONTOLOGY / payload.get("file", f"teahouse.{'ttl' if name == 'ontology' else 'swrl'}"), payload["text"])
+    query_files = _files_by_item([folder / QUERIES, *seeds.get("query", [])], "*.rq", _query_name)
     for name, payload in _current(catalog, "query"):
-        write(QUERIES / f"{name}.rq", payload["text"])
+        source = query_files.get(name)
+        stem = source.stem if source is not None else name
+        write(QUERIES / f"{stem}.rq", payload["text"])
         if payload.get("binding"):
-            write(QUERIES / f"{name}.binding.yaml", yaml.safe_dump(_plain_binding(payload["binding"]), sort_keys=False,
-                                                                  allow_unicode=True))
+            sidecar = source.with_name(f"{stem}.binding.yaml") if source is not None else None
+            write(QUERIES / f"{stem}.binding.yaml", _same_yaml(sidecar, payload["binding"], _binding_of) or yaml.safe_dump(
+                _plain_binding(payload["binding"]), sort_keys=False, allow_unicode=True))
         if payload.get("params"):
-            write(QUERIES / f"{name}.params.json", json.dumps(payload["params"], indent=1))
+            write(QUERIES / f"{stem}.params.json", json.dumps(payload["params"], indent=1))
+    mapping_dirs = [folder / MAPPINGS, *seeds.get("mapping", [])]
     for name, spec in _current(catalog, "mapping"):
-        write(MAPPINGS / f"{name}.yaml", yaml.safe_dump(spec, sort_keys=False, allow_unicode=True))
+        same = next((t for d in mapping_dirs if (t := _same_yaml(d / f"{name}.yaml", spec, lambda v: v)) is not None), None)
+        write(MAPPINGS / f"{name}.yaml", same or yaml.safe_dump(spec, sort_keys=False, allow_unicode=True))
     return written
+
+
+def _files_by_item(folders: list[Path], pattern: str, item_name: Any) -> dict[str, Path]:
+    """Item name -> the first file (folders in order) that defines it; unreadable files are skipped."""
+    out: dict[str, Path] = {}
+    for folder in folders:
+        if not folder.is_dir():
+            continue
+        for path in sorted(folder.glob(pattern)):
+            try:
+                name = item_name(path.read_text(encoding="utf-8"))
+            except Exception:  # a file that does not parse names no item: it keeps its name, is not reused
+                continue
+            if name and name not in out:
+                out[name] = path
+    return out
+
+
+def _workflow_name(text: str) -> str | None:
+    document = yaml.safe_load(text)
+    return document.get("workflow") if isinstance(document, dict) else None
+
+
+def _query_name(text: str) -> str:
+    from gateway.stream.query import parse_query
+
+    return parse_query(text).name
+
+
+def _binding_of(raw: Any) -> Any:
+    from gateway.stream.rules import RuleBinding
+
+    return RuleBinding.from_dict(raw).to_dict()
+
+
+def _same_yaml(path: Path | None, value: Any, normal: Any) -> str | None:
+    """The text of YAML file ``path`` when it holds ``value`` (after ``normal``), else None."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        text = path.read_text(encoding="utf-8")
+        return text if normal(yaml.safe_load(text)) == value else None
+    except Exception:  # unreadable or not that item's shape: written afresh
+        return None
 
 
 def _plain_binding(binding: dict[str, Any]) -> dict[str, Any]:

@@ -93,11 +93,9 @@ class Authenticator:
         elif self.open:
             return ANONYMOUS
         else:
-            raise ApiError(
-                401,
-                "authentication required: send 'Authorization: Bearer <token>'",
-                headers={"WWW-Authenticate": challenge},
-            )
+            wanted = ("HTTP basic credentials ('Authorization: Basic …') or a token ('Authorization: Bearer <token>')"
+                      if challenge.lower().startswith("basic") else "'Authorization: Bearer <token>'")
+            raise ApiError(401, f"authentication required: send {wanted}", headers={"WWW-Authenticate": challenge})
         if ROLE_RANK.get(principal.role, 0) < ROLE_RANK[role]:
             raise ApiError(403, f"{principal.name!r} has role {principal.role!r}; this needs {role!r}")
         return principal

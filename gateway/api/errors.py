@@ -43,8 +43,21 @@ class ApiError(Exception):
         self.extra = extra
 
 
-def error_body(message: str, **extra: Any) -> dict[str, Any]:
-    return {"error": message, **extra}
+#: The ``kind`` of an error body that names none itself, by status: every error body of the API is
+#: ``{"error", "kind", ...}`` (docs/rest-api.md, "Errors"), so clients can branch on ``kind``.
+KIND_BY_STATUS = {400: "body", 401: "auth", 403: "forbidden", 404: "not_found", 405: "method", 409: "conflict",
+                  410: "gone", 413: "too_large", 415: "media_type", 421: "misdirected", 422: "request",
+                  429: "limit", 500: "internal", 503: "unavailable"}
+
+
+def kind_for(status: int) -> str:
+    """The default ``kind`` of an error body with this status."""
+    return KIND_BY_STATUS.get(status, "internal" if status >= 500 else "request")
+
+
+def error_body(message: str, status: int = 400, **extra: Any) -> dict[str, Any]:
+    """``{"error": message, "kind": …, **extra}``; ``kind`` from ``extra`` or else by ``status``."""
+    return {"error": message, "kind": extra.pop("kind", None) or kind_for(status), **extra}
 
 
 def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
@@ -100,16 +113,17 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(ApiError)
     async def _api_error(request: Request, exc: ApiError) -> JSON:
         count(f"http_{exc.status}")
-        return JSON(error_body(exc.message, **exc.extra), status_code=exc.status, headers=exc.headers)
+        return JSON(error_body(exc.message, exc.status, **exc.extra), status_code=exc.status, headers=exc.headers)
 
     @app.exception_handler(BadBody)
     async def _bad_body(request: Request, exc: BadBody) -> JSON:
         count("bad_body")
-        return JSON(error_body(exc.message, **exc.extra), status_code=exc.status)
+        return JSON(error_body(exc.message, exc.status, **exc.extra), status_code=exc.status)
 
     @app.exception_handler(EngineError)
     async def _engine_error(request: Request, exc: EngineError) -> JSON:
         status, body = engine_error_response(exc)
+        body.setdefault("kind", kind_for(status))
         count(type(exc).__name__)
         if status >= 500:
             log.error("engine error on %s %s: %s", request.method, request.url.path, exc)
@@ -118,53 +132,55 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(JobError)  # a build job refused: unknown, not cancellable, queue full
     async def _job_error(request: Request, exc: JobError) -> JSON:
         count(f"http_{exc.status}")
-        return JSON(error_body(exc.message), status_code=exc.status)
+        return JSON(error_body(exc.message, exc.status, kind=getattr(exc, "kind", None)), status_code=exc.status)
 
     @app.exception_handler(QueryParseError)
     async def _query_parse(request: Request, exc: QueryParseError) -> JSON:
         count("query_parse")
-        return JSON(error_body(exc.message, line=exc.line, column=exc.column), status_code=422)
+        return JSON(error_body(exc.message, 422, kind="query", line=exc.line, column=exc.column), status_code=422)
 
     @app.exception_handler(QueryNotFound)
     @app.exception_handler(KnowledgeItemNotFound)  # no such individual, property or SWRL rule
     async def _not_found(request: Request, exc: Exception) -> JSON:
         count("http_404")
-        return JSON(error_body(str(exc)), status_code=404)
+        return JSON(error_body(str(exc), 404), status_code=404)
 
     @app.exception_handler(StreamError)
     @app.exception_handler(BindingError)
     async def _stream_error(request: Request, exc: Exception) -> JSON:
         status = 409 if "already registered" in str(exc) else 422
         count(f"http_{status}")
-        return JSON(error_body(str(exc)), status_code=status)
+        return JSON(error_body(str(exc), status, kind="conflict" if status == 409 else "stream"), status_code=status)
 
     @app.exception_handler(MappingError)
     @app.exception_handler(TermError)
     async def _mapping_error(request: Request, exc: Any) -> JSON:
         count("http_422")
-        return JSON(error_body(exc.message, where=exc.where), status_code=422)
+        return JSON(error_body(exc.message, 422, kind="mapping", where=exc.where), status_code=422)
 
     @app.exception_handler(CatalogUnavailable)
     @app.exception_handler(StoreUnavailable)
     async def _store_down(request: Request, exc: Exception) -> JSON:
         count("store_unavailable")
         log.error("%s %s: %s", request.method, request.url.path, exc)
-        return JSON(error_body(f"{exc} (changes need the Information State; firing keeps working)"), status_code=503)
+        return JSON(error_body(f"{exc} (changes need the Information State; firing keeps working)", 503, kind="store"),
+                    status_code=503)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSON:
         count("invalid_request")
-        return JSON(error_body("invalid request", errors=_validation_errors(exc)), status_code=422)
+        return JSON(error_body("invalid request", 422, errors=_validation_errors(exc)), status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSON:
         count(f"http_{exc.status_code}")
         message = exc.detail if isinstance(exc.detail, str) else "request failed"
-        body = error_body(message) if isinstance(exc.detail, str) else error_body(message, detail=exc.detail)
+        body = (error_body(message, exc.status_code) if isinstance(exc.detail, str)
+                else error_body(message, exc.status_code, detail=exc.detail))
         return JSON(body, status_code=exc.status_code, headers=getattr(exc, "headers", None))
 
     @app.exception_handler(Exception)
     async def _internal(request: Request, exc: Exception) -> JSON:
         count("internal")
         log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return JSON(error_body("internal error", type=type(exc).__name__, detail=str(exc)), status_code=500)
+        return JSON(error_body("internal error", 500, type=type(exc).__name__, detail=str(exc)), status_code=500)

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import asyncio
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any, Awaitable, Callable
 
 import orjson
 from fastapi import Request
+from fastapi.routing import APIRoute
 from fastapi.responses import Response
 
 
@@ -85,6 +86,49 @@ def check_content_type(content_type: str | None) -> None:
     content_type = content_type or "application/json"
     if "json" not in content_type and "text/plain" not in content_type:
         raise BadBody(f"content type {content_type!r} is not supported; send application/json", status=415)
+
+
+def _declared_json(content_type: str | None) -> bool:
+    """True for ``application/json`` and ``application/*+json`` (what FastAPI parses as JSON itself)."""
+    main = (content_type or "").split(";", 1)[0].strip().lower()
+    return main == "application/json" or (main.startswith("application/") and main.endswith("+json"))
+
+
+def json_body_checked(handler: Callable[[Request], Awaitable[Response]], required: bool) -> Callable[[Request], Awaitable[Response]]:
+    """``handler`` (a FastAPI route's request handler) behind the checks every JSON body gets at the
+    door, as on the fire route: 415 for a body that is not JSON by its content type, 400 for one that
+    is empty (when required), not JSON (with line and column) or nested deeper than
+    ``api.max_json_depth``. Why here: FastAPI would answer these with pydantic's 422 — "Input should
+    be a valid dictionary" for XML, ``body.20`` (a character offset) for truncated JSON — or parse a
+    hostile depth with the recursive stdlib parser. The parsed value is handed on as the request's
+    JSON, so the body is parsed once."""
+
+    async def checked(request: Request) -> Response:
+        if request.method in ("POST", "PUT", "PATCH"):
+            raw = await request.body()
+            if raw.strip() or required:
+                content_type = request.headers.get("content-type")
+                check_content_type(content_type)
+                request._json = parse_json(raw, request.app.state.settings.api.max_json_depth)  # Starlette's cache
+                if not _declared_json(content_type):  # text/plain or none, accepted like the fire route does
+                    request.scope["headers"] = [(k, v) for k, v in request.scope["headers"] if k != b"content-type"]
+                    request.scope["headers"].append((b"content-type", b"application/json"))
+                    request.__dict__.pop("_headers", None)
+        return await handler(request)
+
+    return checked
+
+
+class JsonRoute(APIRoute):
+    """The route class of the gateway's routers: a route that takes a JSON body model checks the
+    body at the door (:func:`json_body_checked`); routes that read their body themselves call
+    :func:`read_json`, which makes the same checks."""
+
+    def get_route_handler(self) -> Callable[[Request], Awaitable[Response]]:
+        handler = super().get_route_handler()
+        if self.body_field is None:
+            return handler
+        return json_body_checked(handler, self.body_field.field_info.is_required())
 
 
 async def read_json(request: Request) -> Any:

@@ -70,7 +70,7 @@ class BodyLimit:
 
     @staticmethod
     async def _reject(send: Any, status: int, message: str) -> None:
-        body = orjson.dumps({"error": message})
+        body = orjson.dumps({"error": message, "kind": "too_large" if status == 413 else "body"})
         await send({
             "type": "http.response.start",
             "status": status,

@@ -10,6 +10,12 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 
+def more_errors(n: int) -> str:
+    """The tail after the first error's message, naming what the rest are: a bare "(and 1 more)"
+    after a list of allowed keys read as one more key."""
+    return f" (and {n} more error{'s' if n != 1 else ''})" if n > 0 else ""
+
+
 @dataclass(frozen=True)
 class CompileError:
     """One compile problem. Lines and columns are 1-based; 0 means unknown.
@@ -74,7 +80,7 @@ class CompileFailed(EngineError):
     def __init__(self, errors: list[CompileError]):
         self.errors = errors
         first = errors[0] if errors else None
-        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        more = more_errors(len(errors) - 1)
         super().__init__(f"rule set does not compile: {first}{more}")
 
     def to_dict(self) -> dict[str, Any]:
@@ -147,7 +153,7 @@ class FactError(EngineError):
         if first.get("type"):
             where += f" ({first['type']}"
             where += f" '{first['id']}')" if first.get("id") else ")"
-        more = f" (and {self.total - 1} more)" if self.total > 1 else ""
+        more = more_errors(self.total - 1)
         super().__init__(f"{where}: {first.get('message', 'invalid facts')}{more}")
 
     def to_dict(self) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections import OrderedDict
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from typing import Any
 
 import pymongo
@@ -100,7 +100,7 @@ class DecisionRecord:
             "fire_count": payload.get("fire_count"),
             "duration_ms": payload.get("duration_ms"),
             "context": payload.get("context") or {},
-            "at": datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z"),
+            "at": at_text(datetime.now(timezone.utc)),
             "process": self.process,
         }
 
@@ -116,10 +116,17 @@ class DecisionRecord:
             if value is not None:
                 spec[field] = value
         id_range: dict[str, Any] = {}
+        at_range: dict[str, str] = {}
+        # The ids' time keeps whole seconds (and is taken a moment apart from "at"): they only narrow
+        # the scan, with a margin; the bounds are exact on "at", at its millisecond precision.
         if since is not None:
-            id_range["$gte"] = ObjectId.from_datetime(since)
+            id_range["$gte"] = ObjectId.from_datetime(since - ID_MARGIN)
+            at_range["$gte"] = at_text(since)
         if until is not None:
-            id_range["$lt"] = ObjectId.from_datetime(until)
+            id_range["$lt"] = ObjectId.from_datetime(until + ID_MARGIN)
+            at_range["$lt"] = at_text(until)
+        if at_range:
+            spec["at"] = at_range
         if cursor is not None:
             try:
                 after = ObjectId(cursor)
@@ -158,6 +165,19 @@ class DecisionRecord:
         out = _plain(doc)
         out["outcomes"] = [_plain(o) for o in outcomes]
         return out
+
+
+#: How far a decision's id time (whole seconds, taken as it is recorded) may be from its "at".
+ID_MARGIN = timedelta(seconds=5)
+
+
+def at_text(moment: datetime) -> str:
+    """A decision's ``at`` (UTC, ISO-8601 with milliseconds and ``Z``: text that sorts as time);
+    a bound between two milliseconds is rounded up, so since/until stay inclusive/exclusive."""
+    moment = moment.astimezone(timezone.utc)
+    if moment.microsecond % 1000:
+        moment += timedelta(microseconds=1000 - moment.microsecond % 1000)
+    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def _plain(doc: dict[str, Any]) -> dict[str, Any]:

@@ -54,7 +54,7 @@ def test_malformed_fire_bodies(http, body, status, words):
 
 def test_malformed_management_bodies(http):
     r = http.put("/api/rulesets/limits", content=b"{\"files\": ", headers={"Content-Type": "application/json"})
-    assert r.status_code == 422 and r.json()["error"] == "invalid request"
+    assert r.status_code == 400 and r.json()["kind"] == "body" and (r.json()["line"], r.json()["column"]) == (1, 11)
     r = http.put("/api/rulesets/limits", json={"files": {"a.drl": 3}})
     assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("body.files")
     r = http.put("/api/rulesets/limits", json={"files": {"../evil.drl": "rule"}})
@@ -63,7 +63,7 @@ def test_malformed_management_bodies(http):
     assert r.status_code in (404, 422)
     r = http.post("/api/rulesets/limits/fire", content=b"facts=1", headers={"Content-Type": "application/x-www-form-urlencoded"})
     assert r.status_code == 415
-    assert http.get("/no/such/route").json() == {"error": "Not Found"}
+    assert http.get("/no/such/route").json() == {"error": "Not Found", "kind": "not_found"}
     _still_up(http)
 
 

@@ -58,8 +58,9 @@ def test_fire_bad_facts_is_422_naming_fact_and_field(client, deployed):
     r = client.post("/api/rulesets/rest/fire", json={"facts": [{"type": "Dragon", "id": "d"}]})
     assert r.status_code == 422 and r.json()["errors"][0]["type"] == "Dragon"
     r = client.post("/api/rulesets/rest/fire", json={"facts": [{"id": "no type"}]})
-    assert r.status_code == 422 and r.json()["errors"][0] == {"index": 0, "field": "type",
-                                                              "message": "a fact needs a non-empty string 'type'"}
+    assert r.status_code == 422 and r.json()["kind"] == "facts"
+    assert r.json()["errors"][0] == {"index": 0, "type": None, "id": "no type", "field": "type",
+                                     "message": "a fact needs a non-empty string 'type'"}
     assert client.post("/api/rulesets/nope/fire", json={"facts": []}).status_code == 404
 
 

@@ -105,7 +105,10 @@ def test_rules_test_on_a_server_and_the_deploy_gate(cli_home: Path, server, tmp_
     assert refused.exit_code == 1
     assert f"{folder}/tests/greetings.yaml:7:1: scenario 'a pair is welcomed': expected action say" in refused.output
     assert "not deployed: 1 of 1 scenarios are red" in refused.output
+    assert "deploy with --force" in refused.output and '"force": true' not in refused.output  # the CLI's own flag
     forced = run("rules", "deploy", str(folder), "--server", server.url, "--force", env=env)
     assert forced.exit_code == 0 and "deployed served version 2" in forced.output
+    stale = run("rules", "deploy", str(folder), "--server", server.url, "--force", "--base-version", "1", env=env)
+    assert stale.exit_code == 1 and "the current version is 2, not 1" in stale.output, stale.output
     missing = run("rules", "test", "--server", server.url, "--ruleset", "nothing-here", env=env)
     assert missing.exit_code == 1 and "404" in missing.output

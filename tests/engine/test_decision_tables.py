@@ -317,3 +317,23 @@ def test_shipped_greetings_table_compiles(engine):
     assert files["greetings.xlsx"].startswith("data:application/vnd.openxmlformats-officedocument.spreadsheetml.sheet;")
     assert engine.validate("reception_greetings", files) == []
     assert dt.convert("greetings.xlsx", files["greetings.xlsx"]).rule_count == 14
+
+
+def test_the_documented_priority_error_is_where_rule_authoring_says(engine):
+    """docs/rule-authoring.md, section 8: a PRIORITY that is not a number in the repository's
+    greetings.xlsx is reported at J11 (the docs said F11, a cell of another layout)."""
+    from pathlib import Path
+
+    import openpyxl
+
+    folder = Path(__file__).resolve().parents[2] / "rules" / "drl" / "reception_greetings"
+    files = read_folder(folder)
+    book = openpyxl.load_workbook(folder / "greetings.xlsx")
+    book["Greetings"]["J11"] = "high"
+    out = io.BytesIO()
+    book.save(out)
+    files["greetings.xlsx"] = encode_binary(out.getvalue())
+    errors = engine.validate("reception_greetings", files)
+    documented = next(line for line in (folder.parents[2] / "docs" / "rule-authoring.md").read_text().splitlines()
+                      if "a `PRIORITY` that is not a number" in line).split("`")[-2]
+    assert str(errors[0]) == documented

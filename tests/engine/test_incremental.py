@@ -83,11 +83,15 @@ def fire(compiled, facts) -> dict:
 # --------------------------------------------------------------------------- random rule sets and edits
 
 
-def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = True) -> str:
-    """One rule of a random shape; some modify facts, so firing order and inference both matter."""
-    shape = rng.choice(["age", "tier", "amount", "join", "accumulate", "modify", "function", "absent",
-                        "plain tier", "plain join", "plain accumulate", "plain number join", "plain same age"]
-                       + (["query"] if queries else []) + (["vip", "plain vip"] if vip_field else []))
+#: Every rule shape :func:`random_rule` makes (the last three only when asked for / with the vip field).
+SHAPES = ["age", "tier", "amount", "join", "accumulate", "modify", "function", "absent", "plain tier", "plain join",
+          "plain accumulate", "plain number join", "plain same age", "query", "vip", "plain vip"]
+
+
+def random_rule(rng: random.Random, name: str, vip_field: bool, queries: bool = True, shape: str | None = None) -> str:
+    """One rule of a random shape (or of ``shape``); some modify facts, so firing order and
+    inference both matter."""
+    shape = shape or rng.choice(SHAPES[:13] + (["query"] if queries else []) + (["vip", "plain vip"] if vip_field else []))
     salience = f"salience {rng.randint(-5, 5)}\n" if rng.random() < 0.3 else ""
     say = f'actions.say("bot", "{name}");'
     if shape == "age":

@@ -115,6 +115,32 @@ def gateway(tmp_path_factory, mongo):
         yield gw
 
 
+SEED_PATTERNS = ("rules/drl/**/*", "workflows/*.yaml", "ontology/*.ttl", "ontology/*.swrl", "ontology/queries/*",
+                 "ontology/mappings/*.yaml")
+
+
+def test_export_writes_the_seed_layout_and_import_of_it_changes_nothing(gateway, tmp_path):
+    """Issue 32: on a gateway seeded from the repository, ``export`` writes exactly the seed files —
+    the same names (``workflows/1_greeting.yaml``, ``ontology/queries/customer_detection.rq``) and
+    bytes — and importing them reports every item unchanged. Before, it wrote ``greeting.yaml`` and
+    ``CustomerDetectionQuery.rq`` and re-dumped the YAML sidecars."""
+    from gateway.transfer import export_to, import_from, seed_folders
+
+    out = tmp_path / "out"
+    written = sorted(export_to(gateway.catalog, out, seed_folders(gateway.settings)))
+    seeds = sorted({str(p.relative_to(PROJECT_ROOT)) for pattern in SEED_PATTERNS for p in PROJECT_ROOT.glob(pattern)
+                    if p.is_file()})
+    assert written == seeds
+    for rel in seeds:
+        assert (out / rel).read_bytes() == (PROJECT_ROOT / rel).read_bytes(), rel
+    report = import_from(gateway, out, author="git", comment="nothing changed")
+    assert len(report) == 3 + 2 + 8 + 3 + 2  # rule sets, knowledge, workflows, mappings, queries
+    assert all(outcome.startswith("unchanged") for _, outcome in report), report
+    # exported again into the copy: the same files, none added under another name
+    assert sorted(export_to(gateway.catalog, out)) == seeds
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == seeds
+
+
 def test_mappings_are_data_checked_against_the_message_type(gateway):
     pytest.importorskip("printeps_interfaces")
     http = TestClient(gateway.app)

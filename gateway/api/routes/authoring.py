@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Caller, EngineDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.engine import decision_table
 from gateway.engine.ruleset import is_table_file
 from gateway.engine.scenarios import run_scenarios
@@ -31,7 +31,7 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name (its folder name)")]
 MAX_FILES = 500
 
-router = APIRouter(tags=["rule authoring"])
+router = APIRouter(tags=["rule authoring"], route_class=JsonRoute)
 
 
 class TestBody(BaseModel):

@@ -15,10 +15,10 @@ from fastapi import APIRouter, Query
 
 from gateway.api.deps import Caller, DecisionsDep, iso_datetime
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.store.store import StoreError, StoreUnavailable
 
-router = APIRouter(tags=["decisions"])
+router = APIRouter(tags=["decisions"], route_class=JsonRoute)
 
 ORIGINS = ("rest", "kie", "stream", "ros", "workflow", "api")
 

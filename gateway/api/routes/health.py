@@ -9,9 +9,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from gateway.api.deps import GatewayDep
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 
-router = APIRouter(tags=["operations"])
+router = APIRouter(tags=["operations"], route_class=JsonRoute)
 
 
 @router.get("/health")

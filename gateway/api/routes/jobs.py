@@ -14,9 +14,9 @@ from fastapi import APIRouter, Query
 
 from gateway.api.deps import Author, Caller, JobsDep
 from gateway.api.errors import engine_error_status
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 
-router = APIRouter(tags=["build jobs"])
+router = APIRouter(tags=["build jobs"], route_class=JsonRoute)
 
 
 def _with_status(job: dict) -> dict:

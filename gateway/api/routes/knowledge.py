@@ -19,12 +19,12 @@ from starlette.concurrency import run_in_threadpool
 
 from gateway.api.deps import Author, Caller, KnowledgeDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, read_json
+from gateway.api.jsonio import JSON, JsonRoute, read_json
 from gateway.ontology.knowledge import KnowledgeConflict, KnowledgeInvalid, digest
 from gateway.ontology.reasoner import ReasonerError
 from gateway.versions import VersionMissing
 
-router = APIRouter(tags=["knowledge"])
+router = APIRouter(tags=["knowledge"], route_class=JsonRoute)
 Kind = Literal["ontology", "swrl"]
 MAX_TEXT = 2_000_000
 

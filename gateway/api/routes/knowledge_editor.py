@@ -18,13 +18,13 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Author, Caller, KnowledgeDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.ontology.editor import KnowledgeEditor
 from gateway.ontology.knowledge import KnowledgeConflict, KnowledgeInvalid
 from gateway.ontology.reasoner import ReasonerError
 from gateway.ontology.values import ValueInvalid
 
-router = APIRouter(tags=["knowledge editor"])
+router = APIRouter(tags=["knowledge editor"], route_class=JsonRoute)
 Name = Annotated[str, PathParam(min_length=1, max_length=200, pattern=r"^[A-Za-z_][\w.-]*$")]
 RuleNumber = Annotated[int, PathParam(ge=1, le=100_000)]
 

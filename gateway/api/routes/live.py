@@ -29,8 +29,9 @@ from fastapi.responses import StreamingResponse
 
 from gateway.api.auth import Principal, event_stream_caller
 from gateway.api.deps import GatewayDep
+from gateway.api.jsonio import JsonRoute
 
-router = APIRouter(tags=["live"])
+router = APIRouter(tags=["live"], route_class=JsonRoute)
 
 EventStreamCaller = Annotated[Principal, Depends(event_stream_caller)]
 

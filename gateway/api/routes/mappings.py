@@ -31,12 +31,12 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Author, Caller, MappingsDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.rdf.mapping import Mapper, MappingError
 from gateway.rdf.spec_text import SpecSyntaxError, SpecText, read_spec_text, spec_to_text
 from gateway.versions import CatalogConflict
 
-router = APIRouter(tags=["streams"])
+router = APIRouter(tags=["streams"], route_class=JsonRoute)
 MappingName = Annotated[str, PathParam(pattern=r"^[A-Za-z][A-Za-z0-9_.:-]{0,63}$")]
 
 

@@ -20,14 +20,15 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Author, Caller, EngineDep, JobsDep, SettingsDep, correlation_id, wants_async
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, read_json, run_blocking
+from gateway.engine.errors import FactError
+from gateway.api.jsonio import JSON, JsonRoute, read_json, run_blocking
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"  # as gateway.engine.ruleset.check_name
 
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name (its folder name)")]
 MAX_FILES = 500
 
-router = APIRouter(tags=["rule sets"])
+router = APIRouter(tags=["rule sets"], route_class=JsonRoute)
 
 
 class FilesBody(BaseModel):
@@ -221,15 +222,27 @@ def facts_from_body(body: Any, max_facts: int) -> list[dict[str, Any]]:
     if len(facts) > max_facts:
         raise ApiError(422, f"too many facts: {len(facts)} > {max_facts}",
                        errors=[{"field": "facts", "message": f"at most {max_facts} facts"}])
+    check_facts(facts)
+    return facts
+
+
+def check_facts(facts: list[Any]) -> None:
+    """FactError (422 ``kind: "facts"``, as the engine's own refusals) unless every fact is an
+    object with a type: one shape on the fire route and on the session routes (issue 32)."""
     errors = []
     for index, fact in enumerate(facts):
         if not isinstance(fact, dict):
-            errors.append({"index": index, "field": None, "message": "a fact must be an object"})
+            errors.append({"index": index, "type": None, "id": None, "field": None, "message": "a fact must be an object"})
         elif not isinstance(fact.get("type"), str) or not fact["type"]:
-            errors.append({"index": index, "field": "type", "message": "a fact needs a non-empty string 'type'"})
+            errors.append({"index": index, "type": None, "id": _id_of(fact), "field": "type",
+                           "message": "a fact needs a non-empty string 'type'"})
     if errors:
-        raise ApiError(422, "bad facts", errors=errors)
-    return facts
+        raise FactError(errors)
+
+
+def _id_of(fact: dict[str, Any]) -> str | None:
+    value = fact.get("id")
+    return value if isinstance(value, str) else None
 
 
 @router.get("/api/rulesets/{name}/types")

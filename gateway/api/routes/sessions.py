@@ -22,8 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from gateway.api.deps import Caller, EngineDep, correlation_id
 from gateway.api.errors import ApiError
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
-from gateway.api.jsonio import JSON, run_blocking
-from gateway.api.routes.rulesets import NAME_PATTERN
+from gateway.api.jsonio import JSON, JsonRoute, run_blocking
+from gateway.api.routes.rulesets import NAME_PATTERN, check_facts
 from gateway.engine import FireResult
 from gateway.engine.sessions import SessionElsewhere, SessionGone
 
@@ -32,12 +32,15 @@ SessionId = Annotated[str, PathParam(min_length=1, max_length=128, description="
                                                                                  "the id a create returned)")]
 Handle = Annotated[str, PathParam(min_length=3, max_length=400, description="A fact handle (KIE's external form 0:id:…)")]
 
-router = APIRouter(tags=["sessions"])
+router = APIRouter(tags=["sessions"], route_class=JsonRoute)
 
 
-class Fact(BaseModel):
-    model_config = ConfigDict(extra="allow")
-    type: str = Field(min_length=1, description="A type the rule set declares; the other fields are its fields")
+#: A fact: ``{"type": <a declared type>, <its fields>…}``. Checked by :func:`check_facts`, not by pydantic,
+#: so a fact without a type is refused in the fire route's shape (422 ``kind: "facts"``, with its index).
+FACT_SCHEMA = {"type": "object", "required": ["type"], "additionalProperties": True,
+               "properties": {"type": {"type": "string", "minLength": 1,
+                                       "description": "A type the rule set declares; the other fields are its fields"}}}
+Fact = Annotated[Any, Field(json_schema_extra=FACT_SCHEMA)]
 
 
 class CreateBody(BaseModel):
@@ -81,8 +84,10 @@ class AdvanceBody(BaseModel):
     fire: bool = Field(default=False, description="Fire afterwards (what the time made due: windows, after[...])")
 
 
-def _facts(facts: list[Fact]) -> list[dict[str, Any]]:
-    return [f.model_dump() for f in facts]
+def _facts(facts: list[Any]) -> list[dict[str, Any]]:
+    """The facts as the engine takes them, or FactError 422 (``kind: "facts"``) naming the bad one."""
+    check_facts(facts)
+    return facts
 
 
 async def _at_owner(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
@@ -131,7 +136,7 @@ def list_sessions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
 async def create_session(name: RuleSetName, body: CreateBody, request: Request, engine: EngineDep, _: Caller) -> Response:
     """Open a stateful session: 201 ``{"id", "version", "clock", "time", "fact_count", …}`` (with
     ``handles`` for the ``facts`` inserted). Naming a declared ksession that is open already
-    returns it (200)."""
+    returns it (200, the ``facts`` inserted into it); any other id already open: 409, nothing changes."""
     manager = engine.session_manager
 
     def work() -> JSON:
@@ -144,8 +149,8 @@ async def create_session(name: RuleSetName, body: CreateBody, request: Request, 
                 if body.facts:
                     return _created(engine, existing, body, 201)
                 return JSON(_info(engine, existing), status_code=201)
-            if existing is not None:
-                return JSON(_info(engine, existing), status_code=200)
+            if existing is not None and declared is not None and declared.stateful:
+                return _created(engine, existing, body, 200)  # the live ksession, with the facts sent inserted
             if manager.directory is not None:  # an id another process holds
                 owner = manager.directory.owner(name, body.id)
                 if owner is not None and owner.get("process") != manager.directory.process:
@@ -242,7 +247,7 @@ async def update_fact(name: RuleSetName, session_id: SessionId, handle: Handle, 
     """Replace a fact (KIE's ``update``): ``{"handle", "fact"}``."""
     def work() -> JSON:
         session = engine.session_manager.get(name, session_id)
-        answer = session.execute([{"op": "update", "handle": handle, "fact": body.fact.model_dump()},
+        answer = session.execute([{"op": "update", "handle": handle, "fact": _facts([body.fact])[0]},
                                   {"op": "get_object", "handle": handle}])
         return JSON({"handle": handle, "fact": answer.results[1]["value"], "version": answer.version})
 

@@ -18,8 +18,9 @@ from fastapi.encoders import jsonable_encoder
 
 from gateway.api.deps import Caller, StoreDep, iso_datetime
 from gateway.store.store import MAX_LIMIT, StoreError, StoreUnavailable
+from gateway.api.jsonio import JsonRoute
 
-router = APIRouter(prefix="/api/state", tags=["information-state"])
+router = APIRouter(prefix="/api/state", tags=["information-state"], route_class=JsonRoute)
 
 RESERVED = {"type", "since", "until", "limit", "order"}
 

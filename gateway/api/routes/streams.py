@@ -37,7 +37,7 @@ from starlette.concurrency import run_in_threadpool
 
 from gateway.api.deps import Author, Caller, GatewayDep, QueriesDep, StreamsDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, read_json
+from gateway.api.jsonio import BadBody, JSON, JsonRoute, read_json
 from gateway.rdf.mapping import MappingError
 from gateway.rdf.terms import parse_triple
 from gateway.stream.engine import StreamError
@@ -47,7 +47,7 @@ from gateway.stream.results import report_to_sparql_json, to_sparql_json
 from gateway.stream.rules import BindingError, RuleBinding
 from gateway.versions import CatalogConflict
 
-router = APIRouter(tags=["streams"])
+router = APIRouter(tags=["streams"], route_class=JsonRoute)
 MAX_BATCH = 10_000
 SSE_QUEUE = 1000
 SPARQL_JSON = "application/sparql-results+json"
@@ -101,8 +101,16 @@ class Registration:
             raise ApiError(422, f"report: {exc.message}", field="report", line=exc.line, column=exc.column) from None
 
 
+#: Content types (and any text/*) a query registration takes as its C-SPARQL text (else JSON; anything else: 415).
+QUERY_TEXT_TYPES = ("text/plain", "application/sparql-query")
+
+
 async def _registration(request: Request) -> Registration:
     if not _is_json(request):
+        content_type = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+        if content_type not in QUERY_TEXT_TYPES and not content_type.startswith("text/"):
+            raise BadBody(f"content type {content_type!r} is not supported; send the query as text/plain or "
+                          "JSON (application/json)", status=415)
         return Registration((await request.body()).decode("utf-8", errors="replace"))
     body = await read_json(request)
     if not isinstance(body, dict) or not isinstance(body.get("query"), str):

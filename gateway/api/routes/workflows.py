@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from gateway.api.auth import Principal, author, caller
 from gateway.api.deps import gateway_of
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.config import PROJECT_ROOT
 from gateway.workflow.codegen import generate
 from gateway.workflow.diagram import scenario_view, workflow_view
@@ -46,7 +46,7 @@ from gateway.workflow.registry import WorkflowConflict, WorkflowNotFound
 from gateway.workflow.render import read_document, to_yaml
 from gateway.workflow.service import RealRobots, WorkflowService
 
-router = APIRouter(tags=["workflows"])
+router = APIRouter(tags=["workflows"], route_class=JsonRoute)
 
 WorkflowName = Annotated[str, PathParam(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=100)]
 MAX_VERSION = 2**31 - 1

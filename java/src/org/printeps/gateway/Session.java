@@ -468,11 +468,12 @@ public final class Session {
                 });
             }
             // the old session's pending matches: recorded (and consumed: it is discarded after the move)
-            final java.util.Set<String> pending = Refraction.emptyPending();
+            final Map<String, Integer> pending = Refraction.emptyKeys();
             final Map<Object, Object> byOld = mapped;
+            final java.util.Set<Object> cameAcross = unchanged;
             try {
                 old.session.fireAllRules(match -> {
-                    pending.add(Refraction.key(match.getRule().getName(), match.getObjects(), byOld));
+                    Refraction.add(pending, Refraction.key(match.getRule().getName(), match.getObjects(), byOld, cameAcross));
                     return false;
                 });
             } catch (RuntimeException e) {
@@ -482,11 +483,54 @@ public final class Session {
             java.util.Set<String> unchangedRules = new java.util.HashSet<String>();
             Object parsed = Json.parse(unchangedRulesJson);
             if (parsed instanceof List) for (Object r : (List<?>) parsed) unchangedRules.add(String.valueOf(r));
-            refraction = new Refraction(unchangedRules, unchanged, pending);
+            // what had fired: the new version's first agenda over the facts that came across, minus the pending
+            Map<String, Integer> fired = firstAgenda(built, targets, globals, old, unchangedRules, cameAcross);
+            Refraction.subtract(fired, pending);
+            refraction = new Refraction(unchangedRules, unchanged, fired);
             String focus = ((org.drools.core.common.InternalAgenda) old.session.getAgenda()).getFocusName();
             if (focus != null && !focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
             return "{\"ok\":true,\"facts\":" + count + "}";
         }
+    }
+
+    /**
+     * The keys (see {@link Refraction#key}) of the matches of {@code rules} that the new version
+     * holds over {@code built} before anything fires: found in a throwaway session of this version
+     * (same facts, same entry points, clock, globals and focus), whose agenda is walked without
+     * firing. This session's own agenda must not be walked: walking consumes the matches.
+     */
+    private Map<String, Integer> firstAgenda(List<Object> built, List<org.kie.api.runtime.rule.EntryPoint> targets,
+                                              Map<String, Object> globals, Session old, java.util.Set<String> rules,
+                                              java.util.Set<Object> facts) {
+        final Map<String, Integer> keys = Refraction.emptyKeys();
+        if (rules.isEmpty()) return keys;
+        KieSession probe = runner.newSession(false);
+        try {
+            if (Runner.declaresGlobal(probe.getKieBase(), "actions")) probe.setGlobal("actions", new Actions());
+            for (Map.Entry<String, Object> g : globals.entrySet()) probe.setGlobal(g.getKey(), g.getValue());
+            SessionClock probeClock = probe.getSessionClock();
+            long now = old.clock.getCurrentTime();
+            if (probeClock instanceof SessionPseudoClock && now > probeClock.getCurrentTime()) {
+                ((SessionPseudoClock) probeClock).advanceTime(now - probeClock.getCurrentTime(), TimeUnit.MILLISECONDS);
+            }
+            for (int k = 0; k < built.size(); k++) {
+                if (built.get(k) == null) continue;
+                probe.getEntryPoint(targets.get(k).getEntryPointId()).insert(built.get(k));
+            }
+            String focus = ((org.drools.core.common.InternalAgenda) old.session.getAgenda()).getFocusName();
+            if (focus != null && !focus.equals("MAIN")) probe.getAgenda().getAgendaGroup(focus).setFocus();
+            probe.fireAllRules(match -> {
+                String rule = match.getRule().getName();
+                if (rules.contains(rule)) Refraction.add(keys, Refraction.key(rule, match.getObjects(), null, facts));
+                return false;
+            });
+        } catch (RuntimeException e) {
+            // a probe that fails refracts nothing: every match fires again rather than one being lost
+            keys.clear();
+        } finally {
+            probe.dispose();
+        }
+        return keys;
     }
 
     private TypeRegistry types() { return runner.types(); }
