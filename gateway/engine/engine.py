@@ -376,8 +376,37 @@ class Engine:
     def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None) -> FireResult:
         """Fires undeployed text (the workbench's "try it"): compile errors raise CompileFailed.
         Not a decision: nothing is recorded."""
-        compiled = self._compile(files, "draft")
+        compiled = self.compile_draft(files)
         return self._fire(compiled, DRAFT, 0, facts, fire_limit, True, True)
+
+    def compile_draft(self, files: dict[str, str], on_progress: Callable[[int, int, str], None] | None = None
+                      ) -> CompiledRuleSet:
+        """Undeployed text compiled for a dry run ("try it", replay, explain): one path, so whatever
+        checks a draft must pass apply to all of them. Compile errors raise CompileFailed."""
+        return self._compile(files, "draft", on_progress)
+
+    # ------------------------------------------------------------------ replay (dry runs)
+
+    def replay_candidate(self, name: str, *, files: dict[str, str] | None = None, version: int | None = None,
+                         on_progress: Callable[[int, int, str], None] | None = None
+                         ) -> tuple[dict[str, Any], CompiledRuleSet]:
+        """The candidate of a replay of ``name`` and how it is named in the answer: a draft
+        (``{"hash"}``) or a stored version (``{"version"}``; VersionNotFound if there is none)."""
+        check_name(name)
+        if (files is None) == (version is None):
+            raise InvalidRuleSet("a replay candidate is either 'files' (a draft) or 'version', not both or neither")
+        if files is not None:
+            return {"hash": content_hash(files)}, self.compile_draft(check_files(files), on_progress)
+        stored = self.version(name, int(version))  # type: ignore[arg-type]
+        return {"version": stored.info.version}, self._compile(stored.files, name, on_progress, warm=False)
+
+    def replay_fire(self, compiled: CompiledRuleSet) -> Callable[[list[dict[str, Any]]], tuple[list[str], list[Any]]]:
+        """``fire(facts) -> (rules fired, actions)`` on ``compiled`` in a fresh session: its
+        ``actions`` global only records (nothing reaches a robot) and no decision is recorded."""
+        def fire(facts: list[dict[str, Any]]) -> tuple[list[str], list[Any]]:
+            result = self._fire(compiled, DRAFT, 0, facts, None, False, False)
+            return [f["rule"] for f in result.fired], result.actions
+        return fire
 
     def _fire(
         self,
