@@ -213,3 +213,58 @@ def run(engine: Any, decisions: Any, ruleset: str, params: ReplayParams,
     out["selected"] = total
     out["matching"] = matching
     return out
+
+
+def junit_xml(report: dict[str, Any], fail_on_change: bool = False) -> str:
+    """JUnit XML of a replay's answer, for CI: one test case per listed changed decision (a
+    failure when ``fail_on_change``, else a passed case that says what changed), one per failed
+    fire (an error), and one for the unchanged decisions."""
+    import xml.etree.ElementTree as ET
+
+    name = f"replay {report.get('ruleset')}"
+    changes = report.get("changes") or []
+    failures = report.get("failures") or []
+    suites = ET.Element("testsuites", name=name, tests=str(len(changes) + len(failures) + 1),
+                        failures=str(report.get("changed", 0) if fail_on_change else 0),
+                        errors=str(report.get("failed", 0)))
+    suite = ET.SubElement(suites, "testsuite", name=name, tests=str(len(changes) + len(failures) + 1),
+                          failures=str(len(changes) if fail_on_change else 0), errors=str(len(failures)))
+    classname = f"replay.{report.get('ruleset')}"
+    for change in changes:
+        case = ET.SubElement(suite, "testcase", name=f"decision {change['decision_id']} ({change.get('at')})",
+                             classname=classname)
+        detail = (f"before (v{change['before'].get('version')}): fired {change['before']['fired']}, "
+                  f"actions {orjson.dumps(change['before']['actions']).decode()}\n"
+                  f"after: fired {change['after']['fired']}, actions {orjson.dumps(change['after']['actions']).decode()}")
+        if fail_on_change:
+            ET.SubElement(case, "failure", message="the candidate decides differently", type="changed").text = detail
+        else:
+            ET.SubElement(case, "system-out").text = detail
+    for failure in failures:
+        case = ET.SubElement(suite, "testcase", name=f"decision {failure['decision_id']}", classname=classname)
+        ET.SubElement(case, "error", message=failure["error"], type=str(failure.get("kind")))
+    ET.SubElement(suite, "testcase", name=f"{report.get('unchanged', 0)} decisions unchanged", classname=classname)
+    return ET.tostring(suites, encoding="unicode", xml_declaration=True)
+
+
+def text_table(report: dict[str, Any]) -> list[str]:
+    """The summary a terminal shows: counts, then rule | before | after (changed rules marked)."""
+    lines = [f"replayed {report.get('replayed', 0)} decisions of {report.get('ruleset')} on "
+             + ", ".join(f"{k} {v}" for k, v in (report.get("candidate") or {}).items())
+             + f": {report.get('changed', 0)} changed, {report.get('unchanged', 0)} unchanged, "
+               f"{report.get('failed', 0)} failed, {report.get('not_replayable', 0)} not replayable"]
+    if report.get("note"):
+        lines.append(f"note: {report['note']}")
+    rules = report.get("rules") or []
+    if rules:
+        width = max(4, *(len(r["rule"]) for r in rules))
+        lines.append(f"{'rule'.ljust(width)}  {'before':>7}  {'after':>7}")
+        for r in rules:
+            mark = "  *" if r["before"] != r["after"] else ""
+            lines.append(f"{r['rule'].ljust(width)}  {r['before']:>7}  {r['after']:>7}{mark}")
+    for change in report.get("changes") or []:
+        lines.append(f"changed {change['decision_id']} at {change.get('at')}: "
+                     f"{change['before']['fired']} -> {change['after']['fired']}")
+    if report.get("changes_truncated"):
+        lines.append(f"... {report['changed'] - len(report.get('changes') or [])} more changed decisions not listed")
+    return lines
