@@ -28,7 +28,7 @@ from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler, kmodule, scenarios, warmup
+from gateway.engine import compiler, explain, kmodule, scenarios, warmup
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
@@ -90,6 +90,7 @@ class Engine:
         self._listeners: list[Listener] = []
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
+        self._explainers = explain.ExplainCache()
         self._warm_up_stop = threading.Event()
         self._warm_up_thread: threading.Thread | None = None
         self.session_manager = SessionManager(self, self.settings.sessions)
@@ -384,6 +385,29 @@ class Engine:
         """Undeployed text compiled for a dry run ("try it", replay, explain): one path, so whatever
         checks a draft must pass apply to all of them. Compile errors raise CompileFailed."""
         return self._compile(files, "draft", on_progress)
+
+    # ------------------------------------------------------------------ explain (dry runs)
+
+    def explain(self, name: str, facts: list[dict[str, Any]], *, files: dict[str, str] | None = None,
+                version: int | None = None) -> dict[str, Any]:
+        """Why each rule of ``name`` fired on ``facts`` or what stopped it (see gateway.engine.explain):
+        the draft ``files``, else stored ``version``, else the live version. Not a decision."""
+        check_name(name)
+        if files is not None:
+            label: dict[str, Any] = {"hash": content_hash(files)}
+            check_files(files)
+        else:
+            stored = self.version(name, version) if version is not None else self.current(name)
+            files, label = stored.files, {"version": stored.info.version}
+        encode_facts(facts, self.settings.engine.max_facts)  # bad facts: the fire's own error, before any build
+        explainer = self._explainers.get(self, files)
+        return {"ruleset": name, **label, **explain.explain(self, explainer, facts)}
+
+    def explain_session(self, compiled: CompiledRuleSet) -> StatefulSession:
+        """A throwaway session of ``compiled`` (not registered, never recorded) for explain's queries."""
+        java = self.new_java_session(compiled, "pseudo", "explain", True)
+        return StatefulSession(java, DRAFT, 0, self.settings.engine.fire_limit, self.settings.engine.max_facts,
+                               kind="explain")
 
     # ------------------------------------------------------------------ replay (dry runs)
 
