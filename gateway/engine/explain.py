@@ -467,10 +467,14 @@ def _show(value: Any) -> str:
 
 
 def _describe(fact: Any) -> str:
+    """A fact in a few words: ``Guest "g1"`` when it has an id or name, else ``Group(kind="pair", size=2)``."""
     if isinstance(fact, dict):
         kind = fact.get("type", "fact")
         ident = fact.get("id") or fact.get("name")
-        return f"{kind} {_show(ident)}" if ident is not None else str(kind)
+        if ident is not None:
+            return f"{kind} {_show(ident)}"
+        fields = [f"{k}={_show(v)}" for k, v in fact.items() if k != "type" and not isinstance(v, (dict, list))][:3]
+        return f"{kind}({', '.join(fields)})"
     return _show(fact)
 
 
@@ -553,8 +557,8 @@ def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]]) -> dict[str, 
         if cond.kind == "not":
             blockers = [r.get(FACT) for r in run.rows(plan.candidate_query(k, len(cond.constraints)))]
             out.update(constraint=None, exists=blockers[:10],
-                       reason=f"a {cond.type} fact that the rule must not see exists: {_describe(blockers[0])}"
-                       if blockers else f"a {cond.type} fact the rule must not see exists")
+                       reason=f"{_describe(blockers[0])} exists, and the rule wants no such {cond.type}"
+                       if blockers else f"a {cond.type} fact exists, and the rule wants none")
         elif cond.kind in ("pattern", "exists", "from", "accumulate"):
             out.update(_why_pattern(run, plan, k, cond))
         elif cond.kind == "eval":
