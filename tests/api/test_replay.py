@@ -196,3 +196,34 @@ def test_an_async_replay_is_a_job_with_progress(client, recorded):
     assert failed.status_code == 202
     ended = follow(client, failed.headers["location"])
     assert ended["status"] == "failed" and ended["error"]["status"] == 404
+
+
+def test_a_running_replay_job_is_cancelled_at_its_next_progress_report(client, api_gateway, recorded):
+    from gateway.engine import replay
+
+    name, _facts = recorded
+    jobs = api_gateway.jobs
+    ids: list[str] = []
+
+    def task(progress):
+        def report(done, total, stage):
+            if done >= replay.PROGRESS_EVERY and ids:  # the author presses Cancel while it replays
+                jobs.cancel(ids[0], by="test")
+            progress(done, total, stage)
+        return replay.run(api_gateway.engine, api_gateway.decisions, name,
+                          replay.ReplayParams(files=guest_rules(10)), on_progress=report)
+
+    job = jobs.submit("replay", name, {}, author="test", task=task)
+    ids.append(job["id"])
+    ended = follow(client, f"/api/jobs/{job['id']}")
+    assert ended["status"] == "cancelled" and "while replay" in ended["error"]["error"]
+    assert ended["result"] is None
+
+
+def test_facts_the_candidate_refuses_are_counted_as_failed(client, recorded):
+    name, facts = recorded
+    narrower = {"guests.drl": guest_rules(12)["guests.drl"].replace("    age : int\n", "")
+                .replace("age < 12", "id == \"x\"").replace("age >= 12", "id != \"x\"")}
+    body = client.post(f"/api/rulesets/{name}/replay", json={"files": narrower, "max_changes": 0}).json()
+    assert body["failed"] == body["replayed"] == len(facts) and body["changed"] == body["unchanged"] == 0
+    assert body["failures"][0]["decision_id"] and "age" in body["failures"][0]["error"]
