@@ -78,7 +78,7 @@ async function showOne(el, ctx, id) {
     h("h3", {}, `Facts the rules saw (${d.facts_count ?? facts.length})`),
     facts.length ? h("ul", { class: "facts", "data-testid": "facts" }, facts.slice(0, FACTS_SHOWN).map((f) => h("li", {}, factText(f))),
       facts.length > FACTS_SHOWN ? h("li", { class: "muted" }, `and ${facts.length - FACTS_SHOWN} more`) : null)
-      : h("p", { class: "muted" }, "No facts.")),
+      : h("p", { class: "muted" }, "No facts."),
     whyCard(d)));
 }
 
