@@ -29,8 +29,12 @@ MAX_ITEMS = 200  # per kind of record: a trace is for reading, not for exporting
 def _when(doc: dict[str, Any]) -> float:
     """When the record was written (epoch seconds), the order a trace is told in."""
     meta = doc.get("_meta") or {}
-    stamp = meta.get("inserted_at")
-    return float(stamp) if isinstance(stamp, (int, float)) else 0.0
+    stamp = meta.get("inserted_at")  # a datetime in the database (the journal's epoch seconds, converted)
+    if isinstance(stamp, datetime):
+        return (stamp if stamp.tzinfo else stamp.replace(tzinfo=timezone.utc)).timestamp()
+    if isinstance(stamp, (int, float)):
+        return float(stamp)
+    return 0.0
 
 
 def _item(kind: str, doc: dict[str, Any]) -> dict[str, Any]:

@@ -203,5 +203,6 @@ def test_a_rest_fire_is_traced_by_its_request_id(client, api_gateway, drl_set):
     assert [i["kind"] for i in body["items"]] == ["decision"]
     assert body["items"][0]["record"]["decision_id"] == fired["decision_id"]
     assert body["items"][0]["record"]["actions"] == fired["actions"]
+    assert body["items"][0]["at"][:10] == body["items"][0]["record"]["at"][:10]  # when it was written: that day
     missing = client.get("/api/traces/never-seen")
     assert missing.status_code == 404 and "never-seen" in missing.json()["error"]

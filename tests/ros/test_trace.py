@@ -42,7 +42,8 @@ def test_a_sensor_to_robot_chain_is_traced_in_order(domain_id, settings, mongo, 
         window = decision["context"]["window"]
         stamps = [i["record"]["stamp_ms"] for i in items if i["kind"] in ("sensor_message", "rdf_item")]
         assert stamps and all(window["start"] <= s <= window["end"] for s in stamps)
-        assert [i["t"] for i in items] == sorted(i["t"] for i in items)
+        assert [i["t"] for i in items] == sorted(i["t"] for i in items) and items[0]["t"] > 1.7e9  # written now
+        assert items[-1]["at"][:4] == items[0]["at"][:4] >= "2025"
         assert all(i["since_previous_ms"] >= 0 for i in items[1:])
         assert {h["to"] for h in answer.json()["hops"]} >= {"rdf_item", "query_result", "decision", "action"}
         said = [i["record"]["action"]["params"].get("text") for i in items if i["kind"] == "action"
