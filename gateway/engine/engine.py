@@ -400,14 +400,16 @@ class Engine:
             stored = self.version(name, version) if version is not None else self.current(name)
             files, label = stored.files, {"version": stored.info.version}
         encode_facts(facts, self.settings.engine.max_facts)  # bad facts: the fire's own error, before any build
-        explainer = self._explainers.get(self, files)
-        return {"ruleset": name, **label, **explain.explain(self, explainer, facts)}
+        return {"ruleset": name, **label, **self._explainers.run(self, files, facts)}
 
-    def explain_session(self, compiled: CompiledRuleSet) -> StatefulSession:
-        """A throwaway session of ``compiled`` (not registered, never recorded) for explain's queries."""
+    def close_explain(self) -> None:
+        """Stop explaining (at shutdown): the explain thread ends, detached from the JVM."""
+        self._explainers.close()
+
+    def explain_session(self, compiled: CompiledRuleSet) -> explain.ThrowawaySession:
+        """A throwaway session of ``compiled`` (not registered, never recorded) for explain."""
         java = self.new_java_session(compiled, "pseudo", "explain", True)
-        return StatefulSession(java, DRAFT, 0, self.settings.engine.fire_limit, self.settings.engine.max_facts,
-                               kind="explain")
+        return explain.ThrowawaySession(java, self.settings.engine.fire_limit, self.settings.engine.max_facts)
 
     # ------------------------------------------------------------------ replay (dry runs)
 

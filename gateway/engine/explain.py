@@ -27,12 +27,16 @@ from __future__ import annotations
 import logging
 import re
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
+import orjson
+
 from gateway.engine import compiler
-from gateway.engine.errors import CompileError, CompileFailed, EngineError
+from gateway.engine.errors import CompileError, CompileFailed, EngineError, FactError
+from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import content_hash
 
 log = logging.getLogger(__name__)
@@ -41,6 +45,7 @@ QUERY_FILE = "zz_explain_{n}.drl"
 FACT = "$__f"
 CACHE_SIZE = 8
 QUERIES_PER_PACKAGE = 40
+MAX_WAITING = 8  # explanations queued or running per process; more are refused (429)
 _PACKAGE = re.compile(r"^\s*package\s+[\w.]+\s*;?")
 _STRING_OR_COMMENT = re.compile(r'"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'|//[^\n]*|/\*.*?\*/', re.DOTALL)
 _PATTERN = re.compile(r"^\s*(?:(\$?[\w$]+)\s*:\s*)?([A-Za-z_$][\w$.]*)\s*\(", re.DOTALL)
@@ -415,14 +420,52 @@ def build(engine: Any, files: dict[str, str]) -> Explainer:
     raise EngineError("the diagnostic queries of this rule set do not compile")
 
 
+class ExplainBusy(EngineError):
+    """Too many explanations wait in this process (429)."""
+
+    kind = "limit"
+
+
 class ExplainCache:
     """Explainers by file content (a version, or a draft), built once, kept for the last few."""
 
     def __init__(self, size: int = CACHE_SIZE) -> None:
         self._size = size
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="explain")
+        self._waiting = threading.BoundedSemaphore(MAX_WAITING)
         self._built: OrderedDict[str, Explainer] = OrderedDict()
         self._lock = threading.Lock()
         self._building: dict[str, threading.Lock] = {}
+
+    def run(self, engine: Any, files: dict[str, str], facts: list[dict[str, Any]]) -> dict[str, Any]:
+        """Explain ``facts`` on ``files``: built (once) and asked on the cache's own long-lived
+        thread, one explanation at a time; more than MAX_WAITING waiting is refused (ExplainBusy).
+
+        Why one thread: an explanation's first build compiles hundreds of queries; one at a time
+        on a thread of its own, explaining never takes more than one core from serving, and the
+        queue in front of it is bounded."""
+        if not self._waiting.acquire(blocking=False):
+            raise ExplainBusy(f"{MAX_WAITING} explanations are already waiting on this gateway process; try again shortly")
+        try:
+            return self._worker.submit(lambda: explain(engine, self.get(engine, files), facts)).result()
+        finally:
+            self._waiting.release()
+
+    def close(self) -> None:
+        """Stop the explain thread (detached from the JVM first, as a thread that ends should be)
+        and forget the built explainers."""
+        def detach() -> None:
+            import jpype
+
+            if jpype.isJVMStarted() and jpype.java.lang.Thread.isAttached():
+                jpype.java.lang.Thread.detach()
+        try:
+            self._worker.submit(detach).result(timeout=30)
+        except Exception:  # closing must go on
+            log.debug("explain thread not detached", exc_info=True)
+        self._worker.shutdown(wait=True)
+        with self._lock:
+            self._built.clear()
 
     def get(self, engine: Any, files: dict[str, str]) -> Explainer:
         key = content_hash(files)
@@ -481,6 +524,38 @@ def _describe(fact: Any) -> str:
 def _wants(constraint: str) -> str:
     equals = _EQUALS.match(constraint)
     return equals.group(1).strip() if equals else constraint
+
+
+class ThrowawaySession:
+    """A Java ``Session`` used for one explanation and disposed: insert, fire, query.
+
+    Not a :class:`gateway.engine.session.StatefulSession`: that one is made to live long (it shares
+    buffers with the JVM for the stream path, keeps a lock, follows deploys); this one needs none
+    of it."""
+
+    def __init__(self, java: Any, fire_limit: int, max_facts: int) -> None:
+        self._java = java
+        self._fire_limit = fire_limit
+        self._max_facts = max_facts
+
+    def insert(self, facts: list[dict[str, Any]]) -> None:
+        _checked(self._java.insert(encode_facts(facts, self._max_facts)))
+
+    def fire(self, return_facts: bool = False) -> FireResult:
+        return decode_result(str(self._java.fire(self._fire_limit, return_facts)), "(explain)", 0, 0.0)
+
+    def query(self, name: str) -> dict[str, Any]:
+        return _checked(self._java.query(str(name), "[]"))
+
+    def close(self) -> None:
+        self._java.dispose()
+
+
+def _checked(answer: Any) -> dict[str, Any]:
+    data = orjson.loads(str(answer))
+    if not data.get("ok"):
+        raise FactError(data.get("errors", []), data.get("errorCount"))
+    return data
 
 
 class Run:
