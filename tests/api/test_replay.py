@@ -227,3 +227,22 @@ def test_facts_the_candidate_refuses_are_counted_as_failed(client, recorded):
     body = client.post(f"/api/rulesets/{name}/replay", json={"files": narrower, "max_changes": 0}).json()
     assert body["failed"] == body["replayed"] == len(facts) and body["changed"] == body["unchanged"] == 0
     assert body["failures"][0]["decision_id"] and "age" in body["failures"][0]["error"]
+
+
+def test_too_many_synchronous_replays_at_once_are_refused_with_retry_after(client, recorded):
+    from gateway.api.routes import replay as route
+
+    name, _facts = recorded
+    for _ in range(route.MAX_SYNC_REPLAYS):  # as if that many replays were running now
+        assert route._running.acquire(blocking=False)
+    try:
+        refused = client.post(f"/api/rulesets/{name}/replay", json={"version": 1})
+        assert refused.status_code == 429 and refused.headers["retry-after"] == "5"
+        assert "respond-async" in refused.json()["error"]
+        queued = client.post(f"/api/rulesets/{name}/replay", json={"version": 1}, headers=ASYNC)
+        assert queued.status_code == 202  # a job still takes it
+        assert follow(client, queued.headers["location"])["status"] == "succeeded"
+    finally:
+        for _ in range(route.MAX_SYNC_REPLAYS):
+            route._running.release()
+    assert client.post(f"/api/rulesets/{name}/replay", json={"version": 1}).status_code == 200

@@ -7,6 +7,7 @@ A replay performs no action, records no decision and changes nothing live.
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 from fastapi import APIRouter, Request
@@ -20,6 +21,8 @@ from gateway.engine import replay
 from gateway.store.store import StoreUnavailable
 
 router = APIRouter(tags=["replay"])
+MAX_SYNC_REPLAYS = 2  # synchronous replays at once per process (each holds a worker thread); more: 429
+_running = threading.BoundedSemaphore(MAX_SYNC_REPLAYS)
 
 
 class ReplayBody(BaseModel):
@@ -68,7 +71,13 @@ def replay_decisions(name: RuleSetName, body: ReplayBody, request: Request, engi
 
     if wants_async(request):
         return accepted(jobs.submit("replay", name, {}, author=who.name, task=task))
+    if not _running.acquire(blocking=False):
+        raise ApiError(429, f"{MAX_SYNC_REPLAYS} replays are already running on this gateway process; try again "
+                            "shortly, or send Prefer: respond-async to queue it as a job",
+                       headers={"Retry-After": "5"})
     try:
         return JSON(task())
     except StoreUnavailable as exc:
         raise ApiError(503, str(exc)) from None
+    finally:
+        _running.release()
