@@ -195,6 +195,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         engine.session_manager.directory = SessionDirectory(store.db, name, members)
         closers.append(("the session records", engine.session_manager.directory.release_all))
     closers.append(("the rules engine's sessions", engine.session_manager.close_all))
+    closers.append(("explaining", engine.close_explain))
     jobs = JobService(engine, JobRecords(store.db if store is not None else None), name,
                       alive=(lambda p: members.alive(members.get(p))) if members is not None else None,
                       max_queued=settings.engine.max_queued_jobs)

@@ -425,9 +425,10 @@ def rules_deploy(
     _fail(f"{url}: HTTP {status}: {data.get('error') if isinstance(data, dict) else data}")
 
 
-def _follow_job(server: str, location: str, token: Optional[str]) -> tuple[int, Any]:
-    """Poll a deploy job to its end, drawing its progress on a terminal; answers (status, body) as
-    the synchronous deploy would have."""
+def _follow_job(server: str, location: str, token: Optional[str], succeeded: Any = None) -> tuple[int, Any]:
+    """Poll a build job to its end, drawing its progress on a terminal; answers (status, body) as
+    the synchronous call would have (``succeeded(result)`` makes it from a finished job's result;
+    default: a deploy's)."""
     import time
 
     import httpx
@@ -442,6 +443,8 @@ def _follow_job(server: str, location: str, token: Optional[str]) -> tuple[int, 
             if progress is not None and step:
                 progress(step["done"], step["total"], step["stage"])
             if job["status"] == "succeeded":
+                if succeeded is not None:
+                    return succeeded(job["result"])
                 version = job["result"]["version"]
                 return 201, {"name": version["name"], "version": version["version"]}
             if job["status"] in ("failed", "cancelled"):
@@ -455,6 +458,55 @@ def _follow_job(server: str, location: str, token: Optional[str]) -> tuple[int, 
     finally:
         if progress is not None:
             progress.close()
+
+
+@rules_app.command("replay")
+def rules_replay(
+    path: Path = typer.Argument(..., help="The candidate: a rule set folder (its name is the rule set name)."),
+    server: Optional[str] = typer.Option(None, help=f"Gateway URL (default: $PRINTEPS_SERVER or {DEFAULT_SERVER})."),
+    token: Optional[str] = typer.Option(None, help="Token (default: $PRINTEPS_TOKEN)."),
+    name: Optional[str] = typer.Option(None, help="Rule set name (default: the folder name)."),
+    since: Optional[str] = typer.Option(None, help="Replay decisions from this ISO-8601 time on."),
+    until: Optional[str] = typer.Option(None, help="... and before this one."),
+    origin: Optional[str] = typer.Option(None, help="Only decisions of this origin (rest, kie, stream, ros, workflow)."),
+    limit: int = typer.Option(1000, help="The newest N decisions of the selection (at most 100,000)."),
+    max_changes: int = typer.Option(20, help="Changed decisions listed (all are counted)."),
+    fail_on_change: bool = typer.Option(False, "--fail-on-change", help="Exit 1 when any decision changed."),
+    junit: Optional[Path] = typer.Option(None, "--junit", help="Also write the result as JUnit XML to this file."),
+) -> None:
+    """Replay the recorded decisions of a rule set on the folder's files (a draft, never deployed)
+    and print how many changed and how often each rule fires before and after. Exit 1 when the
+    folder does not compile or the server refuses; with --fail-on-change, also when anything changed."""
+    import httpx
+
+    from gateway.engine.replay import junit_xml, text_table
+
+    folder_name, files = read_ruleset(path)
+    name = name or folder_name
+    folder = path if path.is_dir() else path.parent
+    body: dict[str, Any] = {"files": files, "limit": limit, "max_changes": max_changes}
+    body.update({k: v for k, v in (("since", since), ("until", until), ("origin", origin)) if v is not None})
+    url = f"{_server(server)}/api/rulesets/{name}/replay"
+    try:  # as a job: 100,000 decisions take longer than one HTTP request should wait
+        response = httpx.post(url, json=body, headers={**_headers(token), "Prefer": "respond-async"}, timeout=120)
+        status, data = response.status_code, _json_or_text(response)
+        if status == 202:
+            status, data = _follow_job(_server(server), response.headers["location"], token,
+                                       succeeded=lambda result: (200, result))
+    except httpx.HTTPError as exc:
+        _fail(f"{url}: {exc}")
+    if status == 422 and isinstance(data, dict) and data.get("errors") and data["errors"][0].get("file"):
+        for line in format_errors(data["errors"], folder):
+            typer.echo(line)
+        raise typer.Exit(1)
+    if status != 200 or not isinstance(data, dict):
+        _fail(f"{url}: HTTP {status}: {data.get('error') if isinstance(data, dict) else data}")
+    for line in text_table(data):
+        typer.echo(line)
+    if junit is not None:
+        junit.write_text(junit_xml(data, fail_on_change), encoding="utf-8")
+    if fail_on_change and (data.get("changed") or data.get("failed")):
+        raise typer.Exit(1)
 
 
 @app.command()

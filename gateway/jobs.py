@@ -30,11 +30,11 @@ from gateway.engine.errors import BuildCancelled, EngineError
 log = logging.getLogger(__name__)
 
 JOBS = "jobs"
-KINDS = ("deploy", "validate")
+KINDS = ("deploy", "validate", "replay")
 FINISHED = ("succeeded", "failed", "cancelled")
 # a running build stops at its next progress report while it is still in one of these stages
 # (later, the version is being tested, stored and swapped in: that finishes)
-CANCELLABLE_STAGES = ("parse", "compile", "load", "assemble")
+CANCELLABLE_STAGES = ("parse", "compile", "load", "assemble", "replay")
 PROGRESS_WRITE_INTERVAL_S = 0.5  # progress reaches the store at most twice a second
 LOST_AFTER_S = 30.0  # an unfinished job of a process that is gone, untouched this long, is lost
 
@@ -115,7 +115,7 @@ class JobService:
         self.process = process
         self.alive = alive or (lambda _process: True)
         self.max_queued = max_queued
-        self._queue: deque[tuple[dict[str, Any], dict[str, Any]]] = deque()
+        self._queue: deque[tuple[dict[str, Any], Any]] = deque()  # (job, files | a replay's task)
         self._jobs: dict[str, dict[str, Any]] = {}
         self._cond = threading.Condition()
         self._closed = False
@@ -125,10 +125,16 @@ class JobService:
     # ---- requests --------------------------------------------------------------------------------
     def submit(self, kind: str, ruleset: str, files: dict[str, str], *, author: str = "anonymous",
                comment: str = "", base_version: int | None = None, force: bool = False,
-               role: str | None = None) -> dict[str, Any]:
-        """A new queued job; the build starts when the jobs before it in this process are done."""
+               role: str | None = None,
+               task: Callable[[Callable[[int, int, str], None]], dict[str, Any]] | None = None) -> dict[str, Any]:
+        """A new queued job; the build starts when the jobs before it in this process are done.
+
+        A ``replay`` job runs ``task(progress)`` (the replay, bound to its request by the caller)
+        and its result is what ``task`` returns."""
         if kind not in KINDS:
             raise JobError(422, f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
+        if (kind == "replay") != (task is not None):
+            raise JobError(422, "a replay job needs its task, and only a replay job has one")
         job = {"id": uuid.uuid4().hex, "kind": kind, "ruleset": ruleset, "status": "queued",
                "author": author, "role": role, "comment": comment, "base_version": base_version, "force": force,
                "process": self.process, "created_at": _now(), "started_at": None, "finished_at": None,
@@ -140,7 +146,7 @@ class JobService:
                 raise JobError(429, f"{len(self._queue)} build jobs are already waiting in this process "
                                     f"(engine.max_queued_jobs = {self.max_queued}); try again later")
             self._jobs[job["id"]] = job
-            self._queue.append((job, dict(files)))
+            self._queue.append((job, task if task is not None else dict(files)))
             self.records.write(job)
             self._cond.notify()
         return dict(job)
@@ -208,10 +214,12 @@ class JobService:
                 self.records.write(job)
             self._run(job, files)
 
-    def _run(self, job: dict[str, Any], files: dict[str, str]) -> None:
+    def _run(self, job: dict[str, Any], files: Any) -> None:
         progress = self._progress_writer(job)
         try:
-            if job["kind"] == "deploy":
+            if job["kind"] == "replay":
+                outcome = files(progress)  # type: ignore[operator]  # the replay's task (see submit)
+            elif job["kind"] == "deploy":
                 info = self.engine.deploy(job["ruleset"], files, author=job["author"], comment=job["comment"],
                                           base_version=job["base_version"], force=job["force"],
                                           on_progress=progress, role=job.get("role"))

@@ -258,10 +258,17 @@ def _ensure_helpers_compiled(sources: dict[str, str], out_dir: Path) -> None:
     log.info("compiled %d Java helper classes into %s", len(compiled), out_dir)
 
 
+_helpers: dict[str, object] = {}
+
+
 def helper_class(name: str):  # -> jpype.JClass
-    """A Java helper class by its simple name (``org.printeps.gateway.<name>``)."""
-    start()
-    return jpype.JClass(f"org.printeps.gateway.{name}")
+    """A Java helper class by its simple name (``org.printeps.gateway.<name>``); looked up once
+    (a JClass lookup costs about a millisecond, and a JVM is started once per process)."""
+    found = _helpers.get(name)
+    if found is None:
+        start()
+        found = _helpers[name] = jpype.JClass(f"org.printeps.gateway.{name}")
+    return found
 
 
 def jclass(name: str):

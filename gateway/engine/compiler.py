@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from gateway import jvm
-from gateway.engine import decision_table, scenarios
+from gateway.engine import decision_table, drl_items, scenarios
 from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.ruleset import check_files, content_hash, is_table_file
 
@@ -337,6 +337,24 @@ def _parse(source: _Source) -> tuple[list[CompileError], str | None]:
     except Exception:  # an item the splitter does not know: the set is built in one unit
         log.debug("could not describe %s", source.file, exc_info=True)
         return [], None
+
+
+def rule_sources(files: dict[str, str]) -> list[tuple[_Source, drl_items.SourceItems | None]]:
+    """Every DRL text of ``files`` (written, expanded from a .dslr, generated from a decision
+    table) with its items, for tools that read rules (explain); a text whose items cannot be placed
+    comes with None. Compile errors raise CompileFailed."""
+    check_files(files)
+    with _compile_lock:
+        sources, _expanded, errors = _sources(files)
+        if errors:
+            raise CompileFailed(errors)
+        out: list[tuple[_Source, drl_items.SourceItems | None]] = []
+        for source in sources:
+            problems, described = _parse(source)
+            if problems:
+                raise CompileFailed(problems)
+            out.append((source, drl_items.parse_items(source.file, source.drl, described) if described else None))
+        return out
 
 
 def _parser_position(err: Any, message: str) -> tuple[int, int]:

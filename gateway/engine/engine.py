@@ -29,7 +29,7 @@ from bson import ObjectId
 
 from gateway import jvm
 from gateway.config import Settings, load_settings
-from gateway.engine import compiler, kmodule, policy, scenarios, warmup
+from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
 from gateway.engine.compiler import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
@@ -95,6 +95,7 @@ class Engine:
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
         self.rule_policy = policy.RulePolicy(tuple(self.settings.engine.rule_policy.allow))
         self._policy_verdicts: dict[str, bool] = {}  # content hash -> passes the rule policy
+        self._explainers = explain.ExplainCache()
         self._warm_up_stop = threading.Event()
         self._warm_up_thread: threading.Thread | None = None
         self.session_manager = SessionManager(self, self.settings.sessions)
@@ -460,8 +461,66 @@ class Engine:
         author's text the rule policy refuses raises PolicyRefused before anything compiles.
         Not a decision: nothing is recorded."""
         self.check_policy(DRAFT, files, role)
-        compiled = self._compile(files, "draft")
+        compiled = self.compile_draft(files)
         return self._fire(compiled, DRAFT, 0, facts, fire_limit, True, True)
+
+    def compile_draft(self, files: dict[str, str], on_progress: Callable[[int, int, str], None] | None = None
+                      ) -> CompiledRuleSet:
+        """Undeployed text compiled for a dry run ("try it", replay, explain): one path, so whatever
+        checks a draft must pass apply to all of them. Compile errors raise CompileFailed."""
+        return self._compile(files, "draft", on_progress)
+
+    # ------------------------------------------------------------------ explain (dry runs)
+
+    def explain(self, name: str, facts: list[dict[str, Any]], *, files: dict[str, str] | None = None,
+                version: int | None = None, role: str | None = None) -> dict[str, Any]:
+        """Why each rule of ``name`` fired on ``facts`` or what stopped it (see gateway.engine.explain):
+        the draft ``files`` (checked by the rule policy for ``role`` first, as "try it" is), else
+        stored ``version``, else the live version. Not a decision."""
+        check_name(name)
+        if files is not None:
+            label: dict[str, Any] = {"hash": content_hash(files)}
+            check_files(files)
+            self.check_policy(name, files, role)
+        else:
+            stored = self.version(name, version) if version is not None else self.current(name)
+            files, label = stored.files, {"version": stored.info.version}
+        encode_facts(facts, self.settings.engine.max_facts)  # bad facts: the fire's own error, before any build
+        return {"ruleset": name, **label, **self._explainers.run(self, files, facts)}
+
+    def close_explain(self) -> None:
+        """Stop explaining (at shutdown): the explain thread ends, detached from the JVM."""
+        self._explainers.close()
+
+    def explain_session(self, compiled: CompiledRuleSet) -> explain.ThrowawaySession:
+        """A throwaway session of ``compiled`` (not registered, never recorded) for explain."""
+        java = self.new_java_session(compiled, "pseudo", "explain", True)
+        return explain.ThrowawaySession(java, self.settings.engine.fire_limit, self.settings.engine.max_facts)
+
+    # ------------------------------------------------------------------ replay (dry runs)
+
+    def replay_candidate(self, name: str, *, files: dict[str, str] | None = None, version: int | None = None,
+                         on_progress: Callable[[int, int, str], None] | None = None, role: str | None = None
+                         ) -> tuple[dict[str, Any], CompiledRuleSet]:
+        """The candidate of a replay of ``name`` and how it is named in the answer: a draft
+        (``{"hash"}``; checked by the rule policy for ``role`` before it compiles, as "try it" is) or
+        a stored version (``{"version"}``; VersionNotFound if there is none)."""
+        check_name(name)
+        if (files is None) == (version is None):
+            raise InvalidRuleSet("a replay candidate is either 'files' (a draft) or 'version', not both or neither")
+        if files is not None:
+            self.check_policy(name, check_files(files), role)
+            return {"hash": content_hash(files)}, self.compile_draft(check_files(files), on_progress)
+        stored = self.version(name, int(version))  # type: ignore[arg-type]
+        return {"version": stored.info.version}, self._compile(stored.files, name, on_progress, warm=False)
+
+    def replay_fire(self, compiled: CompiledRuleSet) -> Callable[[list[dict[str, Any]]], tuple[list[str], list[Any]]]:
+        """``fire(facts) -> (rules fired, actions)`` on ``compiled`` in a fresh session: its
+        ``actions`` global only records (nothing reaches a robot) and no decision is recorded."""
+        def fire(facts: list[dict[str, Any]]) -> tuple[list[str], list[Any]]:
+            result = self._fire(compiled, DRAFT, 0, facts, None, False, False)
+            return [f["rule"] for f in result.fired], result.actions
+        return fire
 
     def _fire(
         self,

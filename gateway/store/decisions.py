@@ -19,7 +19,7 @@ import logging
 import threading
 from collections import OrderedDict
 from datetime import datetime, timedelta, timezone
-from typing import Any
+from typing import Any, Iterator
 
 import pymongo
 from bson import ObjectId
@@ -111,30 +111,8 @@ class DecisionRecord:
         """Decisions newest first with filters; returns (page, cursor of the next page or None)."""
         if not 1 <= limit <= MAX_PAGE:
             raise StoreError(f"limit {limit}: must be between 1 and {MAX_PAGE}")
-        spec: dict[str, Any] = {}
-        for field, value in (("ruleset", ruleset), ("version", version), ("origin", origin), ("fired", rule)):
-            if value is not None:
-                spec[field] = value
-        id_range: dict[str, Any] = {}
-        at_range: dict[str, str] = {}
-        # The ids' time keeps whole seconds (and is taken a moment apart from "at"): they only narrow
-        # the scan, with a margin; the bounds are exact on "at", at its millisecond precision.
-        if since is not None:
-            id_range["$gte"] = ObjectId.from_datetime(since - ID_MARGIN)
-            at_range["$gte"] = at_text(since)
-        if until is not None:
-            id_range["$lt"] = ObjectId.from_datetime(until + ID_MARGIN)
-            at_range["$lt"] = at_text(until)
-        if at_range:
-            spec["at"] = at_range
-        if cursor is not None:
-            try:
-                after = ObjectId(cursor)
-            except (InvalidId, TypeError):
-                raise StoreError(f"cursor {cursor!r}: not a cursor this API gave out") from None
-            id_range["$lt"] = min(after, id_range["$lt"]) if "$lt" in id_range else after
-        if id_range:
-            spec["_id"] = id_range
+        spec = _spec(ruleset=ruleset, version=version, origin=origin, rule=rule, since=since, until=until,
+                     cursor=cursor)
         try:
             docs = list(self.store.db[DECISIONS].find(spec, {"_meta": 0}).sort("_id", pymongo.DESCENDING)
                         .limit(limit + 1))
@@ -143,6 +121,44 @@ class DecisionRecord:
         more = len(docs) > limit
         page = [_plain(d) for d in docs[:limit]]
         return page, (page[-1]["decision_id"] if more and page else None)
+
+    def settle(self, timeout_s: float = 5.0) -> bool:
+        """Wait until this process's decisions so far are in the database (a replay reads them
+        there); False when they are not after ``timeout_s`` (the replay then misses the newest)."""
+        return bool(self.store.flush(timeout_s))
+
+    def count(self, *, ruleset: str | None = None, origin: str | None = None, since: datetime | None = None,
+              until: datetime | None = None) -> int:
+        """How many recorded decisions match (a replay's selection, before it reads them)."""
+        try:
+            return int(self.store.db[DECISIONS].count_documents(
+                _spec(ruleset=ruleset, origin=origin, since=since, until=until)))
+        except PyMongoError as exc:
+            raise StoreUnavailable(f"Information State unreachable: {type(exc).__name__}: {exc}") from exc
+
+    def iterate(self, *, ruleset: str | None = None, origin: str | None = None, since: datetime | None = None,
+                until: datetime | None = None, limit: int = MAX_PAGE) -> Iterator[dict[str, Any]]:
+        """The newest ``limit`` matching decisions, newest first, read a page at a time (a replay of
+        100,000 decisions never holds them all)."""
+        cursor: str | None = None
+        left = limit
+        while left > 0:
+            page, cursor = self.find(ruleset=ruleset, origin=origin, since=since, until=until,
+                                     limit=min(left, MAX_PAGE), cursor=cursor)
+            yield from page
+            left -= len(page)
+            if cursor is None:
+                return
+
+    def by_correlation(self, correlation_id: str, limit: int = MAX_PAGE) -> list[dict[str, Any]]:
+        """The decisions recorded with ``correlation_id``, oldest first (a trace). Not indexed:
+        a trace is a human's question, and an index would cost every recorded fire a write."""
+        try:
+            docs = list(self.store.db[DECISIONS].find({"correlation_id": correlation_id}, {"_meta": 0})
+                        .sort("_id", pymongo.ASCENDING).limit(limit))
+        except PyMongoError as exc:
+            raise StoreUnavailable(f"Information State unreachable: {type(exc).__name__}: {exc}") from exc
+        return [_plain(d) for d in docs]
 
     def get(self, decision_id: str) -> dict[str, Any] | None:
         """One decision with the outcomes of its robot actions; None when unknown."""
@@ -178,6 +194,39 @@ def at_text(moment: datetime) -> str:
     if moment.microsecond % 1000:
         moment += timedelta(microseconds=1000 - moment.microsecond % 1000)
     return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _spec(*, ruleset: str | None = None, version: int | None = None, origin: str | None = None,
+          rule: str | None = None, since: datetime | None = None, until: datetime | None = None,
+          cursor: str | None = None) -> dict[str, Any]:
+    """The query document of a decision selection: since/until exact on ``at`` (inclusive /
+    exclusive, at its millisecond precision), the ids' time only narrowing the scan; cursor an
+    ``_id`` bound."""
+    spec: dict[str, Any] = {}
+    for field, value in (("ruleset", ruleset), ("version", version), ("origin", origin), ("fired", rule)):
+        if value is not None:
+            spec[field] = value
+    id_range: dict[str, Any] = {}
+    at_range: dict[str, str] = {}
+    # The ids' time keeps whole seconds (and is taken a moment apart from "at"): they only narrow
+    # the scan, with a margin; the bounds are exact on "at".
+    if since is not None:
+        id_range["$gte"] = ObjectId.from_datetime(since - ID_MARGIN)
+        at_range["$gte"] = at_text(since)
+    if until is not None:
+        id_range["$lt"] = ObjectId.from_datetime(until + ID_MARGIN)
+        at_range["$lt"] = at_text(until)
+    if at_range:
+        spec["at"] = at_range
+    if cursor is not None:
+        try:
+            after = ObjectId(cursor)
+        except (InvalidId, TypeError):
+            raise StoreError(f"cursor {cursor!r}: not a cursor this API gave out") from None
+        id_range["$lt"] = min(after, id_range["$lt"]) if "$lt" in id_range else after
+    if id_range:
+        spec["_id"] = id_range
+    return spec
 
 
 def _plain(doc: dict[str, Any]) -> dict[str, Any]:

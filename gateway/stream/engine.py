@@ -827,7 +827,8 @@ class StreamEngine:
                 # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
                 result = runtime.session.push(facts, instant)
                 result.decision_id = self.rules_engine.record_decision(
-                    result, facts, origin="stream", correlation_id=correlation, context={"query": name, "window": window})
+                    result, facts, origin="stream", correlation_id=correlation,
+                    context={"query": name, "window": window, "session": runtime.session.id})  # not replayable alone
             else:
                 result = self.rules_engine.fire(binding.ruleset, facts, origin="stream", correlation_id=correlation,
                                                 context={"query": name, "window": window})

@@ -8,6 +8,7 @@ import "./decisions-view.css";
 import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
 import { actionList, describeAction, firedList } from "./actions.js";
+import { whyCard } from "./why-view.js";
 
 const REFRESH_MS = 10_000;
 
@@ -77,7 +78,8 @@ async function showOne(el, ctx, id) {
     h("h3", {}, `Facts the rules saw (${d.facts_count ?? facts.length})`),
     facts.length ? h("ul", { class: "facts", "data-testid": "facts" }, facts.slice(0, FACTS_SHOWN).map((f) => h("li", {}, factText(f))),
       facts.length > FACTS_SHOWN ? h("li", { class: "muted" }, `and ${facts.length - FACTS_SHOWN} more`) : null)
-      : h("p", { class: "muted" }, "No facts.")));
+      : h("p", { class: "muted" }, "No facts."),
+    whyCard(d)));
 }
 
 function outcomeList(outcomes, asked) {

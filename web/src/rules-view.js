@@ -12,6 +12,7 @@ import { mountTests } from "./tests-view.js";
 import { mountTableEditor } from "./table-editor.js";
 import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
 import { JobProgress, JobsList } from "./jobs-view.js";
+import { WhatWouldChange } from "./replay-panel.js";
 
 const CHECK_DELAY_MS = 500;
 const ADDABLE = [".xlsx", ".csv", ".dslr", ".dsl", ".drl"];
@@ -238,6 +239,7 @@ class RulesView {
 
   changed() {
     this.assistCache = null;
+    this.replay?.reset(); // a replay says what the text it replayed does, not this one
     this.updateDirty();
     this.saveDraft();
     this.statusEl.className = "check-status pending";
@@ -552,12 +554,18 @@ class RulesView {
       placeholder: "e.g. Friendlier greeting for groups" });
     this.deployResultEl = h("div", { class: "deploy-result", "data-testid": "deploy-result", "aria-live": "polite" });
     this.deployButton = h("button", { class: "big primary", "data-testid": "deploy", onclick: () => this.deploy() }, "Deploy to the robot");
+    this.replay = new WhatWouldChange(this.ctx, this.name, async () => {
+      await this.flushTables();
+      return this.files();
+    });
     return h("div", { class: "card deploy" },
       h("h2", {}, "Deploy"),
       h("label", { class: "field" }, "What did you change? (shown in the history)", this.commentEl),
       h("div", { class: "buttons" },
+        this.replay.button,
         this.deployButton,
         h("button", { class: "big secondary", onclick: () => this.discard() }, "Undo all my changes")),
+      this.replay.el,
       this.deployResultEl);
   }
 
@@ -595,7 +603,13 @@ class RulesView {
     try {
       await this.flushTables();
       const files = this.files();
-      const comment = this.commentEl.value.trim();
+      const comment = this.replay ? this.replay.comment(this.commentEl.value.trim()) : this.commentEl.value.trim();
+      if (comment === null) {
+        fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "replay-comment-needed" },
+          `Your change would change ${this.replay.result.changed} recent decisions: say what you changed and why in the comment, then deploy.`));
+        this.commentEl.focus();
+        return;
+      }
       const body = { files, comment, base_version: this.base };
       if (force) body.force = true;
       this.deployed(files, comment, await this.buildAndDeploy(body));
@@ -640,6 +654,7 @@ class RulesView {
     this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
     localStorage.removeItem(draftKey(this.name));
     this.commentEl.value = "";
+    this.replay?.reset();
     this.renderLive();
     this.updateDirty();
     fill(this.deployResultEl, h("div", { class: "message ok", role: "status" }, `✓ Deployed. Version ${result.version} is now live.`),
