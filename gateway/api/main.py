@@ -22,7 +22,7 @@ from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
 from gateway.api.routes import (
-    authoring, decisions, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, rulesets, sessions, state, streams, workflows,
+    authoring, decisions, dialogue, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, rulesets, sessions, state, streams, workflows,
 )
 from gateway.workbench import router as workbench
 
@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 ROUTERS = (
     rulesets.router, jobs.router, sessions.router, authoring.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
-    workflows.router, state.router, health.router, metrics.router, live.router, workbench.router,
+    dialogue.router, workflows.router, state.router, health.router, metrics.router, live.router, workbench.router,
 )
 
 DESCRIPTION = """Manage and fire PRINTEPS business rule sets (Drools), continuous queries, workflows and

@@ -64,12 +64,14 @@ def plural(label: str) -> str:
 
 
 def parse_pronunciations(text: str) -> tuple[tuple[str, str], ...]:
-    """``"matcha: M AA CH AH; matchas: M AA CH AH Z"`` -> ((word, phones), ...); bad parts skipped."""
+    """``"matcha: M AA CH AH | M AE CH AH; matchas: M AA CH AH Z"`` -> ((word, phones), ...), with
+    `` | `` between a word's alternative pronunciations; bad parts skipped."""
     out = []
     for part in text.split(";"):
         word, sep, phones = part.partition(":")
         if sep and word.strip() and phones.strip():
-            out.append((normal(word), " ".join(phones.split()).upper()))
+            alternatives = [" ".join(p.split()).upper() for p in phones.split("|") if p.strip()]
+            out.append((normal(word), " | ".join(alternatives)))
     return tuple(out)
 
 

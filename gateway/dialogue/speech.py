@@ -109,14 +109,18 @@ class Recogniser:
         decoder = self._decoder
         given = dict(grammar.given)
         missing = sorted(w for w in grammar.words if w in given or decoder.lookup_word(w) is None)
-        for i, word in enumerate(missing):
+        entries: list[tuple[str, str]] = []
+        for word in missing:
             phones = given.get(word) or spell_out(word)
             if word not in given:
                 self.spelled[word] = phones
+            # alternatives are the dictionary's word(2), word(3)...: the recogniser answers the word
+            entries += [(word if n == 0 else f"{word}({n + 1})", alt.strip()) for n, alt in enumerate(phones.split("|"))]
+        for i, (entry, phones) in enumerate(entries):
             try:
-                decoder.add_word(word, phones, i == len(missing) - 1)
+                decoder.add_word(entry, phones, i == len(entries) - 1)
             except RuntimeError:
-                log.warning("the recogniser refused the pronunciation %r of %r", phones, word)
+                log.warning("the recogniser refused the pronunciation %r of %r", phones, entry)
         decoder.add_jsgf_string("dialogue", grammar.jsgf)
         decoder.activate_search("dialogue")
         self._grammar_key = grammar.key
