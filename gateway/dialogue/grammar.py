@@ -117,6 +117,6 @@ def spell_out(word: str) -> str:
         if letters[i] == letters[i - 1:i]:  # a doubled consonant is said once
             i += 1
             continue
-        phones.append(_LETTERS[letters[i]])
+        phones.append("Y" if letters[i] == "y" and i == 0 else _LETTERS[letters[i]])
         i += 1
     return " ".join(phones) or "AH"
