@@ -244,15 +244,15 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         ros_modules = RosModules(ros_gateway.node, ros_gateway.caller, on_move=robots.on_outcome)
 
     closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
+    dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
+    closers.append(("the conversations", dialogue.close))
+
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
-                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed)
+                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed, dialogue=dialogue)
     closers.append(("the workflow executor", workflows.close))
     workflows.executor.recorder = FanOutRecorder(workflows.executor.recorder, CallableRecorder(live.on_workflow_record))
     actions.register("workflow", workflow_handler(workflows))
     streams.subscribe(actions.on_stream_event)
-
-    dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
-    closers.append(("the conversations", dialogue.close))
 
     follower = None
     if follow and use_store:

@@ -17,6 +17,7 @@ ROS topic ``/teahouse/orders``). A conversation silent for ``dialogue.silence_ch
 
 from __future__ import annotations
 
+import collections
 import logging
 import threading
 import time
@@ -88,6 +89,9 @@ class DialogueService:
         self._stop = threading.Event()
         self._watcher: threading.Thread | None = None
         self.finished: dict[str, dict[str, Any]] = {}  # the last state of recently finished conversations
+        self._changed = threading.Condition()  # an order completed or a conversation finished
+        self._events: collections.deque[tuple[int, str, str, dict[str, Any]]] = collections.deque(maxlen=1000)
+        self._seq = 0
 
     # ------------------------------------------------------------------ vocabulary and grammar
 
@@ -209,11 +213,13 @@ class DialogueService:
     def _order(self, conv: Conversation, params: dict[str, Any], menu: Menu) -> None:
         drink = str(params.get("drink") or "")
         individual = next((d.individual for d in menu.drinks if d.label == drink), None)
+        cups = int(params.get("cups") or 0)
         order = {"conversation": conv.id, "table": str(params.get("table") or conv.table), "drink": drink,
-                 "individual": individual, "cups": int(params.get("cups") or 0),
+                 "drinks": menu.plural_of(drink) if cups > 1 else drink, "individual": individual, "cups": cups,
                  "at": datetime.now(timezone.utc).isoformat(), "decision_ids": list(conv.decisions)}
         if self.store is not None:
             self.store.record(ORDERS, order, stored_type="printeps/Order", inserted_by="dialogue")
+        self._announce(conv.id, "order", order)
         for listener in list(self._order_listeners):
             try:
                 listener(dict(order))
@@ -228,6 +234,53 @@ class DialogueService:
             while len(self.finished) > self.settings.max_conversations:
                 self.finished.pop(next(iter(self.finished)))
         conv.session.close()
+        self._announce(conv.id, conv.state, answer)
+
+    def _announce(self, conversation: str, what: str, payload: dict[str, Any]) -> None:
+        with self._changed:
+            self._seq += 1
+            self._events.append((self._seq, conversation, what, payload))
+            self._changed.notify_all()
+
+    # ------------------------------------------------------------------ the take_order workflow step
+
+    def take_order(self, conversation: str, *, table: str | None = None, customer_says: list[str] | None = None,
+                   opening: str | None = None, timeout_s: float = 120.0,
+                   cancelled: threading.Event | None = None) -> dict[str, Any]:
+        """Run the conversation until it completes an order; the order. Pepper opens with
+        ``opening`` (e.g. "What would you like to drink?"); ``customer_says`` plays a simulated
+        customer's sentences as text turns; without them, what real customers say (REST, ROS)
+        carries it. LookupError when it ends without an order or ``timeout_s`` passes."""
+        with self._changed:
+            start = self._seq
+        if opening and self.dispatch is not None:
+            self.dispatch({"kind": "actions", "query": "dialogue", "ruleset": self.settings.ruleset,
+                           "actions": [{"module": "say", "params": {"robot": self.settings.robot, "text": opening}}]})
+        for sentence in customer_says or []:
+            if self._outcome(conversation, start) is not None:
+                break
+            self.turn(conversation, text=sentence, table=table)
+        deadline = time.monotonic() + timeout_s
+        with self._changed:
+            while True:
+                outcome = self._outcome(conversation, start)
+                if outcome is not None:
+                    break
+                left = deadline - time.monotonic()
+                if left <= 0 or (cancelled is not None and cancelled.is_set()):
+                    raise LookupError(f"conversation {conversation}: no order within {timeout_s:g} s")
+                self._changed.wait(min(left, 0.25))
+        what, payload = outcome
+        if what != "order":
+            raise LookupError(f"conversation {conversation} {what} without an order")
+        return payload
+
+    def _outcome(self, conversation: str, after: int) -> tuple[str, dict[str, Any]] | None:
+        with self._changed:
+            for seq, conv, what, payload in self._events:
+                if seq > after and conv == conversation and what in ("order", "ended"):
+                    return what, dict(payload)
+        return None
 
     # ------------------------------------------------------------------ silence
 
