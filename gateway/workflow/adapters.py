@@ -118,7 +118,6 @@ class OntologyValueAdapter:
         return {"name": name, "value": value}
 
 
-@dataclass
 class DialogueAdapter:
     """``dialogue``: Pepper talks with the customer at a table until the order is complete (the
     dialogue rules, :class:`gateway.dialogue.service.DialogueService`); the output is the order
@@ -151,6 +150,7 @@ class DialogueAdapter:
         return order
 
 
+@dataclass
 class ManualTask:
     """A step for a human: shown on the workbench until someone marks it done (or it times out)."""
 
