@@ -246,6 +246,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
     dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
     closers.append(("the conversations", dialogue.close))
+    if ros_gateway is not None:
+        ros_gateway.attach_dialogue(dialogue)
 
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
                               ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed, dialogue=dialogue)

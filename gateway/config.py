@@ -318,6 +318,10 @@ class DialogueSettings(BaseModel):
     max_audio_s: float = Field(default=15.0, description="Longest WAV accepted (seconds).")
     max_audio_bytes: int = Field(default=2_000_000, description="Largest WAV accepted (bytes, after base64).")
     voice: str = Field(default="en-us", description="espeak-ng voice of the simulated Pepper.")
+    utterance_topic: str = Field(default="/teahouse/utterances", description="ROS topic of customers' "
+                                 "utterances (printeps_interfaces/msg/Utterance).")
+    orders_topic: str = Field(default="/teahouse/orders", description="ROS topic the completed orders are "
+                              "published on (std_msgs/msg/String, JSON).")
     speech_dir: str | None = Field(default=None, description="Where the simulated Pepper's WAV files go "
                                    "(default: <data_dir>/speech).")
 
