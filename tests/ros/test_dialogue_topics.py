@@ -5,6 +5,7 @@ the Information State."""
 from __future__ import annotations
 
 import json
+import wave
 
 import pytest
 from rclpy.node import Node
@@ -39,10 +40,9 @@ def test_an_order_taken_over_ros_reaches_pepper_the_topic_and_the_information_st
                                                                                      tmp_path) -> None:
     settings.ros.domain_id = domain_id
     with built_gateway(settings, mongo, tmp_path, ros=True) as gateway, RosRuntime(domain_id=domain_id) as rt:
-        pepper = rt.make(RobotSim, "pepper")
+        pepper = rt.make(RobotSim, "pepper", speech_dir=tmp_path / "speech")
         customer = rt.make(Customer)
-        assert wait_for(lambda: gateway.ros.node.count_subscribers("/teahouse/utterances") == 0
-                        or customer.publisher.get_subscription_count() >= 1, 20)
+        assert wait_for(lambda: customer.publisher.get_subscription_count() >= 1, 20)  # the gateway listens
 
         def said() -> list[str]:
             return [c["text"] for c in pepper.calls if c["service"] == "speak"]
@@ -57,6 +57,9 @@ def test_an_order_taken_over_ros_reaches_pepper_the_topic_and_the_information_st
         assert (order["conversation"], order["table"], order["drink"], order["cups"]) == ("table1", "table1", "coffee", 2)
         assert len(order["decision_ids"]) == 3 and order["at"]
         assert wait_for(lambda: "Thank you. Your coffees will be ready soon." in said(), 30), said()
+        spoken = next(c for c in pepper.calls if c.get("text") == "2 coffees, certainly. Is that right?")
+        with wave.open(spoken["audio"]) as w:  # the simulated Pepper really spoke it
+            assert w.getnframes() > w.getframerate()
         assert gateway.store.flush()
         stored = gateway.store.query("orders", filters={"conversation": "table1"})
         assert stored and stored[0]["decision_ids"] == order["decision_ids"]
