@@ -312,6 +312,8 @@ class DialogueSettings(BaseModel):
     silence_check_s: float = Field(default=60.0, description="A conversation silent this long is told so (a Silence "
                                    "fact); the dialogue rules decide whether it ends.")
     watch_interval_s: float = Field(default=1.0, description="How often silent conversations are looked for.")
+    max_idle_s: float = Field(default=900.0, description="A conversation idle this long is closed whatever the "
+                              "rules decided about its silence (a bound on what is kept).")
     max_conversations: int = Field(default=200, description="Conversations going on at once before 429.")
     max_concurrent_turns: int = Field(default=8, description="Turns processed at once before 503 + Retry-After.")
     max_text_chars: int = Field(default=500)
@@ -322,8 +324,6 @@ class DialogueSettings(BaseModel):
                                  "utterances (printeps_interfaces/msg/Utterance).")
     orders_topic: str = Field(default="/teahouse/orders", description="ROS topic the completed orders are "
                               "published on (std_msgs/msg/String, JSON).")
-    speech_dir: str | None = Field(default=None, description="Where the simulated Pepper's WAV files go "
-                                   "(default: <data_dir>/speech).")
 
 
 class SyncSettings(BaseModel):

@@ -314,11 +314,18 @@ class DialogueService:
 
     def check_silences(self, now: float | None = None) -> list[dict[str, Any]]:
         """Tell every conversation silent for ``silence_check_s`` (since its last turn or last
-        check) so; returns what those turns answered."""
+        check) so, and close those idle for ``max_idle_s``; returns what the told ones answered."""
         now = time.monotonic() if now is None else now
         limit = self.settings.silence_check_s
         with self._lock:
             quiet = [c for c in self._conversations.values() if now - max(c.last_turn_at, c.last_silence_at) >= limit]
+            stale = [c for c in self._conversations.values() if now - c.last_turn_at >= self.settings.max_idle_s]
+        for conv in stale:  # the rules kept it going: closed anyway, so conversations cannot pile up
+            log.info("conversation %s idle for %.0f s: closed", conv.id, now - conv.last_turn_at)
+            with conv.lock:
+                self._finish(conv, {"conversation": conv.id, "table": conv.table, "slots": {}, "state": "ended",
+                                    "decision_id": conv.decisions[-1] if conv.decisions else None})
+        quiet = [c for c in quiet if c not in stale]
         out = []
         for conv in quiet:
             try:
