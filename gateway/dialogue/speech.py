@@ -41,6 +41,10 @@ class SpeechUnavailable(RuntimeError):
     """The recogniser or the synthesiser is not installed on this machine."""
 
 
+class VoiceUnknown(ValueError):
+    """espeak-ng has no such voice."""
+
+
 @dataclass(frozen=True)
 class Recognised:
     text: str
@@ -152,10 +156,14 @@ def synthesise(text: str, voice: str = "en-us", speed: int = 160, timeout_s: flo
     exe = shutil.which("espeak-ng")
     if exe is None:
         raise SpeechUnavailable("speech synthesis needs espeak-ng (Debian: apt-get install espeak-ng)")
-    done = subprocess.run([exe, "-v", voice, "-s", str(int(speed)), "--stdout", text], capture_output=True,
-                          timeout=timeout_s, check=False)
+    # the text goes in on stdin: text that starts with "-" must never be read as an option
+    done = subprocess.run([exe, "-v", voice, "-s", str(int(speed)), "--stdout"], input=text.encode("utf-8"),
+                          capture_output=True, timeout=timeout_s, check=False)
+    problem = done.stderr.decode(errors="replace").strip()[:200]
+    if "voice does not exist" in problem:
+        raise VoiceUnknown(f"voice: espeak-ng has no voice {voice!r} (see espeak-ng --voices)")
     if done.returncode != 0 or not done.stdout.startswith(b"RIFF"):
-        raise SpeechUnavailable(f"espeak-ng failed: {done.stderr.decode(errors='replace').strip()[:200]}")
+        raise SpeechUnavailable(f"espeak-ng failed: {problem}")
     return _fix_stream_header(done.stdout)
 
 

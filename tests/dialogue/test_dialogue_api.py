@@ -132,3 +132,11 @@ def test_pepper_speaks_as_wav(client):
     assert r.status_code == 200 and r.headers["content-type"] == "audio/wav"
     with wave.open(io.BytesIO(r.content)) as w:
         assert w.getnframes() > w.getframerate() // 2  # more than half a second of speech
+
+
+def test_speech_text_is_never_an_option_and_an_unknown_voice_is_422(client, tmp_path):
+    target = tmp_path / "pwn.wav"
+    r = client.post("/api/dialogue/speech", json={"text": f"-w {target}"})
+    assert r.status_code == 200 and not target.exists()  # spoken, not obeyed
+    r = client.post("/api/dialogue/speech", json={"text": "hello", "voice": "nosuchvoice"})
+    assert r.status_code == 422 and r.json()["field"] == "voice" and "nosuchvoice" in r.json()["error"]

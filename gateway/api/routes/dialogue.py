@@ -22,7 +22,7 @@ from gateway.api.deps import Caller, GatewayDep, StoreDep
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, run_blocking
 from gateway.dialogue.service import ORDERS, DialogueBusy, DialogueRefused
-from gateway.dialogue.speech import SpeechUnavailable, synthesise
+from gateway.dialogue.speech import SpeechUnavailable, VoiceUnknown, synthesise
 
 router = APIRouter(tags=["dialogue"])
 
@@ -117,6 +117,8 @@ async def speech(body: SpeechBody, gateway: GatewayDep, _: Caller) -> Response:
     voice = body.voice or _service(gateway).settings.voice
     try:
         wav = await run_blocking(lambda: synthesise(body.text, voice, body.speed))
+    except VoiceUnknown as exc:
+        raise ApiError(422, str(exc), field="voice") from None
     except SpeechUnavailable as exc:
         raise ApiError(503, str(exc)) from None
     return Response(wav, media_type="audio/wav")
