@@ -136,8 +136,8 @@ class DialogueService:
             self._turns.release()
 
     def _check(self, conversation: str, text: str | None, audio: bytes | None, table: str | None) -> None:
-        if not isinstance(conversation, str) or not ID_PATTERN.match(conversation):
-            raise DialogueRefused("conversation", f"conversation {conversation!r}: 1-128 letters, digits, '_', '.', ':' or '-'")
+        if not isinstance(conversation, str) or len(conversation) > 100 or not ID_PATTERN.match(conversation):
+            raise DialogueRefused("conversation", f"conversation {conversation!r}: 1-100 letters, digits, '_', '.', ':' or '-'")
         if table is not None and not ID_PATTERN.match(table):
             raise DialogueRefused("table", f"table {table!r}: 1-128 letters, digits, '_', '.', ':' or '-'")
         if (text is None) == (audio is None):

@@ -31,7 +31,7 @@ class TurnBody(BaseModel):
     """What a customer said at a table: ``text``, or ``audio`` (base64 of a 16-bit PCM WAV file)."""
 
     model_config = ConfigDict(extra="forbid")
-    conversation: str = Field(min_length=1, max_length=128, description="The conversation (one per table), e.g. table1")
+    conversation: str = Field(min_length=1, max_length=100, description="The conversation (one per table), e.g. table1")
     text: str | None = Field(default=None, description="What the customer said, as text")
     audio: str | None = Field(default=None, description="What the customer said, as base64 WAV (16-bit PCM)")
     table: str | None = Field(default=None, max_length=128, description="Where the customer sits (default: the conversation)")
