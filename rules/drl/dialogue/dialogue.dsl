@@ -5,8 +5,9 @@
 # Longer phrases come before shorter ones that start the same way: the first match wins.
 #
 # In "The customer says", DRINK stands for any drink of the menu and NUMBER for any number; the
-# words may come anywhere in what the customer says, with anything before or after them. The same
-# sentences make the grammar the speech recogniser listens with.
+# words may come anywhere in what the customer says, with anything before or after them. Write the
+# words in lower case letters, digits and apostrophes, separated by spaces. The same sentences make
+# the grammar the speech recogniser listens with.
 
 # --- 1. Understanding: what the customer means ----------------------------------------------
 [condition][]The customer says "{words}"=$u: Utterance(intent == null, shape matches "(?i)(.* )?{words}( .*)?")
