@@ -21,10 +21,11 @@ $(STAMP): pyproject.toml ros/install.sh ros/requirements-jazzy.txt $(wildcard ro
 
 install: $(STAMP)
 
-# Build tools for the ROS 2 interface package (cmake, g++); nothing else comes from apt at run time.
+# Build tools for the ROS 2 interface package (cmake, g++), and espeak-ng: the simulated Pepper's
+# voice (and the voice tests' customers). Nothing else comes from apt at run time.
 system-deps:
-	@command -v cmake >/dev/null && command -v g++ >/dev/null || \
-	  ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q cmake g++)
+	@command -v cmake >/dev/null && command -v g++ >/dev/null && command -v espeak-ng >/dev/null || \
+	  ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q cmake g++ espeak-ng)
 
 # Debian's chromium for the workbench's end-to-end tests (browser downloads do not work here).
 browser:

@@ -29,6 +29,8 @@ def benches(quick: bool) -> dict[str, list[str]]:
         "ros": ["bench/ros_latency.py", "60" if quick else "200", "--write-docs"],
         "stream": ["bench/stream_bench.py", *(["--quick", "--rdflib-timeout", "0"] if quick else []), "--write-docs"],
         "sessions": ["bench/session_bench.py", "--seconds", seconds, "--write-docs"],
+        "dialogue": ["bench/dialogue_bench.py", *(["--orders", "20", "--open-orders", "5", "--turns", "50"]
+                                                  if quick else []), "--write-docs"],
         "agile": ["bench/agile_loop.py", "--repeat", "1" if quick else "3", "--write", "docs/agile-loop.md"],
         "table2-browser": ["bench/table2_browser.py", "--write", "docs/agile-loop.md"],
         # the longest (10,000 rules, peers included): last, so the others are not held up

@@ -28,6 +28,7 @@ from typing import Any, Callable
 from gateway import jvm
 from gateway.actions import ActionRouter, workflow_handler
 from gateway.config import Settings
+from gateway.dialogue.service import DialogueService
 from gateway.engine import Engine
 from gateway.follower import ChangeFollower
 from gateway.jobs import JobRecords, JobService
@@ -73,6 +74,7 @@ class Gateway:
     app: Any = None
     members: Any = None  # gateway.store.members.Membership: where other processes reach this one
     jobs: Any = None  # gateway.jobs.JobService: deploys and validations in the background
+    dialogue: Any = None  # gateway.dialogue.service.DialogueService: conversations at the tables
 
     name: str = field(default_factory=process_name)
     _closers: list[tuple[str, Callable[[], None]]] = field(default_factory=list, repr=False)
@@ -243,8 +245,13 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         ros_modules = RosModules(ros_gateway.node, ros_gateway.caller, on_move=robots.on_outcome)
 
     closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
+    dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
+    closers.append(("the conversations", dialogue.close))
+    if ros_gateway is not None:
+        ros_gateway.attach_dialogue(dialogue)
+
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
-                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed)
+                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed, dialogue=dialogue)
     closers.append(("the workflow executor", workflows.close))
     workflows.executor.recorder = FanOutRecorder(workflows.executor.recorder, CallableRecorder(live.on_workflow_record))
     actions.register("workflow", workflow_handler(workflows))
@@ -261,7 +268,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       mappings=mappings, streams=streams, queries=queries, robots=robots, actions=actions,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
-                      members=members, jobs=jobs, live=live, _closers=closers)
+                      members=members, jobs=jobs, live=live, dialogue=dialogue, _closers=closers)
     if store is not None and settings.sync.live_relay:  # the Live view shows every process's teahouse
         from gateway.store.live_relay import LiveRelay
 

@@ -328,6 +328,28 @@ class StreamSettings(BaseModel):
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 
 
+class DialogueSettings(BaseModel):
+    """Spoken dialogue at the tables (gateway.dialogue): the rule set, limits on audio and turns."""
+
+    ruleset: str = Field(default="dialogue", description="The rule set that understands, carries and answers a turn.")
+    robot: str = Field(default="pepper", description="Who speaks the answers.")
+    silence_check_s: float = Field(default=60.0, description="A conversation silent this long is told so (a Silence "
+                                   "fact); the dialogue rules decide whether it ends.")
+    watch_interval_s: float = Field(default=1.0, description="How often silent conversations are looked for.")
+    max_idle_s: float = Field(default=900.0, description="A conversation idle this long is closed whatever the "
+                              "rules decided about its silence (a bound on what is kept).")
+    max_conversations: int = Field(default=200, description="Conversations going on at once before 429.")
+    max_concurrent_turns: int = Field(default=8, description="Turns processed at once before 503 + Retry-After.")
+    max_text_chars: int = Field(default=500)
+    max_audio_s: float = Field(default=15.0, description="Longest WAV accepted (seconds).")
+    max_audio_bytes: int = Field(default=2_000_000, description="Largest WAV accepted (bytes, after base64).")
+    voice: str = Field(default="en-us", description="espeak-ng voice of the simulated Pepper.")
+    utterance_topic: str = Field(default="/teahouse/utterances", description="ROS topic of customers' "
+                                 "utterances (printeps_interfaces/msg/Utterance).")
+    orders_topic: str = Field(default="/teahouse/orders", description="ROS topic the completed orders are "
+                              "published on (std_msgs/msg/String, JSON).")
+
+
 class SyncSettings(BaseModel):
     """How gateway processes follow each other's changes (deploys, workflows, knowledge, queries)."""
 
@@ -352,6 +374,7 @@ class Settings(BaseModel):
     streams: StreamSettings = Field(default_factory=StreamSettings)
     sync: SyncSettings = Field(default_factory=SyncSettings)
     sessions: SessionSettings = Field(default_factory=SessionSettings)
+    dialogue: DialogueSettings = Field(default_factory=DialogueSettings)
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @property

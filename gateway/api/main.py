@@ -22,7 +22,8 @@ from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
 from gateway.api.routes import (
-    authoring, decisions, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, rulesets, sessions, state, streams, workflows, replay, explain,
+    authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, replay, rulesets,
+    sessions, state, streams, workflows,
 )
 from gateway.workbench import router as workbench
 
@@ -30,7 +31,8 @@ log = logging.getLogger(__name__)
 
 ROUTERS = (
     rulesets.router, jobs.router, sessions.router, authoring.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
-    workflows.router, state.router, health.router, metrics.router, live.router, workbench.router, replay.router, explain.router,
+    dialogue.router, workflows.router, state.router, health.router, metrics.router, live.router, replay.router, explain.router,
+    workbench.router,
 )
 
 DESCRIPTION = """Manage and fire PRINTEPS business rule sets (Drools), continuous queries, workflows and

@@ -27,7 +27,10 @@ from gateway.ontology.swrl import (
     rule_lines,
 )
 from gateway.ontology.values import (
+    XSD,
     ValueInvalid,
+    _prefixes,
+    _turtle_literal,
     lexical_form,
     set_value_in_text,
     value_type,
@@ -122,6 +125,56 @@ class KnowledgeEditor:
                                        comment=comment or f"{individual}.{prop} = {lexical}")
         return saved, {"individual": individual, "property": prop, "lexical": lexical, "datatype": datatype,
                        "value": self.knowledge.value(f"{individual}.{prop}")}
+
+    # ---- a new individual ----------------------------------------------------------------------
+    def add_individual(self, name: str, cls: str, values: dict[str, Any] | None = None, *, author: str,
+                       comment: str = "") -> tuple[VersionInfo, dict[str, Any]]:
+        """Add individual ``name`` of class ``cls`` with data ``values`` (``label`` is its
+        ``rdfs:label``; other keys are data properties, type-checked), appended to the ontology text
+        as one Turtle statement and saved like any edit (Pellet-checked, versioned, live at once: a
+        new Beverage can be ordered by talking to Pepper straight away). ValueInvalid names the field."""
+        model = self.model()
+        if not re.fullmatch(r"[A-Za-z_][\w-]*", name or ""):
+            raise ValueInvalid("name", f"{name!r}: a name is a letter or '_' then letters, digits, '_' or '-'")
+        if name in model.individuals or name in model.classes or name in model.properties:
+            raise ValueInvalid("name", f"{name!r} is already in the ontology")
+        if cls not in model.classes:
+            raise ValueInvalid("class", f"{cls!r} is not a class of the ontology (classes: {', '.join(sorted(model.classes))})")
+        current = self.knowledge.text("ontology")
+        if not self.knowledge.files["ontology"].endswith((".ttl", ".n3")):
+            raise ValueInvalid("name", "individuals can be added to a Turtle ontology only")
+        prefix = next(iter(_prefixes(current, model.base)), None)
+        xsd = next(iter(_prefixes(current, XSD)), None)
+
+        def term(local_name: str) -> str:
+            return f"{prefix}:{local_name}" if prefix is not None else f"<{model.base}{local_name}>"
+
+        parts = [f"{term(name)} a <http://www.w3.org/2002/07/owl#NamedIndividual>, {term(cls)}"]
+        shown: dict[str, str] = {}
+        for prop, value in (values or {}).items():
+            if prop == "label":
+                if not isinstance(value, str) or not value.strip():
+                    raise ValueInvalid("values.label", "label: a non-empty text is needed")
+                parts.append(f"<http://www.w3.org/2000/01/rdf-schema#label> {_turtle_literal(value.strip(), 'string', xsd)}")
+                shown[prop] = value.strip()
+                continue
+            info = model.properties.get(prop)
+            if info is None or info.kind != "data":
+                raise ValueInvalid(f"values.{prop}", f"{prop!r} is not a data property of the ontology")
+            if value is None or (isinstance(value, str) and not value.strip()):
+                raise ValueInvalid(f"values.{prop}", f"{prop}: a value is needed")
+            datatype = info.range or "string"
+            try:
+                lexical = lexical_form(prop, datatype, value)
+            except ValueInvalid as exc:
+                raise ValueInvalid(f"values.{prop}", exc.message) from None
+            parts.append(f"{term(prop)} {_turtle_literal(lexical, datatype, xsd)}")
+            shown[prop] = lexical
+        note = f"# {comment.strip()}\n" if comment.strip() and "\n" not in comment.strip() else ""
+        text = current.rstrip("\n") + "\n" + note + " ;\n    ".join(parts) + " .\n"
+        saved = self.knowledge.replace("ontology", text, author=author, base_hash=digest(current),
+                                       comment=comment or f"new {cls} {name}")
+        return saved, {"name": name, "class": cls, "values": shown}
 
     # ---- SWRL rules ----------------------------------------------------------------------------
     def rules(self) -> dict[str, Any]:

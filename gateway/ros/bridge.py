@@ -72,6 +72,7 @@ class RosGateway:
         for module in self.dispatcher.modules:
             actions.register(module, self.dispatcher.dispatch)
         self.ingress.start()
+        self.dialogue: Any = None  # gateway.ros.dialogue.DialogueTopics, once attached
         self._stop = threading.Event()
         self._heartbeat = threading.Thread(target=self._beat, args=(list(cfg.heartbeats),), name="ros-heartbeat",
                                            daemon=True)
@@ -88,13 +89,22 @@ class RosGateway:
                 except Exception:  # a heartbeat must never stop: the next one tries again
                     log.exception("heartbeat of %s failed", stream)
 
+    def attach_dialogue(self, dialogue: Any) -> None:
+        """Take turns from the ``Utterance`` topic and publish completed orders (see
+        :mod:`gateway.ros.dialogue`)."""
+        from gateway.ros.dialogue import DialogueTopics
+
+        cfg = self.settings.dialogue
+        self.dialogue = DialogueTopics(self.node, dialogue, utterance_topic=cfg.utterance_topic,
+                                       orders_topic=cfg.orders_topic)
+
     @property
     def stats(self) -> dict[str, int]:
         return dict(self.ingress.stats)
 
     def idle(self) -> bool:
-        """Nothing queued: every received message was handled."""
-        return self.ingress.idle()
+        """Nothing queued: every received message (sensor readings, utterances) was handled."""
+        return self.ingress.idle() and (self.dialogue is None or self.dialogue.idle())
 
     def health(self) -> dict[str, Any]:
         return {"status": "ok", "node": self.node.get_name(), "domain_id": self.runtime.context.get_domain_id(),
@@ -105,6 +115,8 @@ class RosGateway:
         """Stop taking messages, finish the one in hand, stop the executor, destroy the node."""
         self._stop.set()
         self.ingress.stop()
+        if self.dialogue is not None:
+            self.dialogue.close()
         self.runtime.shutdown()
 
 

@@ -62,7 +62,7 @@ def workbench_asset(relative: str) -> FileResponse:
 
 #: The shell's sections; ``/workbench/<section>[/<item>]`` is a deep link the page turns into its
 #: fragment (``#/<section>/<item>``), so every item has an address that can be shared.
-SECTIONS = ("rules", "workflows", "knowledge", "streams", "live", "decisions", "history")
+SECTIONS = ("rules", "workflows", "knowledge", "streams", "live", "dialogue", "decisions", "history")
 
 
 @router.get("/workbench/{section}", include_in_schema=False)

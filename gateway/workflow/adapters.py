@@ -118,6 +118,38 @@ class OntologyValueAdapter:
         return {"name": name, "value": value}
 
 
+class DialogueAdapter:
+    """``dialogue``: Pepper talks with the customer at a table until the order is complete (the
+    dialogue rules, :class:`gateway.dialogue.service.DialogueService`); the output is the order
+    (``drink``, ``cups``, ``table``, ``decision_ids``...).
+
+    ``conversation`` names the conversation (one per table); Pepper opens with ``opening``.
+    ``customer_says``, a list of
+    sentences, plays a simulated customer (the demo, tests); without it the step waits for what
+    real customers say (REST turns, the ROS ``Utterance`` topic) within the step's timeout.
+    """
+
+    def __init__(self, dialogue: Any) -> None:
+        self.dialogue = dialogue
+
+    def call(self, call: Call) -> dict[str, Any]:
+        conversation = str(call.params.get("conversation") or "")
+        if not conversation:
+            raise ModuleFailed("a dialogue step needs a 'conversation' (e.g. the table's id)")
+        table = call.params.get("table")
+        said = call.params.get("customer_says") or []
+        if isinstance(said, str):
+            said = [said]
+        try:
+            order = self.dialogue.take_order(conversation, table=str(table) if table else None,
+                                             customer_says=[str(s) for s in said], timeout_s=call.timeout,
+                                             opening=str(call.params.get("opening") or "") or None,
+                                             cancelled=call.cancelled)
+        except LookupError as exc:
+            raise ModuleFailed(str(exc)) from None
+        return order
+
+
 @dataclass
 class ManualTask:
     """A step for a human: shown on the workbench until someone marks it done (or it times out)."""

@@ -10,7 +10,8 @@ Module kinds in the node: ``ros_service``/``ros_topic`` -> clients/publishers; `
 the gateway's FireBusinessRules ROS service (``--fire-rules-service``), its actions dispatched to
 modules; ``manual`` -> a JSON request on topic ``manual_requests``, done when the task id comes back
 on ``manual_done`` (or at once with ``--auto-manual``); ``wait`` -> sleep; ``ontology_value`` ->
-``--values '{"name": value}'`` or the step's ``default``.
+``--values '{"name": value}'`` or the step's ``default``; ``dialogue`` -> waits for the order the
+gateway's dialogue publishes on ``/teahouse/orders`` (JSON) for the step's conversation.
 """
 
 from __future__ import annotations
@@ -127,6 +128,8 @@ class WorkflowRuntime(Node):
         self._done_lock = threading.Condition()
         self._manual_pub = self.create_publisher(String, 'manual_requests', 10)
         self.create_subscription(String, 'manual_done', self._on_manual_done, 10)
+        self._orders = []
+        self.create_subscription(String, '/teahouse/orders', self._on_order, 10)
 
     # -- steps
     def assign(self, v, step_id, values):
@@ -247,6 +250,26 @@ class WorkflowRuntime(Node):
             if not self._done_lock.wait_for(lambda: task in self._done_tasks, timeout):
                 raise TimeoutError(f'nobody completed the manual step within {timeout}s')
         return {'done': True, 'task': task}
+
+    def kind_dialogue(self, spec, params, timeout):
+        # the gateway carries the conversation (its dialogue rules); this node waits for the order
+        # it publishes on /teahouse/orders (JSON) for this conversation
+        conversation = str(params.get('conversation') or '')
+        with self._done_lock:
+            found = self._done_lock.wait_for(
+                lambda: any(o.get('conversation') == conversation for o in self._orders), timeout)
+            if not found:
+                raise TimeoutError(f'no order from conversation {conversation!r} within {timeout}s')
+            return next(o for o in self._orders if o.get('conversation') == conversation)
+
+    def _on_order(self, msg):
+        try:
+            order = json.loads(msg.data)
+        except ValueError:
+            return
+        with self._done_lock:
+            self._orders = (self._orders + [order])[-100:]
+            self._done_lock.notify_all()
 
     def _on_manual_done(self, msg):
         with self._done_lock:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Union
 
-MODULE_KINDS = ("ros_service", "ros_topic", "fire_rules", "manual", "wait", "ontology_value")
+MODULE_KINDS = ("ros_service", "ros_topic", "fire_rules", "manual", "wait", "ontology_value", "dialogue")
 FAILURE_POLICIES = ("fail", "continue", "retry")
 
 

@@ -206,6 +206,21 @@ def build_palette(*, configured_robots: Mapping[str, str], interfaces: Mapping[s
         "save": True,
     })
     entries.append({
+        "id": "dialogue", "group": "Dialogue", "kind": "dialogue", "label": "Take the order by talking",
+        "description": "Pepper talks with the customer at a table (the dialogue rules) until the order is "
+                       "complete; the next steps get the order (drink, cups).",
+        "module_name": "dialogue",
+        "module": {"kind": "dialogue", "actor": "pepper"},
+        "actor": {"name": "pepper", "kind": "robot", "label": "Pepper"},
+        "params": [Param("conversation", "string", True, "${input.table.id}", None,
+                         "The conversation: one per table.").to_dict(),
+                   Param("opening", "string", False, "What would you like to drink?", None,
+                         "What Pepper says first.").to_dict(),
+                   Param("customer_says", "expression", False, None, None,
+                         "A simulated customer's sentences (empty: wait for real customers).").to_dict()],
+        "save": True,
+    })
+    entries.append({
         "id": "wait", "group": "Timing", "kind": "wait", "label": "Wait",
         "description": "Pause the workflow for some seconds (e.g. let the customers finish).",
         "module_name": "pause",

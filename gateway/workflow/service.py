@@ -20,8 +20,7 @@ import uuid
 from typing import Any, Callable, Mapping
 
 from gateway.workflow.adapters import (
-    Adapter, ManualBoard, OntologyValueAdapter, RulesAdapter, SimulatedRobots, WaitAdapter,
-)
+    Adapter, ManualBoard, OntologyValueAdapter, RulesAdapter, SimulatedRobots, WaitAdapter, DialogueAdapter)
 from gateway.workflow.executor import Executor, RunResult
 from gateway.workflow.loader import Problem, WorkflowInvalid, parse
 from gateway.workflow.model import Workflow
@@ -137,7 +136,7 @@ class WorkflowService:
 
 def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, store: Any = None,
                   ontology_lookup: Callable[[str], Any] | None = None,
-                  ros_modules: Adapter | None = None, seed: bool = True) -> WorkflowService:
+                  ros_modules: Adapter | None = None, seed: bool = True, dialogue: Any = None) -> WorkflowService:
     """Assemble the service from ``settings.workflows`` and what the gateway runs: its catalog
     (versions), engine (``fire_rules``), knowledge (``ontology_value``), ROS node (robot modules;
     simulated robots without one) and Information State (runs recorded)."""
@@ -154,6 +153,8 @@ def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, sto
         adapters["fire_rules"] = RulesAdapter(engine)
     if ontology_lookup is not None:
         adapters["ontology_value"] = OntologyValueAdapter(ontology_lookup)
+    if dialogue is not None:
+        adapters["dialogue"] = DialogueAdapter(dialogue)
     manual = ManualBoard(simulate=cfg.simulate_humans)
     adapters["manual"] = manual
     memory = MemoryRecorder()

@@ -27,6 +27,15 @@ def test_teahouse_reception_end_to_end(tmp_path, monkeypatch) -> None:
         ("move_to", "entrance"), ("speak", "Welcome. Three seats?"), ("gesture", "bow"), ("move_to", "table for four"),
     ]
     clearing = [("move_to", "table2"), ("move_to", "counter")]  # the clear_table workflow's robot steps
+    ordering = [("speak", "2 green teas, certainly. Is that right?"),  # customers at table 1, by voice
+                ("speak", "Thank you. Your green teas will be ready soon."),
+                ("speak", "How many cups of coffee?"),  # the second one forgot the count
+                ("speak", "3 coffees, certainly. Is that right?"),
+                ("speak", "Thank you. Your coffees will be ready soon.")]
+    assert [c for c in calls if c in ordering] == ordering, "\n".join(lines)
+    assert [(o["drink"], o["cups"]) for o in summary["orders"]] == [("green tea", 2), ("coffee", 3)]
+    assert all(c.get("audio", "").endswith(".wav") for c in summary["robot_calls"] if c["service"] == "speak")
+    calls = [c for c in calls if c not in ordering]
     assert [c for c in calls if c not in clearing] == reception, "\n".join(lines)
     assert [c for c in calls if c in clearing] == clearing, "\n".join(lines)
     assert summary["detections"] == 2 and summary["failed"] == 0 and summary["rejected"] == 0

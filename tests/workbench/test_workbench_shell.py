@@ -9,7 +9,7 @@ from playwright.sync_api import expect
 
 from wb_helpers import AUTHOR_TOKEN, new_page
 
-SECTIONS = ["Rules", "Workflows", "Knowledge", "Streams", "Live", "Decisions", "History"]
+SECTIONS = ["Rules", "Workflows", "Knowledge", "Streams", "Live", "Dialogue", "Decisions", "History"]
 
 
 def test_one_navigation_reaches_every_section(author_page):

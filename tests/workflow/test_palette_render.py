@@ -35,7 +35,7 @@ def test_palette_entries_have_typed_parameters():
                             rulesets=["reception", "seat_info"], ontology_values={"pepper1.robotToHumanDistance": 1.0})
     entries = {e["id"]: e for e in palette["entries"]}
     assert set(entries) == {"pepper.gesture", "pepper.move_to", "pepper.speak", "fire_rules", "ontology_value",
-                            "wait", "manual", "branch", "set"}
+                            "wait", "manual", "branch", "set", "dialogue"}
     assert entries["pepper.speak"]["module_name"] == "say"
     ruleset = entries["fire_rules"]["module_params"][0]
     assert ruleset["choices"] == ["reception", "seat_info"] and ruleset["default"] == "reception"

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from gw_testing import wait_for
+
 pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
 pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
 
@@ -138,6 +140,14 @@ def test_workflows_call_robots_through_the_gateway_node(pepper, ros_env, tmp_pat
     with built_gateway(settings, mongo, tmp_path, ros=True) as gateway:
         result = gateway.workflows.run("take_order")
         assert result.status == "succeeded", result.error
-        assert robot_calls(pepper) == [("move_to", (3.5, 2.0)), ("speak", "What would you like to drink?"),
-                                       ("speak", "2 green tea, certainly.")]  # 4.0 - pepper1.robotToTableDistance 0.5
-        assert result.steps[-1].output == {"published": "/teahouse/orders"}
+        # Pepper's side of the dialogue goes through the action router (as every rule action does),
+        # the workflow's own steps through the workflow: both reach the robot over ROS
+        dialogue = [("speak", "What would you like to drink?"), ("speak", "2 green teas, certainly. Is that right?"),
+                    ("speak", "Thank you. Your green teas will be ready soon.")]
+        assert wait_for(lambda: all(c in robot_calls(pepper) for c in dialogue), 20), robot_calls(pepper)
+        calls = robot_calls(pepper)
+        assert [c for c in calls if c in dialogue] == dialogue
+        assert [c for c in calls if c not in dialogue] == [
+            ("move_to", (3.5, 2.0)),  # 4.0 - pepper1.robotToTableDistance 0.5
+            ("speak", "2 green teas, certainly. I will bring them to your table.")]
+        assert result.steps[-1].output == {"published": "/teahouse/kitchen"}

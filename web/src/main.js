@@ -1,5 +1,5 @@
 // The workbench shell: one header with the sections (Rules · Workflows · Knowledge · Streams ·
-// Live · Decisions · History), a sidebar the current view fills, and one view at a time chosen by the URL
+// Live · Dialogue · Decisions · History), a sidebar the current view fills, and one view at a time chosen by the URL
 // fragment: #/<section>/<item>?params. Deep links by path (/workbench/workflows/show_to_seat) are
 // turned into the same fragment at start, so every item has one shareable address.
 //
@@ -16,6 +16,7 @@ import { showWorkflows } from "./workflow-view.js";
 import { showKnowledge } from "./knowledge-view.js";
 import { showStreams } from "./streams-view.js";
 import { showLive } from "./live-view.js";
+import { showDialogue } from "./dialogue-view.js";
 
 /** The sections in navigation order: label, view, and whether the rule set list is its sidebar. */
 const SECTIONS = [
@@ -24,6 +25,7 @@ const SECTIONS = [
   { id: "knowledge", label: "Knowledge", show: showKnowledge },
   { id: "streams", label: "Streams", show: showStreams },
   { id: "live", label: "Live", show: showLive },
+  { id: "dialogue", label: "Dialogue", show: showDialogue },
   { id: "decisions", label: "Decisions", show: showDecisions },
   { id: "history", label: "History", show: showHistory, rulesets: true },
 ];

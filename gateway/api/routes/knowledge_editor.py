@@ -52,6 +52,17 @@ class RuleCheckBody(BaseModel):
     text: str = Field(max_length=20_000)
 
 
+class IndividualBody(BaseModel):
+    """A new individual: ``{"name": "oolongTea", "class": "Beverage", "values": {"label": "oolong tea"}}``."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    name: str = Field(min_length=1, max_length=200)
+    class_: str = Field(alias="class", min_length=1, max_length=200)
+    values: dict[str, str | float | int | bool | None] = Field(
+        default_factory=dict, description="Data property -> value (type-checked); 'label' is the rdfs:label")
+    comment: str = Field(default="", max_length=2000)
+
+
 class TryBody(BaseModel):
     """A new individual that is not stored: ``{"id": "kid", "types": ["Customer"], "properties": {"age": 6}}``."""
 
@@ -74,6 +85,23 @@ def individuals(knowledge: KnowledgeDep, _: Caller) -> JSON:
     """Every individual with its types and data values (``datatype`` = xsd type; ``inferred`` values
     come from the SWRL rules, with the rules that conclude them), and the properties with ranges."""
     return JSON(KnowledgeEditor(knowledge).individuals())
+
+
+@router.post("/api/knowledge/individuals", status_code=201)
+def add_individual(body: IndividualBody, knowledge: KnowledgeDep, who: Author) -> JSON:
+    """Add an individual of a class with its values (Pellet-checked, versioned, live at once): a new
+    ``Beverage`` with its ``label`` can be ordered by talking to Pepper straight away."""
+    try:
+        info, added = KnowledgeEditor(knowledge).add_individual(body.name, body.class_, body.values, author=who.name,
+                                                                comment=body.comment)
+    except ValueInvalid as exc:
+        raise ApiError(422, exc.message, field=exc.field, errors=[exc.to_dict()]) from None
+    except KnowledgeInvalid as exc:
+        raise ApiError(422, f"{body.name}: {exc.errors[0]['message']}", field="values",
+                       errors=[{"field": "values", **e} for e in exc.errors]) from None
+    except KnowledgeConflict as exc:
+        raise _conflict(exc) from None
+    return JSON({**added, "version": info.version}, status_code=201)
 
 
 @router.get("/api/knowledge/individuals/{name}")
