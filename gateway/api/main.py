@@ -22,14 +22,14 @@ from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
 from gateway.api.routes import (
-    authoring, decisions, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, rulesets, sessions, state, streams, workflows,
+    authoring, decisions, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, outline, rulesets, sessions, state, streams, workflows,
 )
 from gateway.workbench import router as workbench
 
 log = logging.getLogger(__name__)
 
 ROUTERS = (
-    rulesets.router, jobs.router, sessions.router, authoring.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
+    rulesets.router, jobs.router, sessions.router, authoring.router, outline.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
     workflows.router, state.router, health.router, metrics.router, live.router, workbench.router,
 )
 
