@@ -9,6 +9,9 @@ import { localProblems } from "./checks.js";
 import { actionList, firedList } from "./actions.js";
 import { assistFor, declaredTypes, dslEntries } from "./dsl-assist.js";
 import { mountTests } from "./tests-view.js";
+import { offerTestUpdate } from "./tests-update.js";
+import { mountRuleList } from "./rule-list.js";
+import { findHighlight, setFind } from "./find-highlight.js";
 import { mountTableEditor } from "./table-editor.js";
 import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
 import { JobProgress, JobsList } from "./jobs-view.js";
@@ -112,6 +115,7 @@ class RulesView {
     const draft = this.loadDraft();
     this.active = orderedFiles(Object.keys(draft ? draft.files : this.original))[0];
     this.createEditors(draft ? draft.files : this.original);
+    this.ruleList.load();
     if (draft) this.announceDraft(draft);
     this.select(this.active);
     this.updateDirty();
@@ -126,6 +130,7 @@ class RulesView {
     this.storeDraft();
     this.seq++;
     this.testsView?.dispose();
+    this.ruleList?.dispose();
     for (const table of Object.values(this.tables)) table.dispose();
   }
 
@@ -166,6 +171,7 @@ class RulesView {
         "You are signed in with a caller token: you can read and try the rules, but not change or deploy them."),
       h("div", { class: "columns" },
         h("div", { class: "left" },
+          this.buildRuleList(),
           h("div", { class: "toolbar" }, this.tabsEl, this.buildAddFile(),
             h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
             this.statusEl),
@@ -189,7 +195,7 @@ class RulesView {
       else this.views[fileName] = createEditor(host, {
         doc: files[fileName], fileName, readOnly: !this.editable,
         label: `Editor for ${fileName}`, onChange: () => this.changed(), onCursor: (line) => this.followCursor(fileName, line),
-        extensions: assistFor(fileName, () => this.assistSource()),
+        extensions: [assistFor(fileName, () => this.assistSource()), findHighlight()],
       });
       const tab = h("button", { class: "tab", role: "tab", "data-file": fileName, onclick: () => this.select(fileName) },
         h("span", { class: "tab-name" }, fileName), h("span", { class: "tab-kind" }, kindOf(fileName).label),
@@ -238,6 +244,8 @@ class RulesView {
 
   changed() {
     this.assistCache = null;
+    this.testsView?.markStale();
+    this.ruleList?.refresh();
     this.updateDirty();
     this.saveDraft();
     this.statusEl.className = "check-status pending";
@@ -567,6 +575,29 @@ class RulesView {
     return this.jobsList.el;
   }
 
+  // ---- The rules as a list ----------------------------------------------------------------------
+
+  buildRuleList() {
+    const host = h("div", { class: "rule-list-host" });
+    this.ruleList = mountRuleList(host, {
+      name: this.name,
+      files: () => this.files(),
+      goTo: (rule) => this.goTo(rule.row ? { file: rule.file, line: rule.row, column: 1, sheet: rule.sheet } : { file: rule.file, line: rule.line, column: 1 }),
+      onSearch: (text) => this.searchEditors(text),
+    });
+    return host;
+  }
+
+  /** Mark the search words in every editor and bring the first rule that matches into view. */
+  searchEditors(text) {
+    for (const view of Object.values(this.views)) setFind(view, text);
+    if (!text || !this.ruleList) return;
+    const first = this.ruleList.visible().find((r) => r.line && this.views[r.file]);
+    if (!first) return;
+    if (first.file !== this.active) this.select(first.file);
+    scrollToLine(this.views[first.file], first.line, "start");
+  }
+
   // ---- Tests ------------------------------------------------------------------------------------
 
   buildTests() {
@@ -675,16 +706,29 @@ class RulesView {
       `Lost track of the build (${err.message}). It may still finish: see Build jobs, or reload the page in a moment.`));
   }
 
-  /** The deploy was refused because test scenarios are red: say which, offer to deploy anyway. */
+  /** The deploy was refused because test scenarios are red: say which, offer to update the tests
+   * when they only expect words the draft changed, or to deploy anyway. */
   redScenarios(body) {
     const red = ((body.report && body.report.results) || []).filter((r) => r.status !== "passed");
+    const updateHost = h("div", { class: "tests-update-host" });
     fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "red-scenarios" },
       h("p", {}, `Not deployed: ${red.length} test scenario${red.length === 1 ? " fails" : "s fail"} with these rules. Nothing was changed.`),
       h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status))),
+      updateHost,
       h("p", {}, "Fix the rules (or the scenario, if the change is wanted), or deploy anyway."),
       h("div", { class: "buttons" },
-        h("button", { class: "secondary", onclick: () => this.testsView.run() }, "Show the tests"),
+        h("button", { class: "secondary", "data-testid": "show-tests", onclick: () => this.testsView.run({ reveal: true }) }, "Show the tests"),
         h("button", { class: "danger", "data-testid": "deploy-anyway", onclick: () => this.deploy(true) }, "Deploy anyway"))));
+    offerTestUpdate(updateHost, { name: this.name, files: this.files(), apply: (files, { allFixed }) => this.updateTests(files, allFixed) });
+  }
+
+  /** Put the rewritten test files into their editors; deploy again when nothing else was red. */
+  updateTests(files, allFixed) {
+    for (const [file, text] of Object.entries(files)) {
+      if (this.views[file]) setText(this.views[file], text);
+    }
+    if (allFixed) this.deploy();
+    else this.testsView.run({ reveal: true });
   }
 
   conflict(current) {
