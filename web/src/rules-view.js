@@ -12,6 +12,7 @@ import { mountTests } from "./tests-view.js";
 import { offerTestUpdate } from "./tests-update.js";
 import { mountRuleList } from "./rule-list.js";
 import { findHighlight, setFind } from "./find-highlight.js";
+import { reachBar } from "./reach-bar.js";
 import { mountTableEditor } from "./table-editor.js";
 import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
 import { JobProgress, JobsList } from "./jobs-view.js";
@@ -177,7 +178,12 @@ class RulesView {
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
           h("h2", { class: "small" }, "Problems"), this.problemsEl),
-        h("div", { class: "right" }, this.buildDeploy(), this.buildJobs(), this.buildTry(), this.buildTests()))));
+        h("div", { class: "right" }, this.buildDeploy(), this.buildJobs(), this.buildTry(), this.buildTests())),
+      reachBar([
+        { label: "▶ Try it", testid: "reach-try", target: () => main.querySelector(".card.try") },
+        this.editable ? { label: "Deploy…", testid: "reach-deploy", target: () => main.querySelector(".card.deploy"),
+          then: () => this.commentEl.focus({ preventScroll: true }) } : null,
+      ].filter(Boolean))));
     this.renderLive();
   }
 
