@@ -177,3 +177,33 @@ def test_layout_at_desktop_and_tablet_width(browser, gateway, screenshots):
             assert page.js_errors == []
         finally:
             page.context.close()
+
+
+def test_a_value_shows_its_unit_and_limits_and_a_negative_distance_is_refused(author_page, gateway, screenshots):
+    page = author_page
+    page.goto("/workbench#/knowledge/kinect1")
+    value = page.get_by_test_id("value-kinect1.distanceToEntrance")
+    expect(value).to_have_value("3.3")
+    expect(page.get_by_test_id("unit-kinect1.distanceToEntrance")).to_have_text("metres")
+    expect(page.get_by_test_id("kind-kinect1.distanceToEntrance")).to_have_text("number in metres, 0 to 20")
+    error = page.locator("#err-kinect1-distanceToEntrance")
+
+    value.fill("far away")
+    expect(error).to_have_text("distanceToEntrance: 'far away' is not a number in metres from 0 to 20, e.g. 3.3")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_disabled()
+    value.fill("-1")
+    expect(error).to_have_text("distanceToEntrance: -1 metres is below the least allowed, 0 metres; "
+                               "give a number in metres from 0 to 20, e.g. 3.3")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_disabled()
+    page.screenshot(path=str(screenshots / "knowledge-value-limits.png"))
+    value.fill("2.5")
+    expect(error).to_have_text("")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_enabled()
+
+    # The gateway refuses it too, with the same reason, and changes nothing.
+    with gateway.rest() as client:
+        before = client.get("/api/knowledge/ontology").json()
+        r = client.put("/api/knowledge/individuals/kinect1/values/distanceToEntrance", json={"value": "-1"})
+        assert r.status_code == 422
+        assert r.json()["errors"][0]["message"].startswith("distanceToEntrance: -1 metres is below the least allowed, 0 metres")
+        assert client.get("/api/knowledge/ontology").json() == before
