@@ -207,3 +207,23 @@ def test_a_value_shows_its_unit_and_limits_and_a_negative_distance_is_refused(au
         assert r.status_code == 422
         assert r.json()["errors"][0]["message"].startswith("distanceToEntrance: -1 metres is below the least allowed, 0 metres")
         assert client.get("/api/knowledge/ontology").json() == before
+
+
+def test_owner_pages_speak_plainly(author_page, gateway):
+    page = author_page
+    # Live: no developer words, and the missing robot connection is explained.
+    page.goto("/workbench#/live")
+    expect(page.get_by_test_id("live-status")).to_have_text("● Live")
+    expect(page.get_by_test_id("robot-status")).to_contain_text("No robot is connected to this gateway")
+    text = page.locator("main").inner_text()
+    for developer_words in ("REST", "/api/", "post to", "process"):
+        assert developer_words not in text, developer_words
+
+    # Workflows: a new step's problem names the field as the form labels it.
+    page.goto("/workbench#/workflows/greeting")
+    page.locator("[data-step=reception_rules]").first.click()
+    page.get_by_role("button", name="Insert: Pepper: say").click()
+    expect(page.get_by_test_id("wf-form").locator("[data-field='with.text']")).to_be_focused()
+    problems = page.get_by_test_id("wf-problems")
+    expect(problems).to_contain_text("field “text”: text is required")
+    expect(problems).not_to_contain_text("with.text")

@@ -6,6 +6,7 @@
 // format: the YAML tab shows what is saved and stays editable; the generated Python is shown too.
 
 import "./workflow-view.css";
+import { fieldLabel } from "./field-label.js";
 import { h, fill, when, debounce } from "./dom.js";
 import { api, getToken } from "./api.js";
 import { createEditor, setText, showProblems } from "./editor.js";
@@ -357,13 +358,14 @@ class WorkflowEditor {
     if (this.tab === "process") this.markStepErrors();
   }
 
-  /** "Step “pause_2”, field “with.seconds”: 'abc' is not a number of seconds" */
+  /** "Step “pause_2”, field “seconds”: 'abc' is not a number of seconds" (the field as its form labels it) */
   describeProblem(problem) {
     const where = problem.client ? { stepPath: problem.stepPath, stepId: getIn(this.doc, problem.stepPath)?.id, field: problem.field }
       : this.doc ? locateProblem(this.doc, problem) : { field: problem.path };
     let text = "";
-    if (where.stepId || where.stepPath) text = `Step “${where.stepId || "?"}”${where.field ? `, field “${where.field}”` : ""}: `;
-    else if (where.module) text = `Module “${where.module}”${where.field ? `, field “${where.field}”` : ""}: `;
+    const field = fieldLabel(where.field);
+    if (where.stepId || where.stepPath) text = `Step “${where.stepId || "?"}”${field ? `, field “${field}”` : ""}: `;
+    else if (where.module) text = `Module “${where.module}”${field ? `, field “${field}”` : ""}: `;
     else if (problem.path) text = `${problem.path}: `;
     const line = problem.line ? ` (YAML line ${problem.line})` : "";
     return { where, text: `${text}${problem.message}${line}` };
