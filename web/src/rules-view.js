@@ -719,8 +719,10 @@ class RulesView {
     const updateHost = h("div", { class: "tests-update-host" });
     fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "red-scenarios" },
       h("p", {}, `Not deployed: ${red.length} test scenario${red.length === 1 ? " fails" : "s fail"} with these rules. Nothing was changed.`),
-      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status))),
+      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name)))),
       updateHost,
+      h("details", { class: "red-details" }, h("summary", {}, "What each test expected (details)"),
+        h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status)))),
       h("p", {}, "Fix the rules (or the scenario, if the change is wanted), or deploy anyway."),
       h("div", { class: "buttons" },
         h("button", { class: "secondary", "data-testid": "show-tests", onclick: () => this.testsView.run({ reveal: true }) }, "Show the tests"),
