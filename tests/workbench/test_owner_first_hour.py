@@ -219,8 +219,14 @@ def test_owner_pages_speak_plainly(author_page, gateway):
     for developer_words in ("REST", "/api/", "post to", "process"):
         assert developer_words not in text, developer_words
 
-    # Workflows: a new step's problem names the field as the form labels it.
+    # Workflows: each palette entry once, with a plain name; a new step's problem names the field
+    # as the form labels it.
     page.goto("/workbench#/workflows/greeting")
+    palette = page.get_by_test_id("wf-palette")
+    expect(palette.locator(".wf-entry", has_text="say")).to_have_count(1)
+    expect(palette.locator(".wf-entry", has_text="say")).to_have_text("robot Pepper: say")
+    expect(palette.locator(".wf-entry[data-module=fire_reception_rules]")).to_have_text("rules Fire the reception rules")
+    expect(palette.locator(".wf-entry", has_text="Pepper: move to")).to_have_count(1)
     page.locator("[data-step=reception_rules]").first.click()
     page.get_by_role("button", name="Insert: Pepper: say").click()
     expect(page.get_by_test_id("wf-form").locator("[data-field='with.text']")).to_be_focused()

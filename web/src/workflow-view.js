@@ -7,6 +7,7 @@
 
 import "./workflow-view.css";
 import { fieldLabel } from "./field-label.js";
+import { paletteRows } from "./palette-entries.js";
 import { h, fill, when, debounce } from "./dom.js";
 import { api, getToken } from "./api.js";
 import { createEditor, setText, showProblems } from "./editor.js";
@@ -734,20 +735,18 @@ class WorkflowEditor {
   }
 
   paletteGroups() {
-    const mine = Object.entries(this.doc.modules || {});
-    const groups = {};
-    for (const entry of this.palette.entries || []) (groups[entry.group] = groups[entry.group] || []).push(entry);
+    const { mine, groups } = paletteRows(this.doc, this.palette.entries, moduleFor);
     return [
       h("h3", {}, "Modules of this workflow"),
-      h("ul", { class: "wf-entries", "aria-label": "Modules of this workflow" }, mine.map(([name, module]) => h("li", {},
+      h("ul", { class: "wf-entries", "aria-label": "Modules of this workflow" }, mine.map(({ name, module, entry, label }) => h("li", {},
         h("button", {
-          class: "wf-entry", draggable: "true", "data-module": name,
-          "aria-label": `Insert a ${name} step (${kindWord(module.kind)})`,
+          class: "wf-entry", draggable: "true", "data-module": name, title: `module ${name}`,
+          "aria-label": entry ? `Insert: ${entry.label}` : `Insert a ${name} step (${kindWord(module.kind)})`,
           ondragstart: (e) => e.dataTransfer.setData("application/x-wf-palette", JSON.stringify({ module: name })),
           onclick: () => this.insertFrom({ module: name }),
-        }, h("span", { class: `wf-kind k-${module.kind}` }, kindWord(module.kind)), ` ${name}`),
+        }, h("span", { class: `wf-kind k-${module.kind}` }, kindWord(module.kind)), ` ${label}`),
         h("button", { class: "link wf-edit-module", "aria-label": `Edit module ${name}`, onclick: () => this.editModule(name) }, "edit")))),
-      h("h3", {}, "Add a new module"),
+      Object.keys(groups).length ? h("h3", {}, "Add a new module") : null,
       Object.entries(groups).map(([group, entries]) => h("div", { class: "wf-group" },
         h("h4", {}, group),
         h("ul", { class: "wf-entries", "aria-label": group }, entries.map((entry) => h("li", {},
