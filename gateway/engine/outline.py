@@ -23,7 +23,6 @@ from gateway.engine.ruleset import is_table_file
 RULE_LINE = re.compile(r'^\s*rule\s+(?:"((?:[^"\\]|\\.)*)"|(\S+))')
 ATTRIBUTE = re.compile(r"^(salience|no-loop|lock-on-active|agenda-group|activation-group|ruleflow-group|"
                        r"date-effective|date-expires|enabled|dialect|duration|timer|calendars|auto-focus)\b")
-KEYWORD_RULE = re.compile(r'^rule\s+"?([^"]+)"?')
 
 
 def outline(files: dict[str, str]) -> list[dict[str, Any]]:
