@@ -22,15 +22,15 @@ from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
 from gateway.api.routes import (
-    authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, replay, rulesets,
-    sessions, state, streams, workflows,
+    authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, outline, replay,
+    rulesets, sessions, state, streams, workflows,
 )
 from gateway.workbench import router as workbench
 
 log = logging.getLogger(__name__)
 
 ROUTERS = (
-    rulesets.router, jobs.router, sessions.router, authoring.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
+    rulesets.router, jobs.router, sessions.router, authoring.router, outline.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
     dialogue.router, workflows.router, state.router, health.router, metrics.router, live.router, replay.router, explain.router,
     workbench.router,
 )

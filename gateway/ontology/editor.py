@@ -31,6 +31,7 @@ from gateway.ontology.values import (
     ValueInvalid,
     _prefixes,
     _turtle_literal,
+    expectation,
     lexical_form,
     set_value_in_text,
     value_type,
@@ -57,7 +58,9 @@ class KnowledgeEditor:
         return {"version": self._version("ontology"), "classes": model.class_tree()}
 
     def properties(self) -> list[dict[str, Any]]:
-        return [{"name": p.name, "kind": p.kind, "range": p.range, "domain": p.domain, "comment": p.comment}
+        return [{"name": p.name, "kind": p.kind, "range": p.range, "domain": p.domain, "comment": p.comment,
+                 **({"unit": p.unit, "limits": p.limits, "expects": expectation(p.range, p.unit, p.limits)}
+                    if p.kind == "data" else {})}
                 for p in sorted(self.model().properties.values(), key=lambda p: p.name)]
 
     def individuals(self) -> dict[str, Any]:
@@ -76,12 +79,21 @@ class KnowledgeEditor:
         ind = model.individuals[name]
         rules = self._rules(model)
         values = [{"property": v.property, "lexical": v.lexical, "value": self.knowledge.value(f"{name}.{v.property}"),
-                   "datatype": value_type(model, name, v.property), "inferred": False}
+                   "datatype": value_type(model, name, v.property), "inferred": False,
+                   **self._value_words(model, name, v.property, v.lexical)}
                   for v in ind.values]
         inferred = self._inferred_values(model, name, rules)
         return {"name": name, "types": ind.types, "values": values + inferred,
                 "links": [{"property": p, "individual": o} for p, o in ind.links],
                 "comment": ""}
+
+    @staticmethod
+    def _value_words(model: OntologyModel, individual: str, prop: str, example: str = "") -> dict[str, Any]:
+        """The unit, limits and expected value in words of ``individual.prop`` (for the editor)."""
+        info = model.properties.get(prop)
+        unit, limits = (info.unit, dict(info.limits)) if info else ("", {})
+        return {"unit": unit, "limits": limits,
+                "expects": expectation(value_type(model, individual, prop), unit, limits, example)}
 
     def _inferred_values(self, model: OntologyModel, name: str, rules: list[Any]) -> list[dict[str, Any]]:
         out = []
@@ -117,7 +129,8 @@ class KnowledgeEditor:
         if value is None or (isinstance(value, str) and not value.strip()):
             raise ValueInvalid("value", f"{prop}: a value is needed")
         datatype = value_type(model, individual, prop)
-        lexical = lexical_form(prop, datatype, value)
+        now = next((v.lexical for v in model.individuals[individual].values if v.property == prop), "")
+        lexical = lexical_form(prop, datatype, value, info.unit, info.limits, now)
         current = self.knowledge.text("ontology")
         text = set_value_in_text(current, model, individual, prop, lexical, datatype)
         # the edit was made on `current`: a change saved meanwhile is a conflict, never overwritten

@@ -34,6 +34,8 @@ class PropertyInfo:
     range: str = ""  # xsd local name ("decimal") for data properties, class name for object ones
     domain: str = ""
     comment: str = ""
+    unit: str = ""  # printeps:unit annotation ("metres"), for people
+    limits: dict[str, str] = field(default_factory=dict)  # facet ("minInclusive") -> lexical, from an OWL 2 datatype restriction
 
 
 @dataclass
@@ -91,6 +93,26 @@ class OntologyModel:
         return seen
 
 
+FACETS = ("minInclusive", "maxInclusive", "minExclusive", "maxExclusive")
+
+
+def _restriction(graph: Any, node: Any) -> tuple[Any, dict[str, str]]:
+    """An OWL 2 datatype restriction (``[ owl:onDatatype xsd:decimal ; owl:withRestrictions
+    ( [ xsd:minInclusive 0 ] ) ]``): its base datatype and its facets."""
+    import rdflib
+    from rdflib.collection import Collection
+
+    base_type = next(iter(graph.objects(node, rdflib.OWL.onDatatype)), None)
+    limits: dict[str, str] = {}
+    for head in graph.objects(node, rdflib.OWL.withRestrictions):
+        for facet_node in Collection(graph, head):
+            for facet in FACETS:
+                value = next(iter(graph.objects(facet_node, rdflib.URIRef(XSD + facet))), None)
+                if value is not None:
+                    limits[facet] = str(value)
+    return base_type, limits
+
+
 def local(iri: str, base: str) -> str | None:
     """The local name of an IRI in the ontology's namespace (None outside it)."""
     return iri[len(base):] if base and iri.startswith(base) and len(iri) > len(base) else None
@@ -128,9 +150,12 @@ def read_model(text: str, base: str, turtle: bool = True) -> OntologyModel:
             if not n:
                 continue
             rng = next(iter(graph.objects(s, rdflib.RDFS.range)), None)
+            limits: dict[str, str] = {}
+            if kind == "data" and isinstance(rng, rdflib.BNode):
+                rng, limits = _restriction(graph, rng)
             rng_name = (xsd_name(str(rng)) if kind == "data" else (name(rng) or "")) if rng is not None else ""
             properties[n] = PropertyInfo(n, kind, rng_name, name(next(iter(graph.objects(s, rdflib.RDFS.domain)), "")) or "",
-                                         text_of(s, rdflib.RDFS.comment))
+                                         text_of(s, rdflib.RDFS.comment), text_of(s, rdflib.URIRef(base + "unit")), limits)
     individuals: dict[str, IndividualInfo] = {}
     for s in set(graph.subjects(a, rdflib.OWL.NamedIndividual)) | {
             s for s, o in graph.subject_objects(a) if name(o) in classes}:

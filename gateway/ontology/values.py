@@ -40,21 +40,92 @@ class ValueInvalid(ValueError):
         return {"field": self.field, "message": self.message}
 
 
-def lexical_form(prop: str, datatype: str, value: object) -> str:
-    """The canonical-enough lexical form of ``value`` for ``xsd:<datatype>``, or ValueInvalid."""
+_WHOLE = ("integer", "int", "long", "short")
+_WORDS = {**{t: "a whole number" for t in _WHOLE}, "nonNegativeInteger": "a whole number, 0 or more",
+          "positiveInteger": "a whole number, 1 or more", "decimal": "a number", "double": "a number",
+          "float": "a number", "boolean": "true or false", "string": "text"}
+
+
+def _limits_words(limits: dict[str, str]) -> str:
+    low, high = limits.get("minInclusive"), limits.get("maxInclusive")
+    if low is not None and high is not None:
+        return f" from {low} to {high}"
+    parts = []
+    if low is not None:
+        parts.append(f"at least {low}")
+    if limits.get("minExclusive") is not None:
+        parts.append(f"more than {limits['minExclusive']}")
+    if high is not None:
+        parts.append(f"at most {high}")
+    if limits.get("maxExclusive") is not None:
+        parts.append(f"less than {limits['maxExclusive']}")
+    return (", " + " and ".join(parts)) if parts else ""
+
+
+def _default_example(datatype: str, limits: dict[str, str]) -> str:
+    """A plain example within the limits: 1.2 (3 for whole numbers), else a limit itself."""
+    plain = "3" if datatype in _WHOLE else "1.2"
+    n = Decimal(plain)
+    fits = not ((("minInclusive" in limits) and n < Decimal(limits["minInclusive"]))
+                or (("maxInclusive" in limits) and n > Decimal(limits["maxInclusive"]))
+                or (("minExclusive" in limits) and n <= Decimal(limits["minExclusive"]))
+                or (("maxExclusive" in limits) and n >= Decimal(limits["maxExclusive"])))
+    return plain if fits else limits.get("minInclusive") or limits.get("maxInclusive") or plain
+
+
+def expectation(datatype: str, unit: str = "", limits: dict[str, str] | None = None, example: str = "") -> str:
+    """What a value must be, in an owner's words: "a number in metres from 0 to 5, e.g. 1.2"."""
+    words = _WORDS.get(datatype, f"a value of type {datatype}")
+    if unit:
+        words += f" in {unit}"
+    words += _limits_words(limits or {})
+    if not example and datatype in _NUMBER:
+        example = _default_example(datatype, limits or {})
+    if example and datatype != "boolean":
+        words += f", e.g. {example}"
+    return words
+
+
+def check_limits(prop: str, lexical: str, datatype: str, unit: str, limits: dict[str, str], example: str = "") -> None:
+    """ValueInvalid when a number lies outside the property's declared limits, saying which and why."""
+    if datatype not in _NUMBER or not limits:
+        return
+    try:
+        number = Decimal(lexical)
+    except InvalidOperation:
+        return  # INF / NaN: the type check said what it could
+    unit_words = f" {unit}" if unit else ""
+    tests = (("minInclusive", lambda b: number < b, "below the least allowed,"),
+             ("minExclusive", lambda b: number <= b, "not more than"),
+             ("maxInclusive", lambda b: number > b, "above the most allowed,"),
+             ("maxExclusive", lambda b: number >= b, "not less than"))
+    for facet, broken, words in tests:
+        bound = limits.get(facet)
+        if bound is not None and broken(Decimal(bound)):
+            raise ValueInvalid("value", f"{prop}: {lexical}{unit_words} is {words} {bound}{unit_words}; "
+                                        f"give {expectation(datatype, unit, limits, example)}")
+
+
+def lexical_form(prop: str, datatype: str, value: object, unit: str = "", limits: dict[str, str] | None = None,
+                 example: str = "") -> str:
+    """The canonical-enough lexical form of ``value`` for ``xsd:<datatype>``, or ValueInvalid saying,
+    in words, what is expected (``unit`` and ``limits`` from the ontology; ``example``: e.g. the
+    value it has now)."""
     raw = ("true" if value else "false") if isinstance(value, bool) else str(value).strip()
+    expects = expectation(datatype, unit, limits, example)
     if datatype in _NUMBER:
         if not _NUMBER[datatype].fullmatch(raw):
-            raise ValueInvalid("value", f"{prop}: {raw!r} is not an xsd:{datatype}")
+            raise ValueInvalid("value", f"{prop}: {raw!r} is not {expects}")
         if datatype == "decimal":
             try:
                 Decimal(raw)
             except InvalidOperation:
-                raise ValueInvalid("value", f"{prop}: {raw!r} is not an xsd:{datatype}") from None
+                raise ValueInvalid("value", f"{prop}: {raw!r} is not {expects}") from None
+        check_limits(prop, raw, datatype, unit, limits or {}, example)
         return raw
     if datatype == "boolean":
         if raw not in _BOOLEAN:
-            raise ValueInvalid("value", f"{prop}: {raw!r} is not an xsd:boolean (true or false)")
+            raise ValueInvalid("value", f"{prop}: {raw!r} is not {expects}")
         return "true" if raw in ("true", "1") else "false"
     if len(raw) > 10_000:
         raise ValueInvalid("value", f"{prop}: a value may have at most 10000 characters")

@@ -55,10 +55,13 @@ def test_individuals_have_typed_values_asserted_and_inferred(client):
     body = client.get("/api/knowledge/individuals").json()
     distance = _value(body, "pepper1", "robotToHumanDistance")
     assert distance == {"property": "robotToHumanDistance", "lexical": "1.0", "value": 1.0, "datatype": "decimal",
-                        "inferred": False}
+                        "inferred": False, "unit": "metres", "limits": {"minInclusive": "0", "maxInclusive": "5"},
+                        "expects": "a number in metres from 0 to 5, e.g. 1.0"}
     poured = _value(body, "cup1", "pourQuantity")
     assert poured["inferred"] is True and poured["value"] == 140.0 and poured["rules"] == [7]
     ranges = {p["name"]: p["range"] for p in body["properties"]}
+    table_time = next(p for p in body["properties"] if p["name"] == "tableEmptyTime")
+    assert (table_time["unit"], table_time["limits"]) == ("seconds", {"minInclusive": "0", "maxInclusive": "110"})
     assert ranges["emptyCupReactionTime"] == "decimal" and ranges["needsChildSeat"] == "boolean"
     assert client.get("/api/knowledge/individuals/nobody").status_code == 404
 
@@ -86,7 +89,10 @@ def test_one_value_is_saved_as_a_version_and_is_live_for_workflows(client, gatew
 
 
 @pytest.mark.parametrize("prop, value, field, says", [
-    ("robotToHumanDistance", "abc", "value", "robotToHumanDistance: 'abc' is not an xsd:decimal"),
+    ("robotToHumanDistance", "abc", "value", "robotToHumanDistance: 'abc' is not a number in metres from 0 to 5, e.g. 1.0"),
+    ("robotToHumanDistance", "-0.5", "value", "robotToHumanDistance: -0.5 metres is below the least allowed, 0 metres; "
+                                              "give a number in metres from 0 to 5, e.g. 1.0"),
+    ("robotToHumanDistance", "7", "value", "7 metres is above the most allowed, 5 metres"),
     ("robotToHumanDistance", "", "value", "robotToHumanDistance: a value is needed"),
     ("robotPosition", "kitchen1", "property", "robotPosition is an object property"),
     ("noSuchThing", "1", "property", "'noSuchThing' is not a property of the ontology"),

@@ -195,7 +195,7 @@ def change_3(owner: Owner, setup: Setup) -> None:
     open_workflow(owner, "prepare_drinks")
     owner.click(owner.page.get_by_role("button", name="Add new steps at the end of the else arm of any_order"),
                 "the else arm of any_order")
-    insert(owner, "Insert a jaco2_motion step (robot)")
+    insert(owner, "Insert: Jaco2: gesture / motion")  # the workflow's jaco2_motion module
     field_(owner, "with.name", "tea ceremony performance")
     field_(owner, "id", "idle_performance")
     save_workflow(owner, "Table 2 #3: perform while idle")

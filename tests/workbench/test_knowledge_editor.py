@@ -115,11 +115,11 @@ def test_table2_value_changes_in_the_browser_are_live_for_the_workflows(page: Pa
     page.goto("/workbench/knowledge/pepper1")
     cell = page.get_by_test_id("value-pepper1.robotToHumanDistance")
     cell.fill("abc")
-    expect(page.locator("#err-pepper1-robotToHumanDistance")).to_have_text("robotToHumanDistance: 'abc' is not an xsd:decimal")
+    expect(page.locator("#err-pepper1-robotToHumanDistance")).to_have_text("robotToHumanDistance: 'abc' is not a number in metres from 0 to 5, e.g. 1.5")
     expect(cell).to_have_attribute("aria-invalid", "true")
     expect(page.get_by_test_id("save-pepper1.robotToHumanDistance")).to_be_disabled()
     cell.press("Enter")
-    expect(page.get_by_test_id("values-message")).to_contain_text("Not saved: robotToHumanDistance: 'abc' is not an xsd:decimal")
+    expect(page.get_by_test_id("values-message")).to_contain_text("Not saved: robotToHumanDistance: 'abc' is not a number in metres from 0 to 5, e.g. 1.5")
     expect(cell).to_have_value("abc")  # the owner's text is kept
     page.screenshot(path=str(screenshots / "knowledge-value-error.png"))
     assert _value(gateway, "pepper1.robotToHumanDistance") == 1.5
@@ -287,7 +287,7 @@ def test_a_value_the_individual_lacks_is_added(page: Page, gateway):
     page.goto("/workbench/knowledge/hsr1")
     page.get_by_test_id("add-property").select_option("robotToHumanDistance")
     page.get_by_test_id("add-value").fill("x")
-    expect(page.locator("#add-value-error")).to_have_text("robotToHumanDistance: 'x' is not an xsd:decimal")
+    expect(page.locator("#add-value-error")).to_have_text("robotToHumanDistance: 'x' is not a number in metres from 0 to 5, e.g. 1.2")
     page.get_by_test_id("add-value").fill("1.2")
     page.get_by_test_id("add-value-button").click()
     expect(page.locator(".flash")).to_contain_text("✓ hsr1.robotToHumanDistance = 1.2 is live")

@@ -101,6 +101,7 @@ def test_dsl_preview_and_unmatched_sentence(author_page, ruleset, screenshots):
     open_ruleset(page, ruleset)
     page.get_by_text("Show the DRL it becomes").click()
     preview = page.get_by_test_id("preview")
+    preview.evaluate("el => el.scrollIntoView({block: 'start'})")  # below the rule list: the editor draws what is in view
     expect(preview).to_contain_text("Customer(category == null")
     # Editing a sentence updates the DRL beside it, scrolled to the same place.
     replace_text(page, OLD_GREETING, "Hello, you two!")

@@ -138,7 +138,9 @@ def test_table2_5_a_new_wait_module_and_its_step(author_page: Page, gateway):
     step_button(page, "confirm_order").click()
     page.get_by_label("Where new steps go").select_option("before")
     page.get_by_role("button", name="Insert: Wait").click()  # no wait module yet: the palette adds one
-    expect(page.get_by_role("button", name="Insert a pause step (wait)")).to_be_visible()
+    # the new module and its palette entry are one row now, named plainly
+    expect(page.locator(".wf-entry[data-module=pause]")).to_have_accessible_name("Insert: Wait")
+    expect(page.locator(".wf-entry[data-entry=wait]")).to_have_count(0)
     page.get_by_test_id("wf-form").locator("[data-field=id]").fill("let_them_finish")
     page.get_by_role("button", name="Edit module pause").click()
     seconds = page.get_by_test_id("wf-form").locator("[data-field='params.seconds']")
@@ -160,7 +162,7 @@ def test_table2_3_an_else_arm_with_a_performance(author_page: Page, gateway):
     open_workflow(page, name)
     page.get_by_role("button", name="Add new steps at the end of the else arm of any_order").click()
     expect(page.get_by_test_id("wf-insertion")).to_have_text("Inserting at the end of the else arm of any_order.")
-    page.get_by_role("button", name="Insert a jaco2_motion step (robot)").click()
+    page.get_by_role("button", name="Insert: Jaco2: gesture / motion").click()  # the workflow's jaco2_motion module
     form = page.get_by_test_id("wf-form")
     form.locator("[data-field='with.name']").fill("tea ceremony performance")
     form.locator("[data-field=id]").fill("idle_performance")
@@ -227,7 +229,7 @@ def test_a_new_process_in_a_service(author_page: Page, gateway):
     new_process.press("Enter")
     expect(page.get_by_test_id("wf-problems")).to_contain_text("processes.wave_goodbye.steps")  # empty until a step
     expect(page.get_by_test_id("wf-insertion")).to_have_text("Inserting at the end of the process wave_goodbye.")
-    page.get_by_role("button", name="Insert a gesture step (robot)").click()
+    page.get_by_role("button", name="Insert: Pepper: gesture / motion").click()  # the workflow's gesture module
     page.get_by_test_id("wf-form").locator("[data-field='with.name']").fill("wave")
     save(page, "wave goodbye after seeing them off", 2)
     assert step_ids(run(gateway, name))[-1] == "gesture"

@@ -9,13 +9,10 @@ import { h, fill, when } from "./dom.js";
 import { api } from "./api.js";
 import { actionList, describeAction, firedList } from "./actions.js";
 import { whyCard } from "./why-view.js";
+import { ORIGIN_WORDS } from "./owner-words.js";
 
 const REFRESH_MS = 10_000;
 
-const ORIGIN_WORDS = {
-  rest: "asked over REST", kie: "asked by a KIE client", stream: "detected in the sensor stream",
-  ros: "asked by a ROS workflow", workflow: "a workflow step", cli: "the command line",
-};
 
 const STATUS_WORDS = { ok: "done", failed: "failed", timeout: "timed out", no_service: "robot not reachable", unsupported: "not supported here" };
 const FACTS_SHOWN = 50;
@@ -38,7 +35,7 @@ export async function showDecisions(main, ctx, name) {
     oneEl,
     h("div", { class: "title-row" }, h(name ? "h2" : "h1", {}, "Recent decisions"), limitEl,
       h("button", { class: "secondary", onclick: load }, "Refresh")),
-    h("p", { class: "hint" }, "Each time the rules decided something (a request, a sensor event, a workflow step), on any gateway process: which rules fired and what the robot was told to do. Newest first."),
+    h("p", { class: "hint" }, "Each time the rules decided something (a request, a sensor event, a workflow step): which rules fired and what the robot was told to do. Newest first."),
     bodyEl));
   await Promise.all([name ? showOne(oneEl, ctx, name) : null, load()]);
   if (name) oneEl.querySelector("h1")?.focus();
@@ -65,7 +62,6 @@ async function showOne(el, ctx, id) {
     ["Rule set", d.ruleset ? h("a", { href: ctx.href("rules", d.ruleset) }, `${d.ruleset}${d.version ? ` version ${d.version}` : ""}`) : "—"],
     ["What happened", `${ORIGIN_WORDS[d.origin] || d.origin || "—"}${d.correlation_id ? ` (${d.correlation_id})` : ""}`],
     context.query ? ["Detected by", `${context.query}${context.window ? `, window ${context.window.start}–${context.window.end} ms` : ""}`] : null,
-    d.process ? ["Gateway process", d.process] : null,
   ].filter(Boolean);
   fill(el, h("section", { class: "card decision-card", "aria-labelledby": "decision-title" },
     h("div", { class: "title-row" }, h("h1", { id: "decision-title", tabindex: "-1" }, "Decision ", h("code", {}, d.decision_id || id)),

@@ -9,26 +9,12 @@ import { h, fill, when, debounce } from "./dom.js";
 import { api } from "./api.js";
 import { textDiff } from "./editor.js";
 import "./knowledge-view.css";
+import { NUMBER, kindWords, typeProblem } from "./value-words.js";
 
 const CHECK_AS_YOU_TYPE_MS = 700; // Pellet checks a rule this long after the last keystroke
 const SECTIONS = [["values", "Values"], ["rules", "SWRL rules"], ["history", "History"]];
 
-const NUMBER = {
-  decimal: /^[+-]?(\d+(\.\d*)?|\.\d+)$/,
-  integer: /^[+-]?\d+$/, int: /^[+-]?\d+$/, long: /^[+-]?\d+$/, short: /^[+-]?\d+$/,
-  nonNegativeInteger: /^\+?\d+$/, positiveInteger: /^\+?0*[1-9]\d*$/,
-  double: /^[+-]?((\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?|INF|NaN)$/,
-  float: /^[+-]?((\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?|INF|NaN)$/,
-};
-
-/** What is wrong with `raw` as an xsd:<type> value of `prop` ("" when it fits); the server says the same. */
-export function typeProblem(prop, type, raw) {
-  const value = raw.trim();
-  if (!value) return `${prop}: a value is needed`;
-  if (NUMBER[type] && !NUMBER[type].test(value)) return `${prop}: '${value}' is not an xsd:${type}`;
-  if (type === "boolean" && !["true", "false", "1", "0"].includes(value)) return `${prop}: '${value}' is not an xsd:boolean (true or false)`;
-  return "";
-}
+export { typeProblem } from "./value-words.js";
 
 export async function showKnowledge(main, ctx, name, params) {
   const [section, item] = splitName(name);
@@ -105,7 +91,7 @@ async function showValues(main, ctx, individual, cls) {
     h("p", { class: "hint" }, "Each value is checked against its type as you type. Save makes it live at once (the workflows read it on their next step); History keeps every version."),
     messageEl,
     rows.length ? h("table", { class: "values", "data-testid": "values" },
-      h("thead", {}, h("tr", {}, ["Individual", "Property", "Value", "Type", ""].map((t) => h("th", { scope: "col" }, t)))),
+      h("thead", {}, h("tr", {}, ["Individual", "Property", "Value", "What it is", ""].map((t) => h("th", { scope: "col" }, t)))),
       h("tbody", {}, rows)) : h("p", { class: "muted" }, "No data values here."),
     individual ? individualCard(ctx, data.individuals.find((i) => i.name === individual)) : null,
     individual && ctx.isAuthor() ? addValueCard(ctx, data, tree.classes, data.individuals.find((i) => i.name === individual), state) : null,
@@ -132,14 +118,14 @@ function valueRow(ctx, ind, v, state, messageEl) {
     h("div", { class: "meta" }, ind.types.join(", ")));
   if (v.inferred) {
     fill(row, nameCell, h("td", {}, v.property), h("td", { class: "inferred-value" }, String(v.lexical)),
-      h("td", {}, `xsd:${v.datatype}`),
+      h("td", { title: `xsd:${v.datatype}` }, kindWords(v.datatype, v)),
       h("td", {}, h("span", { class: "badge" }, v.rules && v.rules.length
         ? ["inferred by ", v.rules.map((n, i) => [i ? ", " : "", h("a", { href: ctx.href("knowledge", `rules/${n}`) }, `rule ${n}`)])]
         : "inferred")));
     return row;
   }
   const errorId = `err-${id.replace(/\W/g, "-")}`;
-  const input = h("input", { class: "value-input", value: v.lexical, "aria-label": `${id} (xsd:${v.datatype})`,
+  const input = h("input", { class: "value-input", value: v.lexical, "aria-label": `${id} (${kindWords(v.datatype, v)})`,
     inputmode: NUMBER[v.datatype] ? "decimal" : null, "aria-describedby": errorId, "data-testid": `value-${id}` });
   const comment = h("input", { class: "comment-input", placeholder: "why?", "aria-label": `Comment for ${id}` });
   const save = h("button", { class: "primary", disabled: true, "data-testid": `save-${id}` }, "Save");
@@ -147,7 +133,7 @@ function valueRow(ctx, ind, v, state, messageEl) {
   const readOnly = !ctx.isAuthor();
   let saved = v.lexical;
   const validate = () => {
-    const text = typeProblem(v.property, v.datatype, input.value);
+    const text = typeProblem(v.property, v.datatype, input.value, v);
     fill(problem, text);
     input.setAttribute("aria-invalid", text ? "true" : "false");
     row.classList.toggle("dirty", input.value !== saved);
@@ -189,8 +175,8 @@ function valueRow(ctx, ind, v, state, messageEl) {
   input.addEventListener("keydown", (e) => { if (e.key === "Enter") submit(); if (e.key === "Escape") { input.value = saved; validate(); } });
   save.addEventListener("click", submit);
   fill(row, nameCell, h("td", {}, v.property),
-    h("td", {}, input, problem),
-    h("td", {}, `xsd:${v.datatype}`),
+    h("td", {}, input, v.unit ? h("span", { class: "unit", "data-testid": `unit-${id}` }, ` ${v.unit}`) : null, problem),
+    h("td", { title: `xsd:${v.datatype}`, "data-testid": `kind-${id}` }, kindWords(v.datatype, v)),
     h("td", { class: "save-cell" }, readOnly ? h("span", { class: "muted" }, "authors can edit") : [comment, " ", save]));
   return row;
 }
@@ -220,13 +206,14 @@ function addValueCard(ctx, data, tree, ind, state) {
   const props = data.properties.filter((p) => p.kind === "data" && !has.has(p.name) && (!p.domain || fits.has(p.domain)));
   if (!props.length) return null;
   const prop = h("select", { "aria-label": "New property", "data-testid": "add-property" },
-    props.map((p) => h("option", { value: p.name }, `${p.name} (xsd:${p.range || "string"})`)));
+    props.map((p) => h("option", { value: p.name }, `${p.name} (${kindWords(p.range || "string", p)})`)));
   const value = h("input", { class: "value-input", "aria-label": "New value", "data-testid": "add-value", "aria-describedby": "add-value-error" });
   const comment = h("input", { class: "comment-input", placeholder: "why?", "aria-label": "Comment for the new value" });
   const problem = h("div", { id: "add-value-error", class: "field-error", "aria-live": "polite" });
-  const range = () => (props.find((p) => p.name === prop.value) || {}).range || "string";
+  const chosen = () => props.find((p) => p.name === prop.value) || {};
+  const range = () => chosen().range || "string";
   const validate = () => {
-    const text = value.value ? typeProblem(prop.value, range(), value.value) : "";
+    const text = value.value ? typeProblem(prop.value, range(), value.value, chosen()) : "";
     fill(problem, text);
     value.setAttribute("aria-invalid", text ? "true" : "false");
     return text || (value.value.trim() ? "" : `${prop.value}: a value is needed`);
@@ -274,12 +261,13 @@ function inferPanel(ctx, data, individual) {
   const prop = h("select", { "aria-label": "Property" });
   const value = h("input", { "aria-label": "Value", placeholder: "value", size: 8 });
   const fillProps = () => fill(prop, data.properties.filter((p) => p.kind === "data" && (!p.domain || p.domain === cls.value))
-    .map((p) => h("option", { value: p.name }, `${p.name} (xsd:${p.range || "string"})`)));
+    .map((p) => h("option", { value: p.name }, `${p.name} (${kindWords(p.range || "string", p)})`)));
   cls.addEventListener("change", fillProps);
   fillProps();
   const tryIt = async () => {
-    const range = (data.properties.find((p) => p.name === prop.value) || {}).range || "string";
-    const problem = value.value.trim() ? typeProblem(prop.value, range, value.value) : "";
+    const spec = data.properties.find((p) => p.name === prop.value) || {};
+    const range = spec.range || "string";
+    const problem = value.value.trim() ? typeProblem(prop.value, range, value.value, spec) : "";
     if (problem) {
       fill(out, h("div", { class: "message error", role: "alert" }, problem));
       return;

@@ -5,6 +5,7 @@
 // (events keep arriving and are shown on resume); leaving the view closes the connection.
 
 import "./live-view.css";
+import { ORIGIN_WORDS, robotStatusNote } from "./owner-words.js";
 import { h, fill } from "./dom.js";
 import { api, getToken } from "./api.js";
 import { describeAction, ruleName } from "./actions.js";
@@ -17,10 +18,6 @@ const KINDS = ["reading", "detection", "decision", "action"];
 const COLORS = ["#1f6feb", "#cf222e", "#1a7f37", "#9a6700", "#8250df", "#bf3989", "#0a7ea4", "#57606a"];
 const DASHES = ["", "6 3", "2 3", "8 3 2 3"];
 const THRESHOLD_REFRESH_MS = 30_000; // the entrance distance is knowledge the owner may change live
-const ORIGIN_WORDS = {
-  rest: "asked over REST", kie: "asked by a KIE client", stream: "detected in the sensor stream",
-  ros: "asked by a ROS workflow", workflow: "a workflow step", api: "asked over REST",
-};
 const STATUS_WORDS = { ok: "done", failed: "failed", timeout: "timed out", no_service: "robot not reachable", unsupported: "not supported here" };
 
 // Plot geometry (SVG user units; the SVG scales to the card's width).
@@ -71,7 +68,7 @@ export async function showLive(main, ctx) {
   const pauseBtn = h("button", { class: "secondary", type: "button", "aria-pressed": "false", "data-testid": "pause" }, "Pause");
   const reconnectBtn = h("button", { class: "secondary", type: "button", hidden: true }, "Reconnect");
   const pausedEl = h("span", { class: "muted", "aria-live": "polite", "data-testid": "paused-note" });
-  const sourceEl = h("p", { class: "hint" }, "Everything this gateway process sees, as it happens: people near the entrance, what the sensors' queries detected, the rules that fired and what the robots did.");
+  const sourceEl = h("p", { class: "hint" }, "Everything the teahouse's gateway sees, as it happens: people near the entrance, what the sensors' queries detected, the rules that fired and what the robots did.");
   const plotHost = h("div", { class: "live-plot", "data-testid": "live-plot" });
   const legendEl = h("ul", { class: "live-legend", "data-testid": "live-legend", "aria-label": "People and their latest distance" });
   const detectionsEl = h("ol", { class: "live-list", "data-testid": "live-detections", "aria-label": "Detections, newest first" });
@@ -81,6 +78,7 @@ export async function showLive(main, ctx) {
   empty(detectionsEl, "Nothing detected yet.");
   empty(decisionsEl, "No rules fired yet.");
   empty(actionsEl, "No robot actions yet.");
+  const robotStatusEl = h("div", { class: "robot-status-host" });
 
   const card = (title, id, ...body) => h("section", { class: "card live-card", "aria-labelledby": id }, h("h2", { id }, title), ...body);
   fill(main, h("section", { class: "live" },
@@ -91,7 +89,8 @@ export async function showLive(main, ctx) {
       card("Detected", "live-detections-title", detectionsEl)),
     h("div", { class: "live-bottom" },
       card("Rules fired", "live-decisions-title", decisionsEl),
-      card("What the robots did", "live-actions-title", actionsEl))));
+      card("What the robots did", "live-actions-title", robotStatusEl, actionsEl))));
+  robotStatusNote().then((note) => { if (note) robotStatusEl.replaceChildren(note); });
   draw();
 
   // ---- the connection ------------------------------------------------------------------------
@@ -118,8 +117,7 @@ export async function showLive(main, ctx) {
       const hello = JSON.parse(msg.data);
       state.process = hello.process;
       setStatus("open", "● Live");
-      fill(sourceEl, "Everything gateway process ", h("b", {}, hello.process || "?"),
-        " sees, as it happens: people near the entrance, what the sensors' queries detected, the rules that fired and what the robots did.");
+      sourceEl.title = hello.process ? `gateway process ${hello.process}` : ""; // for whoever runs it, not in the text
     });
     source.addEventListener("dropped", (msg) => {
       state.skipped += JSON.parse(msg.data).dropped || 0;
@@ -281,7 +279,7 @@ export async function showLive(main, ctx) {
       s("text", { x: 14, y: (M.top + H - M.bottom) / 2, class: "label", "text-anchor": "middle",
         transform: `rotate(-90 14 ${(M.top + H - M.bottom) / 2})` }, "distance to the entrance (m)"),
       right === null ? s("text", { x: (M.left + W) / 2, y: H / 2, class: "placeholder", "text-anchor": "middle" },
-        "Waiting for entrance readings… (start printeps demo, or post to /api/streams)") : null);
+        "Waiting for readings from the entrance sensor…") : null);
     fill(plotHost, svg, state.latestAt
       ? h("p", { class: "hint live-latest", "data-testid": "latest-reading" }, `Latest entrance reading received at ${clock(state.latestAt)}.`)
       : null);

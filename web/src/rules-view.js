@@ -9,6 +9,10 @@ import { localProblems } from "./checks.js";
 import { actionList, firedList } from "./actions.js";
 import { assistFor, declaredTypes, dslEntries } from "./dsl-assist.js";
 import { mountTests } from "./tests-view.js";
+import { offerTestUpdate } from "./tests-update.js";
+import { mountRuleList } from "./rule-list.js";
+import { findHighlight, setFind } from "./find-highlight.js";
+import { reachBar } from "./reach-bar.js";
 import { mountTableEditor } from "./table-editor.js";
 import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
 import { JobProgress, JobsList } from "./jobs-view.js";
@@ -113,6 +117,7 @@ class RulesView {
     const draft = this.loadDraft();
     this.active = orderedFiles(Object.keys(draft ? draft.files : this.original))[0];
     this.createEditors(draft ? draft.files : this.original);
+    this.ruleList.load();
     if (draft) this.announceDraft(draft);
     this.select(this.active);
     this.updateDirty();
@@ -127,6 +132,7 @@ class RulesView {
     this.storeDraft();
     this.seq++;
     this.testsView?.dispose();
+    this.ruleList?.dispose();
     for (const table of Object.values(this.tables)) table.dispose();
   }
 
@@ -167,12 +173,18 @@ class RulesView {
         "You are signed in with a caller token: you can read and try the rules, but not change or deploy them."),
       h("div", { class: "columns" },
         h("div", { class: "left" },
+          this.buildRuleList(),
           h("div", { class: "toolbar" }, this.tabsEl, this.buildAddFile(),
             h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
             this.statusEl),
           h("div", { class: "editor-area" }, this.editorsEl, this.previewEl),
           h("h2", { class: "small" }, "Problems"), this.problemsEl),
-        h("div", { class: "right" }, this.buildDeploy(), this.buildJobs(), this.buildTry(), this.buildTests()))));
+        h("div", { class: "right" }, this.buildDeploy(), this.buildJobs(), this.buildTry(), this.buildTests())),
+      reachBar([
+        { label: "▶ Try it", testid: "reach-try", target: () => main.querySelector(".card.try") },
+        this.editable ? { label: "Deploy…", testid: "reach-deploy", target: () => main.querySelector(".card.deploy"),
+          then: () => this.commentEl.focus({ preventScroll: true }) } : null,
+      ].filter(Boolean))));
     this.renderLive();
   }
 
@@ -190,7 +202,7 @@ class RulesView {
       else this.views[fileName] = createEditor(host, {
         doc: files[fileName], fileName, readOnly: !this.editable,
         label: `Editor for ${fileName}`, onChange: () => this.changed(), onCursor: (line) => this.followCursor(fileName, line),
-        extensions: assistFor(fileName, () => this.assistSource()),
+        extensions: [assistFor(fileName, () => this.assistSource()), findHighlight()],
       });
       const tab = h("button", { class: "tab", role: "tab", "data-file": fileName, onclick: () => this.select(fileName) },
         h("span", { class: "tab-name" }, fileName), h("span", { class: "tab-kind" }, kindOf(fileName).label),
@@ -240,6 +252,8 @@ class RulesView {
   changed() {
     this.assistCache = null;
     this.replay?.reset(); // a replay says what the text it replayed does, not this one
+    this.testsView?.markStale();
+    this.ruleList?.refresh();
     this.updateDirty();
     this.saveDraft();
     this.statusEl.className = "check-status pending";
@@ -575,6 +589,29 @@ class RulesView {
     return this.jobsList.el;
   }
 
+  // ---- The rules as a list ----------------------------------------------------------------------
+
+  buildRuleList() {
+    const host = h("div", { class: "rule-list-host" });
+    this.ruleList = mountRuleList(host, {
+      name: this.name,
+      files: () => this.files(),
+      goTo: (rule) => this.goTo(rule.row ? { file: rule.file, line: rule.row, column: 1, sheet: rule.sheet } : { file: rule.file, line: rule.line, column: 1 }),
+      onSearch: (text) => this.searchEditors(text),
+    });
+    return host;
+  }
+
+  /** Mark the search words in every editor and bring the first rule that matches into view. */
+  searchEditors(text) {
+    for (const view of Object.values(this.views)) setFind(view, text);
+    if (!text || !this.ruleList) return;
+    const first = this.ruleList.visible().find((r) => r.line && this.views[r.file]);
+    if (!first) return;
+    if (first.file !== this.active) this.select(first.file);
+    scrollToLine(this.views[first.file], first.line, "start");
+  }
+
   // ---- Tests ------------------------------------------------------------------------------------
 
   buildTests() {
@@ -693,16 +730,31 @@ class RulesView {
       `Lost track of the build (${err.message}). It may still finish: see Build jobs, or reload the page in a moment.`));
   }
 
-  /** The deploy was refused because test scenarios are red: say which, offer to deploy anyway. */
+  /** The deploy was refused because test scenarios are red: say which, offer to update the tests
+   * when they only expect words the draft changed, or to deploy anyway. */
   redScenarios(body) {
     const red = ((body.report && body.report.results) || []).filter((r) => r.status !== "passed");
+    const updateHost = h("div", { class: "tests-update-host" });
     fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "red-scenarios" },
       h("p", {}, `Not deployed: ${red.length} test scenario${red.length === 1 ? " fails" : "s fail"} with these rules. Nothing was changed.`),
-      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status))),
+      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name)))),
+      updateHost,
+      h("details", { class: "red-details" }, h("summary", {}, "What each test expected (details)"),
+        h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status)))),
       h("p", {}, "Fix the rules (or the scenario, if the change is wanted), or deploy anyway."),
       h("div", { class: "buttons" },
-        h("button", { class: "secondary", onclick: () => this.testsView.run() }, "Show the tests"),
+        h("button", { class: "secondary", "data-testid": "show-tests", onclick: () => this.testsView.run({ reveal: true }) }, "Show the tests"),
         h("button", { class: "danger", "data-testid": "deploy-anyway", onclick: () => this.deploy(true) }, "Deploy anyway"))));
+    offerTestUpdate(updateHost, { name: this.name, files: this.files(), apply: (files, { allFixed }) => this.updateTests(files, allFixed) });
+  }
+
+  /** Put the rewritten test files into their editors; deploy again when nothing else was red. */
+  updateTests(files, allFixed) {
+    for (const [file, text] of Object.entries(files)) {
+      if (this.views[file]) setText(this.views[file], text);
+    }
+    if (allFixed) this.deploy();
+    else this.testsView.run({ reveal: true });
   }
 
   conflict(current) {

@@ -1,6 +1,7 @@
 // The Tests view: runs the rule set's test scenarios (tests/*.yaml) on the text being edited and
 // shows each one green or red, with what was expected against what actually happened, and the rules
-// no scenario fires. Self-contained: mountTests(host, options) -> {run, dispose}.
+// no scenario fires. Failures come first; after an edit the results are marked stale.
+// Self-contained: mountTests(host, options) -> {run, markStale, dispose}.
 
 import { h, fill } from "./dom.js";
 import { api, rulesetPath } from "./api.js";
@@ -21,15 +22,20 @@ export function mountTests(host, { name, files, goTo = () => {}, onErrors = () =
     h("p", { class: "hint" }, "The scenarios in tests/*.yaml say what must keep happening. They run on the text in the editor, and again before every deploy."),
     button, summaryEl, listEl, coverageEl));
   let seq = 0;
+  let shown = false;
 
-  async function run() {
+  /** Run the scenarios; reveal: scroll the results into view once they are in. */
+  async function run({ reveal = false } = {}) {
     const mine = ++seq;
     button.disabled = true;
     summaryEl.className = "tests-summary pending";
     summaryEl.textContent = "Running the tests…";
     try {
       const report = await api("POST", rulesetPath(name, "/test"), { files: await files() });
-      if (mine === seq) render(report);
+      if (mine === seq) {
+        render(report);
+        if (reveal) host.scrollIntoView({ block: "start", behavior: "smooth" });
+      }
       return report;
     } catch (err) {
       if (mine !== seq) return null;
@@ -47,6 +53,8 @@ export function mountTests(host, { name, files, goTo = () => {}, onErrors = () =
   }
 
   function render(report) {
+    shown = true;
+    host.classList.remove("stale");
     const red = report.failed + report.errors;
     if (!report.scenarios) {
       summaryEl.className = "tests-summary muted";
@@ -58,7 +66,8 @@ export function mountTests(host, { name, files, goTo = () => {}, onErrors = () =
       summaryEl.className = "tests-summary ok";
       summaryEl.textContent = `✓ All ${report.scenarios} scenarios pass`;
     }
-    fill(listEl, report.results.map((result) => renderResult(result)));
+    const failedFirst = [...report.results].sort((a, b) => (a.status === "passed") - (b.status === "passed"));
+    fill(listEl, failedFirst.map((result) => renderResult(result)));
     const notFired = (report.coverage && report.coverage.not_fired) || [];
     fill(coverageEl, report.scenarios && notFired.length
       ? [h("b", {}, `Rules no scenario fires (${notFired.length} of ${report.coverage.rules}): `), notFired.join(", ")]
@@ -81,8 +90,17 @@ export function mountTests(host, { name, files, goTo = () => {}, onErrors = () =
           h("div", {}, h("h4", {}, "Actual"), renderActual(result.actual || {})))));
   }
 
+  /** The rules changed since the results shown: say so (they may no longer hold). */
+  function markStale() {
+    if (!shown || host.classList.contains("stale")) return;
+    host.classList.add("stale");
+    summaryEl.append(h("span", { class: "stale-note", "data-testid": "tests-stale" },
+      " — the rules changed since: run the tests again"));
+  }
+
   return {
     run,
+    markStale,
     dispose() {
       seq++;
     },

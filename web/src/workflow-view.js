@@ -6,6 +6,8 @@
 // format: the YAML tab shows what is saved and stays editable; the generated Python is shown too.
 
 import "./workflow-view.css";
+import { fieldLabel } from "./field-label.js";
+import { paletteRows } from "./palette-entries.js";
 import { h, fill, when, debounce } from "./dom.js";
 import { api, getToken } from "./api.js";
 import { createEditor, setText, showProblems } from "./editor.js";
@@ -357,13 +359,14 @@ class WorkflowEditor {
     if (this.tab === "process") this.markStepErrors();
   }
 
-  /** "Step “pause_2”, field “with.seconds”: 'abc' is not a number of seconds" */
+  /** "Step “pause_2”, field “seconds”: 'abc' is not a number of seconds" (the field as its form labels it) */
   describeProblem(problem) {
     const where = problem.client ? { stepPath: problem.stepPath, stepId: getIn(this.doc, problem.stepPath)?.id, field: problem.field }
       : this.doc ? locateProblem(this.doc, problem) : { field: problem.path };
     let text = "";
-    if (where.stepId || where.stepPath) text = `Step “${where.stepId || "?"}”${where.field ? `, field “${where.field}”` : ""}: `;
-    else if (where.module) text = `Module “${where.module}”${where.field ? `, field “${where.field}”` : ""}: `;
+    const field = fieldLabel(where.field);
+    if (where.stepId || where.stepPath) text = `Step “${where.stepId || "?"}”${field ? `, field “${field}”` : ""}: `;
+    else if (where.module) text = `Module “${where.module}”${field ? `, field “${field}”` : ""}: `;
     else if (problem.path) text = `${problem.path}: `;
     const line = problem.line ? ` (YAML line ${problem.line})` : "";
     return { where, text: `${text}${problem.message}${line}` };
@@ -732,20 +735,18 @@ class WorkflowEditor {
   }
 
   paletteGroups() {
-    const mine = Object.entries(this.doc.modules || {});
-    const groups = {};
-    for (const entry of this.palette.entries || []) (groups[entry.group] = groups[entry.group] || []).push(entry);
+    const { mine, groups } = paletteRows(this.doc, this.palette.entries, moduleFor);
     return [
       h("h3", {}, "Modules of this workflow"),
-      h("ul", { class: "wf-entries", "aria-label": "Modules of this workflow" }, mine.map(([name, module]) => h("li", {},
+      h("ul", { class: "wf-entries", "aria-label": "Modules of this workflow" }, mine.map(({ name, module, entry, label }) => h("li", {},
         h("button", {
-          class: "wf-entry", draggable: "true", "data-module": name,
-          "aria-label": `Insert a ${name} step (${kindWord(module.kind)})`,
+          class: "wf-entry", draggable: "true", "data-module": name, title: `module ${name}`,
+          "aria-label": entry ? `Insert: ${entry.label}` : `Insert a ${name} step (${kindWord(module.kind)})`,
           ondragstart: (e) => e.dataTransfer.setData("application/x-wf-palette", JSON.stringify({ module: name })),
           onclick: () => this.insertFrom({ module: name }),
-        }, h("span", { class: `wf-kind k-${module.kind}` }, kindWord(module.kind)), ` ${name}`),
+        }, h("span", { class: `wf-kind k-${module.kind}` }, kindWord(module.kind)), ` ${label}`),
         h("button", { class: "link wf-edit-module", "aria-label": `Edit module ${name}`, onclick: () => this.editModule(name) }, "edit")))),
-      h("h3", {}, "Add a new module"),
+      Object.keys(groups).length ? h("h3", {}, "Add a new module") : null,
       Object.entries(groups).map(([group, entries]) => h("div", { class: "wf-group" },
         h("h4", {}, group),
         h("ul", { class: "wf-entries", "aria-label": group }, entries.map((entry) => h("li", {},

@@ -9,6 +9,9 @@ the engine's (``Engine.deploy`` refuses a red rule set unless forced). Routes:
   ``version`` N, or of the current version: the report (green/red per scenario with expected and
   actual, coverage). 422 with located errors when the rules do not compile or a scenario file is
   malformed.
+* ``POST /api/rulesets/{name}/tests/update`` — "Update the tests too": the draft's test files with
+  the expectations its changed sentences or values broke rewritten in place (comments and layout
+  kept), and the changes; scenarios red for another reason are left alone. Stores nothing.
 * ``POST /api/decision-tables/read`` — a table file's text (CSV, or an .xlsx ``data:`` URL) as a grid.
 * ``POST /api/decision-tables/write`` — the table file with one sheet's cells replaced.
 """
@@ -25,7 +28,9 @@ from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute
 from gateway.engine import decision_table
 from gateway.engine.ruleset import is_table_file
+from gateway.engine.errors import RuleSetNotFound
 from gateway.engine.scenarios import run_scenarios
+from gateway.engine.test_update import update_tests
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name (its folder name)")]
@@ -71,6 +76,26 @@ def test_ruleset(name: RuleSetName, engine: EngineDep, who: Caller, body: TestBo
         stored = engine.version(name, body.version) if body.version is not None else engine.current(name)
         files, version, role = dict(stored.files), stored.info.version, None
     return JSON(run_scenarios(engine, files, name, version, role=role).to_dict())
+
+
+class UpdateTestsBody(BaseModel):
+    """The draft whose tests are to follow it."""
+
+    model_config = ConfigDict(extra="forbid")
+    files: dict[str, str] = Field(min_length=1, max_length=MAX_FILES)
+
+
+@router.post("/api/rulesets/{name}/tests/update")
+def update_ruleset_tests(name: RuleSetName, body: UpdateTestsBody, engine: EngineDep, _: Caller) -> JSON:
+    """``{"files": {test file: updated text}, "changes": [{"scenario", "file", "line", "old", "new",
+    "rule"}], "kept": [names of scenarios still red for another reason]}``. Only scenarios that fail
+    solely because an expected value is one the draft changed (old value gone from the rules, new
+    one in them, old one in the live version) are rewritten, at their line. Stores nothing."""
+    try:
+        base = dict(engine.current(name).files)
+    except RuleSetNotFound:
+        base = None
+    return JSON(update_tests(engine, dict(body.files), name, base))
 
 
 @router.post("/api/decision-tables/read")

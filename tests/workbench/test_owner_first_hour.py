@@ -1,0 +1,235 @@
+"""The owner's first hour (issue 31), in the real workbench on a real gateway: the rules as a list
+of what they do with a search, "Update the tests too" when a changed sentence blocks the deploy,
+and a layout whose top bar, palette, run panel, Deploy and Try stay usable at 1280×800 and at
+tablet width (820×1180)."""
+
+from __future__ import annotations
+
+import os
+
+import httpx
+from playwright.sync_api import expect
+
+from wb_helpers import AUTHOR_TOKEN, EDITOR, RECEPTION, folder_files, new_page, open_ruleset, replace_text
+
+OLD, NEW = "Welcome. Two seats?", "Welcome! A table for two?"
+TESTS = "tests/reception.yaml"
+_count = iter(range(1, 10_000))
+
+
+def deploy_forced(gateway, files: dict[str, str], stem: str) -> str:
+    """A copy of a rule set under a name of its own (forced: its scenarios may be red on purpose)."""
+    name = f"{stem}-{os.getpid()}-{next(_count)}"
+    with gateway.rest() as client:
+        r = client.put(f"/api/rulesets/{name}", json={"files": files, "comment": "copy for a test", "force": True})
+    assert r.status_code == 201, r.text
+    return name
+
+
+def said(result: dict) -> list[str]:
+    return [a["params"]["text"] for a in result["actions"] if a["module"] == "say"]
+
+
+PAIR = [{"type": "Entrance", "id": "entrance", "number_of_customers": 2},
+        {"type": "Customer", "id": "c1", "entrance": "entrance", "age": 30, "gender": "female"},
+        {"type": "Customer", "id": "c2", "entrance": "entrance", "age": 31, "gender": "female"},
+        {"type": "Robot", "id": "pepper", "position": "entrance"}]
+
+
+def test_the_rules_as_a_list_a_search_and_a_jump(author_page, gateway, screenshots):
+    page = author_page
+    page.set_viewport_size({"width": 1280, "height": 800})
+    open_ruleset(page, "reception")
+    rules = page.get_by_test_id("rule-list")
+    expect(rules.locator(".rule-item")).to_have_count(32)
+    pair = rules.locator(".rule-item[data-rule='Greet a pair']")
+    expect(pair).to_contain_text(f'Pepper says "{OLD}"')
+    expect(page.get_by_test_id("used-by")).to_contain_text("CustomerDetectionQuery")
+    expect(page.get_by_test_id("used-by")).to_contain_text("fire_business_rules")
+
+    page.get_by_test_id("rule-search").fill("Two seats")
+    expect(rules.locator(".rule-item")).to_have_count(3)
+    expect(rules).to_contain_text("Greet a pair")
+    expect(rules).not_to_contain_text("Infant")
+    expect(page.locator(f"{EDITOR} .cm-find-match").first).to_be_visible()  # the words marked in the editor
+    page.screenshot(path=str(screenshots / "workbench-rule-list.png"))
+
+    page.get_by_test_id("rule-search").fill("")
+    expect(rules.locator(".rule-item")).to_have_count(32)
+    rules.locator(".rule-item[data-rule='Greet a large group']").click()
+    line = page.locator(f"{EDITOR} .cm-activeLine")
+    expect(line).to_have_text('rule "Greet a large group"')
+    expect(line).to_be_in_viewport()
+
+    page.get_by_test_id("rule-search").fill("no such words anywhere")
+    expect(rules).to_contain_text("No rule says that.")
+
+
+def test_the_list_follows_the_edit_and_a_copy_is_fed_by_nothing(author_page, ruleset):
+    page = author_page
+    open_ruleset(page, ruleset)
+    expect(page.get_by_test_id("used-by")).to_contain_text("Nothing feeds this rule set yet")
+    replace_text(page, OLD, NEW)
+    page.get_by_test_id("rule-search").fill("table for two?")
+    expect(page.get_by_test_id("rule-list").locator(".rule-item")).to_have_count(1)
+    expect(page.get_by_test_id("rule-list")).to_contain_text("Greet a pair")
+
+
+def test_update_the_tests_too_then_deploy(author_page, gateway, screenshots):
+    page = author_page
+    files = folder_files(RECEPTION)
+    name = deploy_forced(gateway, files, "owner-update")
+    open_ruleset(page, name)
+    page.get_by_test_id("run-tests").click()
+    expect(page.get_by_test_id("tests-summary")).to_have_text("✓ All 24 scenarios pass")
+
+    replace_text(page, f'Pepper says "{OLD}"', f'Pepper says "{NEW}"')
+    expect(page.get_by_test_id("tests-stale")).to_be_visible()  # the results no longer match the text
+    page.get_by_test_id("deploy").click()
+    refused = page.get_by_test_id("red-scenarios")
+    expect(refused).to_contain_text("Not deployed: 3 test scenarios fail")
+    offer = page.get_by_test_id("tests-update")
+    expect(offer.locator("li")).to_have_count(3)
+    expect(offer).to_contain_text(f"“{OLD}” → “{NEW}”")
+    expect(page.get_by_test_id("tests-kept")).to_have_count(0)
+    refused.scroll_into_view_if_needed()
+    page.screenshot(path=str(screenshots / "workbench-update-tests.png"))
+
+    page.get_by_test_id("update-tests").click()
+    expect(page.get_by_test_id("deploy-result")).to_contain_text("Version 2 is now live")
+    assert said(gateway.fire(name, PAIR)) == [NEW]
+    with gateway.rest() as client:
+        stored = client.get(f"/api/rulesets/{name}").json()["files"][TESTS]
+    assert stored.count(f'"{NEW}"') == 3 and f'"{OLD}"' not in stored
+    assert stored.split("\n")[:9] == files[TESTS].split("\n")[:9]  # the header comments kept
+    assert "ordered: true                # Pepper comes to the entrance before she greets" in stored
+
+
+def test_a_scenario_red_for_another_reason_is_never_rewritten(author_page, gateway):
+    page = author_page
+    files = folder_files(RECEPTION)
+    text = files[TESTS]
+    teen = text.index("- name: teenage boy and girl")
+    end = text.index("- name:", teen + 5)
+    files[TESTS] = text[:teen] + text[teen:end].replace("location: table for two", "location: table for three") + text[end:]
+    name = deploy_forced(gateway, files, "owner-kept")
+    open_ruleset(page, name)
+
+    replace_text(page, f'Pepper says "{OLD}"', f'Pepper says "{NEW}"')
+    page.get_by_test_id("deploy").click()
+    expect(page.get_by_test_id("red-scenarios")).to_contain_text("Not deployed: 3 test scenarios fail")
+    expect(page.get_by_test_id("tests-update").locator("li")).to_have_count(2)
+    expect(page.get_by_test_id("tests-kept")).to_contain_text("teenage boy and girl are a pair, not a couple")
+    page.get_by_test_id("update-tests").click()
+
+    # The two pair scenarios now pass; the teenage one stays red, listed first, scrolled into view.
+    summary = page.get_by_test_id("tests-summary")
+    expect(summary).to_have_text("✗ 1 of 24 scenarios fail")
+    first = page.get_by_test_id("tests").locator("> li").first
+    expect(first).to_have_attribute("data-status", "failed")
+    expect(first).to_contain_text("teenage boy and girl")
+    expect(summary).to_be_in_viewport()
+    with gateway.rest() as client:
+        versions = client.get(f"/api/rulesets/{name}/versions").json()
+    assert [v["version"] for v in versions] == [1]  # nothing deployed
+
+
+def test_update_over_rest_needs_a_token(gateway):
+    with httpx.Client(base_url=gateway.base_url, timeout=30) as client:
+        r = client.post("/api/rulesets/reception/tests/update", json={"files": {"a.drl": ""}})
+    assert r.status_code == 401
+
+
+def boxes_intersect(a: dict, b: dict) -> bool:
+    return not (a["x"] + a["width"] <= b["x"] or b["x"] + b["width"] <= a["x"]
+                or a["y"] + a["height"] <= b["y"] or b["y"] + b["height"] <= a["y"])
+
+
+def test_layout_at_desktop_and_tablet_width(browser, gateway, screenshots):
+    for width, height in ((1280, 800), (820, 1180)):
+        page = new_page(browser, gateway, AUTHOR_TOKEN)
+        try:
+            page.set_viewport_size({"width": width, "height": height})
+            page.goto("/workbench#/workflows/greeting")
+            palette, run = page.locator(".wf-side"), page.locator(".wf-run")
+            expect(palette).to_be_visible()
+            expect(run).to_be_visible()
+            for scroll in (0, 400, 800, 5000):
+                page.evaluate(f"window.scrollTo(0, {scroll})")
+                page.wait_for_function(f"window.scrollY >= Math.min({scroll}, document.documentElement.scrollHeight - innerHeight) - 1")
+                assert not boxes_intersect(palette.bounding_box(), run.bounding_box()), (width, scroll)
+                assert page.locator("header.top").bounding_box()["y"] == 0, (width, scroll)  # the top bar stays put
+
+            open_ruleset(page, "reception")
+            page.evaluate("window.scrollTo(0, document.documentElement.scrollHeight)")
+            expect(page.locator("header.top")).to_be_in_viewport()
+            if width < 900:  # tablet: the reach bar brings Deploy and Try
+                expect(page.get_by_test_id("reach-deploy")).to_be_in_viewport()
+                page.evaluate("window.scrollTo(0, 0)")
+                page.get_by_test_id("reach-try").click()
+                expect(page.get_by_test_id("try")).to_be_in_viewport()
+                page.get_by_test_id("reach-deploy").click()
+                expect(page.get_by_test_id("deploy")).to_be_in_viewport()
+                page.screenshot(path=str(screenshots / "workbench-tablet.png"))
+            else:  # desktop: the side column stays beside the editor
+                expect(page.get_by_test_id("deploy")).to_be_in_viewport()
+            assert page.evaluate("document.documentElement.scrollWidth <= innerWidth")  # nothing scrolls sideways
+            assert page.js_errors == []
+        finally:
+            page.context.close()
+
+
+def test_a_value_shows_its_unit_and_limits_and_a_negative_distance_is_refused(author_page, gateway, screenshots):
+    page = author_page
+    page.goto("/workbench#/knowledge/kinect1")
+    value = page.get_by_test_id("value-kinect1.distanceToEntrance")
+    expect(value).to_have_value("3.3")
+    expect(page.get_by_test_id("unit-kinect1.distanceToEntrance")).to_have_text("metres")
+    expect(page.get_by_test_id("kind-kinect1.distanceToEntrance")).to_have_text("number in metres, 0 to 20")
+    error = page.locator("#err-kinect1-distanceToEntrance")
+
+    value.fill("far away")
+    expect(error).to_have_text("distanceToEntrance: 'far away' is not a number in metres from 0 to 20, e.g. 3.3")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_disabled()
+    value.fill("-1")
+    expect(error).to_have_text("distanceToEntrance: -1 metres is below the least allowed, 0 metres; "
+                               "give a number in metres from 0 to 20, e.g. 3.3")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_disabled()
+    page.screenshot(path=str(screenshots / "knowledge-value-limits.png"))
+    value.fill("2.5")
+    expect(error).to_have_text("")
+    expect(page.get_by_test_id("save-kinect1.distanceToEntrance")).to_be_enabled()
+
+    # The gateway refuses it too, with the same reason, and changes nothing.
+    with gateway.rest() as client:
+        before = client.get("/api/knowledge/ontology").json()
+        r = client.put("/api/knowledge/individuals/kinect1/values/distanceToEntrance", json={"value": "-1"})
+        assert r.status_code == 422
+        assert r.json()["errors"][0]["message"].startswith("distanceToEntrance: -1 metres is below the least allowed, 0 metres")
+        assert client.get("/api/knowledge/ontology").json() == before
+
+
+def test_owner_pages_speak_plainly(author_page, gateway):
+    page = author_page
+    # Live: no developer words, and the missing robot connection is explained.
+    page.goto("/workbench#/live")
+    expect(page.get_by_test_id("live-status")).to_have_text("● Live")
+    expect(page.get_by_test_id("robot-status")).to_contain_text("No robot is connected to this gateway")
+    text = page.locator("main").inner_text()
+    for developer_words in ("REST", "/api/", "post to", "process"):
+        assert developer_words not in text, developer_words
+
+    # Workflows: each palette entry once, with a plain name; a new step's problem names the field
+    # as the form labels it.
+    page.goto("/workbench#/workflows/greeting")
+    palette = page.get_by_test_id("wf-palette")
+    expect(palette.locator(".wf-entry", has_text="say")).to_have_count(1)
+    expect(palette.locator(".wf-entry", has_text="say")).to_have_text("robot Pepper: say")
+    expect(palette.locator(".wf-entry[data-module=fire_reception_rules]")).to_have_text("rules Fire the reception rules")
+    expect(palette.locator(".wf-entry", has_text="Pepper: move to")).to_have_count(1)
+    page.locator("[data-step=reception_rules]").first.click()
+    page.get_by_role("button", name="Insert: Pepper: say").click()
+    expect(page.get_by_test_id("wf-form").locator("[data-field='with.text']")).to_be_focused()
+    problems = page.get_by_test_id("wf-problems")
+    expect(problems).to_contain_text("field “text”: text is required")
+    expect(problems).not_to_contain_text("with.text")
