@@ -73,7 +73,6 @@ class ReplayReport:
     ruleset: str
     candidate: dict[str, Any]
     max_changes: int = DEFAULT_MAX_CHANGES
-    role: str | None = None  # whose draft: the rule policy checks it for this role
     replayed: int = 0
     changed: int = 0
     unchanged: int = 0
@@ -184,6 +183,7 @@ class ReplayParams:
     origin: str | None = None
     limit: int = DEFAULT_LIMIT
     max_changes: int = DEFAULT_MAX_CHANGES
+    role: str | None = None  # whose draft: the rule policy checks it for this role
 
 
 def run(engine: Any, decisions: Any, ruleset: str, params: ReplayParams,

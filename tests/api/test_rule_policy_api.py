@@ -116,6 +116,18 @@ def test_a_probe_is_refused_for_an_author_everywhere_and_nothing_runs(api, tmp_p
                       headers=CALLER)
     assert tested.status_code == 422 and tested.json()["kind"] == "policy", tested.text
 
+    # the other dry runs of a draft — explain and replay — check it the same way, even for a caller
+    explained = api.post(f"/api/rulesets/{name}/explain", json={"files": files, "facts": [{"type": "Customer", "id": "c"}]},
+                         headers=CALLER)
+    assert explained.status_code == 422 and explained.json()["kind"] == "policy", explained.text
+    _assert_refused_here(explained.json(), shape)
+    target = api.put("/api/rulesets/policy-replay-target", json={"files": {"types.drl": TYPES, "probe.drl": _rule()}},
+                     headers=DEV)
+    assert target.status_code in (200, 201), target.text
+    replayed = api.post("/api/rulesets/policy-replay-target/replay", json={"files": files}, headers=CALLER)
+    assert replayed.status_code == 422 and replayed.json()["kind"] == "policy", replayed.text
+    _assert_refused_here(replayed.json(), shape)
+
     assert not marker.exists()
     assert content_hash(files) not in compiler._cache  # never built: no class of it in any class loader
     assert api.get(f"/api/rulesets/{name}", headers=AUTHOR).status_code == 404  # nothing stored either

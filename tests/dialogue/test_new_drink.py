@@ -36,7 +36,7 @@ def test_a_new_individual_is_checked_field_by_field(client):
         ({"name": "bad name", "class": "Beverage"}, "name", "letter"),
         ({"name": "kombucha", "class": "Drinkable"}, "class", "not a class"),
         ({"name": "kombucha", "class": "Beverage", "values": {"colour": "brown"}}, "values.colour", "not a data property"),
-        ({"name": "kombucha", "class": "Cup", "values": {"cupCapacity": "lots"}}, "values.cupCapacity", "decimal"),
+        ({"name": "kombucha", "class": "Cup", "values": {"cupCapacity": "lots"}}, "values.cupCapacity", "not a number"),
         ({"name": "kombucha", "class": "Beverage", "values": {"label": ""}}, "values.label", "non-empty"),
     ]
     for body, field, words in cases:

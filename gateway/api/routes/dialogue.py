@@ -20,11 +20,11 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Caller, GatewayDep, StoreDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, run_blocking
+from gateway.api.jsonio import JSON, JsonRoute, run_blocking
 from gateway.dialogue.service import ORDERS, DialogueBusy, DialogueRefused
 from gateway.dialogue.speech import SpeechUnavailable, VoiceUnknown, synthesise
 
-router = APIRouter(tags=["dialogue"])
+router = APIRouter(tags=["dialogue"], route_class=JsonRoute)
 
 
 class TurnBody(BaseModel):

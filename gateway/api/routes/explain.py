@@ -18,13 +18,13 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Caller, DecisionsDep, EngineDep, SettingsDep, StoreDep
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.api.routes.rulesets import MAX_FILES, RuleSetName, facts_from_body
 from gateway.engine.replay import not_replayable
 from gateway.store.store import StoreUnavailable
 from gateway.store.traces import trace
 
-router = APIRouter(tags=["explain and trace"])
+router = APIRouter(tags=["explain and trace"], route_class=JsonRoute)
 
 
 class ExplainBody(BaseModel):

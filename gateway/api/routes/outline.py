@@ -20,12 +20,12 @@ from fastapi import APIRouter
 from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Caller, EngineDep, SettingsDep, StreamsDep, WorkflowsDep
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.api.routes.authoring import MAX_FILES, RuleSetName
 from gateway.engine.outline import outline
 from gateway.workflow.model import BranchStep, ModuleStep
 
-router = APIRouter(tags=["rule authoring"])
+router = APIRouter(tags=["rule authoring"], route_class=JsonRoute)
 
 
 class OutlineBody(BaseModel):

@@ -15,12 +15,12 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.api.deps import Caller, DecisionsDep, EngineDep, JobsDep, iso_datetime, wants_async
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON
+from gateway.api.jsonio import JSON, JsonRoute
 from gateway.api.routes.rulesets import MAX_FILES, RuleSetName, accepted
 from gateway.engine import replay
 from gateway.store.store import StoreUnavailable
 
-router = APIRouter(tags=["replay"])
+router = APIRouter(tags=["replay"], route_class=JsonRoute)
 MAX_SYNC_REPLAYS = 2  # synchronous replays at once per process (each holds a worker thread); more: 429
 _running = threading.BoundedSemaphore(MAX_SYNC_REPLAYS)
 
