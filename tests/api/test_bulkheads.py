@@ -255,3 +255,27 @@ def test_a_kie_batch_past_its_time_limit_answers_failure_503(limited):
     assert r.status_code == 503 and r.json()["type"] == "FAILURE", r.text
     assert "engine.fire_timeout_s" in r.json()["msg"]
     assert _decisions(gateway, client) == before
+
+
+def test_a_stateful_session_after_a_timeout_keeps_what_the_docs_say(limited):
+    """A stateful session is not rolled back (docs/rest-api.md, "Overload and time limits"): it
+    keeps the batch's inserts and the firings before the halt, and still serves; no decision."""
+    gateway, client = limited
+    path = f"{KIE}/looping"
+    # a fresh session (a batch without a lookup, above, may have gone to this default one)
+    assert client.post(path, json={"lookup": "counting", "commands": [{"dispose": ""}]}).status_code == 200
+    first = client.post(path, json={"lookup": "counting", "commands": [
+        {"insert": {"object": {"org.printeps.looptest.Seen": {"id": "before"}}}}, {"fire-all-rules": {}}]})
+    assert first.status_code == 200, first.text
+    before = _decisions(gateway, client)
+    halted = client.post(path, json={"lookup": "counting", "commands": [
+        {"insert": {"object": {"org.printeps.looptest.Counter": {"id": "k", "n": 0}}}}, {"fire-all-rules": {}}]})
+    assert halted.status_code == 503 and halted.json()["type"] == "FAILURE", halted.text
+    assert _decisions(gateway, client) == before  # the halted batch is not a decision
+    objects = client.post(path, json={"lookup": "counting", "commands": [{"get-objects": {"out-identifier": "all"}}]})
+    assert objects.status_code == 200, objects.text
+    values = {x["key"]: x["value"] for x in objects.json()["result"]["execution-results"]["results"]}
+    kept = {next(iter(o)).rsplit(".", 1)[1]: next(iter(o.values())) for o in values["all"]}
+    assert kept["Seen"]["id"] == "before"
+    assert 0 < kept["Counter"]["n"] < 1000000  # inserted by the halted batch, counted up to the halt
+    client.post(path, json={"lookup": "counting", "commands": [{"dispose": ""}]})
