@@ -302,6 +302,10 @@ class StreamSettings(BaseModel):
     max_catchup_windows: int = Field(default=100, description="Of a stretch of empty windows passed at once "
                                      "(a gap in the stream), how many are reported: the first ones and the last.")
     max_pending_posts: int = Field(default=64, description="Concurrent POST /api/streams before 503.")
+    binding_wait_s: float = Field(
+        default=0.5, gt=0, description="Longest the stream waits for a rule binding's fire of a window; a slower "
+        "fire goes on on the binding's own thread and reports itself, and while it runs newer windows coalesce "
+        "(one waits, the newest; the others are reported as skipped): a slow rule set never holds up the stream.")
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 
 
