@@ -82,21 +82,6 @@ class Bulkhead:
         self.submit(fn, done)
         return await future
 
-    def call(self, fn: Callable[[], Any]) -> Any:
-        """``fn()``'s result, computed on a worker while this (non-loop) thread waits."""
-        finished = threading.Event()
-        outcome: list[Any] = [None, None]
-
-        def done(result: Any, error: BaseException | None) -> None:
-            outcome[0], outcome[1] = result, error
-            finished.set()
-
-        self.submit(fn, done)
-        finished.wait()
-        if outcome[1] is not None:
-            raise outcome[1]
-        return outcome[0]
-
     # -- the workers --------------------------------------------------------------------------------
     def _work(self) -> None:
         while True:
