@@ -56,7 +56,7 @@ from gateway.api.kie.containers import (
     service_response,
 )
 from gateway.engine import EngineError, FireResult, RuleSetNotFound, VersionNotFound
-from gateway.engine.errors import FireTimeout, Overloaded
+from gateway.engine.errors import Overloaded
 from gateway.engine.session import CommandFailed
 from gateway.engine.sessions import (
     SessionElsewhere,
@@ -362,7 +362,9 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
     except RuleSetNotFound:
         return failure(404, f"Container {container_id} is not instantiated.")
     except CommandFailed as exc:
-        metrics.fire_error(container_id, FireTimeout(container_id, 0) if exc.kind == "timeout" else exc)
+        if exc.kind == "timeout":  # halted by engine.fire_timeout_s
+            metrics.timeouts.labels(container_id).inc()
+        metrics.fire_failed(container_id)
         metrics.errors.labels("kie_failure").inc()
         return failure(command_failed_status(exc), f"Error calling container {container_id}: {_failed(batch, exc)}")
     except SessionNotFound as exc:
