@@ -208,11 +208,13 @@ async def fire_answer(state: Any, name: str, body: Any, correlation: str | None)
     engine.live_compiled(name)  # 404 before a bulkhead is made for a name nobody deployed
     start = time.perf_counter()
     try:
-        result = await state.bulkheads.of(name).run(
-            lambda: engine.fire(name, facts, origin="rest", correlation_id=correlation))
+        # only the fire on the rule set's thread (the JVM releases the GIL there); the decision is
+        # recorded here, on the loop, so the thread holds the GIL as briefly as it can
+        result = await state.bulkheads.of(name).run(lambda: engine.fire(name, facts, record=False))
     except Exception as exc:
         metrics.fire_error(name, exc)
         raise
+    result.decision_id = engine.record_decision(result, facts, origin="rest", correlation_id=correlation)
     out = result.to_dict()
     metrics.observe_fire(name, time.perf_counter() - start, len(out.get("fired") or ()))
     return out
