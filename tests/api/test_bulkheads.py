@@ -94,8 +94,16 @@ def _serve(api_gateway, api_settings, **api: Any) -> ServerThread:
 
 
 def _in_background(fn: Any) -> tuple[threading.Thread, list[Any]]:
+    """Runs ``fn`` in a thread; its answer (or the exception it raised) ends up in the list."""
     out: list[Any] = []
-    thread = threading.Thread(target=lambda: out.append(fn()), daemon=True)
+
+    def run() -> None:
+        try:
+            out.append(fn())
+        except Exception as exc:  # shown by the assertion that reads ``out``
+            out.append(exc)
+
+    thread = threading.Thread(target=run, daemon=True)
     thread.start()
     return thread, out
 
@@ -108,8 +116,11 @@ def test_a_slow_rule_set_does_not_hold_up_another_or_health(api_gateway, api_set
     server = _serve(api_gateway, api_settings, fire_workers=1)
     gates = [Gate(tmp_path, f"slow{k}") for k in range(2)]
     try:
-        slow = [_in_background(lambda g=g: _fire(server.url, SLOW, g.facts())) for g in gates]
+        bulkheads = server.server.config.app.state.bulkheads
+        slow = [_in_background(lambda: _fire(server.url, SLOW, gates[0].facts()))]
         assert wait_for(gates[0].started.exists, 60), f"the slow fire never started: {slow[0][1]}"
+        slow.append(_in_background(lambda: _fire(server.url, SLOW, gates[1].facts())))
+        assert wait_for(lambda: bulkheads.stats()[SLOW]["waiting"] == 1, 60), bulkheads.stats()
         # the slow set's one thread is blocked, its second fire waits in its queue: the others go on
         worst = 0.0
         with httpx.Client(base_url=server.url, timeout=30) as c:
@@ -120,7 +131,7 @@ def test_a_slow_rule_set_does_not_hold_up_another_or_health(api_gateway, api_set
                 worst = max(worst, time.perf_counter() - t0)
         assert worst < 5.0, f"a fast fire and /health took {worst:.2f} s beside a blocked rule set"
         assert not gates[1].started.exists()  # the slow set's share is one thread: the second still waits
-        stats = server.server.config.app.state.bulkheads.stats()[SLOW]
+        stats = bulkheads.stats()[SLOW]
         assert stats["running"] == 1 and stats["waiting"] == 1
         for gate in gates:
             gate.open()
