@@ -25,6 +25,7 @@ def benches(quick: bool) -> dict[str, list[str]]:
     return {
         "engine": ["bench/engine_bench.py", *(["--quick"] if quick else [])],
         "http": ["bench/http_bench.py", "--seconds", seconds, "--write-docs"],
+        "bulkheads": ["bench/bulkhead_bench.py", "--seconds", "5" if quick else "10", "--write-docs"],
         "propagation": ["bench/propagation_bench.py", "--rounds", "6" if quick else "20", "--write-docs"],
         "ros": ["bench/ros_latency.py", "60" if quick else "200", "--write-docs"],
         "stream": ["bench/stream_bench.py", *(["--quick", "--rdflib-timeout", "0"] if quick else []), "--write-docs"],

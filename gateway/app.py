@@ -82,7 +82,8 @@ class Gateway:
     def health(self) -> dict[str, dict[str, Any]]:
         """Per part: ``{"status": "ok" | "degraded" | "down" | "not configured", ...}``."""
         report: dict[str, dict[str, Any]] = {
-            "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()}},
+            "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()},
+                       "sessions": len(self.engine.session_manager.list()), "jvm_heap": jvm.heap()},
             "store": self.store.health() if self.store is not None else {"status": "not configured"},
             "ros": self.ros.health() if self.ros is not None else {"status": "not configured"},
             "actions": {"status": "ok", "handlers": sorted(self.actions.handlers), **self.actions.stats},

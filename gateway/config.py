@@ -51,6 +51,9 @@ class EngineSettings(BaseModel):
     rules_dir: str = str(PROJECT_ROOT / "rules" / "drl")
     fire_limit: int = Field(default=10_000, description="Max rule firings per request (runaway guard).")
     max_facts: int = Field(default=100_000, description="Max facts in one fire request.")
+    fire_timeout_s: float = Field(
+        default=10.0, ge=0, description="Time limit of one fire (REST, KIE batch, session, stream binding): it is "
+        "halted before its next rule firing and answers 503 kind 'timeout'; nothing is recorded (0: none).")
     compile_incremental: bool = Field(
         default=True, description="Compile in units and reuse unchanged rules (false: the whole set every time).")
     compile_workers: int = Field(default=2, description="Threads compiling rule units at once.")
@@ -251,17 +254,15 @@ class ApiSettings(BaseModel):
     )
     max_body_bytes: int = Field(default=10 * 1024 * 1024, description="Larger request bodies get 413.")
     max_json_depth: int = Field(default=64, description="Deeper JSON request bodies get 400.")
-    inline_fire: bool = Field(
-        default=True,
-        description="Run REST fires on the event loop (~0.2 ms faster each); false: in a worker thread, so a "
-        "long fire never delays other requests.",
-    )
-    fire_fast_path: bool = Field(
-        default=True,
-        description="Answer POST /api/rulesets/{name}/fire and KIE command batches (POST .../containers/instances/"
-        "{id}) in front of FastAPI's routing (same answers, about half the CPU per request); false: through "
-        "FastAPI like every other route.",
-    )
+    fire_workers: int = Field(
+        default=2, ge=1, description="Threads firing each rule set (its bulkhead, see gateway/engine/bulkhead.py): "
+        "a slow rule set uses its own and never the event loop's or another rule set's.")
+    max_queue: int = Field(
+        default=64, ge=1, description="Fires of one rule set waiting for its threads; beyond it a fire is refused "
+        "at once with 429 and Retry-After.")
+    max_wait_s: float = Field(
+        default=5.0, gt=0, description="Longest a fire may wait for its rule set's threads (by the set's recent "
+        "fire time); one that would wait, or did wait, longer is refused with 503 and Retry-After.")
     server_id: str = "printeps-gateway"
 
     @field_validator("tokens", mode="before")
@@ -325,6 +326,10 @@ class StreamSettings(BaseModel):
     max_catchup_windows: int = Field(default=100, description="Of a stretch of empty windows passed at once "
                                      "(a gap in the stream), how many are reported: the first ones and the last.")
     max_pending_posts: int = Field(default=64, description="Concurrent POST /api/streams before 503.")
+    binding_wait_s: float = Field(
+        default=0.5, gt=0, description="Longest the stream waits for a rule binding's fire of a window; a slower "
+        "fire goes on on the binding's own thread and reports itself, and while it runs newer windows coalesce "
+        "(one waits, the newest; the others are reported as skipped): a slow rule set never holds up the stream.")
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
 
 

@@ -275,3 +275,14 @@ def jclass(name: str):
     """Any Java class by fully qualified name, starting the JVM if needed."""
     start()
     return jpype.JClass(name)
+
+
+def heap() -> dict[str, float] | None:
+    """The JVM's heap in MB (``used``, ``committed``, ``max``), or None before it started: what
+    ``/health`` reports so a soak (bench/soak.py) sees a leak as a slope."""
+    if not jpype.isJVMStarted():
+        return None
+    runtime = jpype.JClass("java.lang.Runtime").getRuntime()
+    total, free, most = int(runtime.totalMemory()), int(runtime.freeMemory()), int(runtime.maxMemory())
+    mb = 1024 * 1024
+    return {"used": round((total - free) / mb, 1), "committed": round(total / mb, 1), "max": round(most / mb, 1)}

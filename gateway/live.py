@@ -9,7 +9,8 @@ in the gateway; the composition root (:mod:`gateway.app`) wires these hooks to o
   distance in a message on the entrance stream (``reading_streams``) becomes a ``reading``
   (``{"t", "stream", "distances": {person: m}}``; ``t`` is the sensor's time, ms);
 - ``on_stream_event(event)`` — a stream engine subscriber: a non-empty query result becomes a
-  ``detection`` (``{"query", "window", "rows", "solutions"}``);
+  ``detection`` (``{"query", "window", "rows", "solutions"}``); a window a rule binding skipped
+  because its rules were still firing an earlier one, a ``skipped`` (``{"query", "ruleset", "window", "reason"}``);
 - ``on_engine_event(kind, payload)`` — a rules engine listener: each fire is a ``decision``
   (``{"decision_id", "ruleset", "version", "origin", "fired", "actions", "query"}``);
 - ``on_outcome(outcome)`` — an action router listener, and ``on_workflow_record(kind, payload)`` — a
@@ -44,7 +45,7 @@ from gateway.rdf.terms import PRINTEPS
 
 log = logging.getLogger(__name__)
 
-KINDS = ("reading", "detection", "decision", "action")
+KINDS = ("reading", "detection", "decision", "action", "skipped")
 DISTANCE = PRINTEPS + "distance"
 POSITION_AT_TIME = PRINTEPS + "positionAtTime"
 MAX_ROWS = 50  # rows of a detection shown live (the full result stays in /api/queries/{name}/results)
@@ -210,7 +211,11 @@ class LiveFeed:
             self.publish("reading", {"stream": stream, "t": int(timestamp_ms), "distances": distances})
 
     def on_stream_event(self, event: dict[str, Any]) -> None:
-        """Stream engine subscriber: a query result with solutions is a detection."""
+        """Stream engine subscriber: a query result with solutions is a detection; a window a rule
+        binding skipped (its rules still firing an earlier one) is said as ``skipped``."""
+        if event.get("kind") == "skipped":
+            self.publish("skipped", {key: event.get(key) for key in ("query", "ruleset", "window", "reason")})
+            return
         if event.get("kind") != "result" or not event.get("solutions"):
             return
         rows = list(event.get("rows") or [])

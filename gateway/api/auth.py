@@ -144,9 +144,15 @@ def require_kie(role: str) -> Callable[..., Principal]:
     return dependency
 
 
+async def check_bearer(request: Request, role: str) -> Principal:
+    """What :func:`require` answers, for a route served without FastAPI's dependency solving
+    (:class:`gateway.api.lean_route.LeanRoute`): the same credential reader, the same check."""
+    return _auth(request).check(role, await _bearer(request))
+
+
 async def check_kie(request: Request, role: str) -> Principal:
-    """What :func:`require_kie` answers, for a caller outside FastAPI's dependency solving (the
-    KIE batch route's fast path): the same credential readers, the same check."""
+    """What :func:`require_kie` answers, for a route served without FastAPI's dependency solving
+    (the KIE batch's LeanRoute): the same credential readers, the same check."""
     return _auth(request).check(role, await _bearer(request), await _basic(request), challenge=KIE_CHALLENGE)
 
 

@@ -26,6 +26,7 @@ from gateway.stream.lexer import QueryParseError
 from gateway.stream.rules import BindingError
 from gateway.versions import CatalogUnavailable
 from gateway.engine import EngineError, VersionConflict
+from gateway.engine.errors import FireTimeout, Overloaded
 from gateway.engine.session import CommandFailed
 from gateway.engine.sessions import SessionNotFound, SessionRefused
 
@@ -75,7 +76,7 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
 KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "policy": 422, "invalid": 422,
                "facts": 422,
                "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503, "limit": 429,
-               "gone": 410}
+               "gone": 410, "timeout": 503, "overloaded": 503}
 
 
 def engine_error_status(kind: str) -> int:
@@ -89,9 +90,22 @@ def _status_of(exc: EngineError) -> int:
         return 404
     if isinstance(exc, SessionRefused):
         return 409 if exc.conflict else 422
+    if isinstance(exc, Overloaded):
+        return exc.status  # 429 queue full, 503 would wait too long
     if isinstance(exc, CommandFailed):
-        return 429 if exc.kind == "limit" else 422
+        return command_failed_status(exc)
     return engine_error_status(getattr(exc, "kind", ""))
+
+
+def command_failed_status(exc: CommandFailed) -> int:
+    """A failed command batch: 429 at a limit, 503 halted by the fire time limit, else 422."""
+    return 429 if exc.kind == "limit" else 503 if exc.kind == "timeout" else 422
+
+
+def retry_after(exc: Exception) -> dict[str, str] | None:
+    """The ``Retry-After`` header of an overload refusal (None for other errors)."""
+    seconds = getattr(exc, "retry_after_s", None)
+    return None if seconds is None else {"Retry-After": str(seconds)}
 
 
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
@@ -125,9 +139,9 @@ def install_error_handlers(app: FastAPI) -> None:
         status, body = engine_error_response(exc)
         body.setdefault("kind", kind_for(status))
         count(type(exc).__name__)
-        if status >= 500:
+        if status >= 500 and not isinstance(exc, (Overloaded, FireTimeout)):  # those two are counted, not logged
             log.error("engine error on %s %s: %s", request.method, request.url.path, exc)
-        return JSON(body, status_code=status)
+        return JSON(body, status_code=status, headers=retry_after(exc))
 
     @app.exception_handler(JobError)  # a build job refused: unknown, not cancellable, queue full
     async def _job_error(request: Request, exc: JobError) -> JSON:

@@ -17,10 +17,10 @@ from fastapi.responses import RedirectResponse
 
 from gateway.api.auth import Authenticator
 from gateway.api.errors import install_error_handlers
-from gateway.api.fast_paths import FastPaths
 from gateway.api.limits import BodyLimit
 from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
+from gateway.engine.bulkhead import Bulkheads
 from gateway.api.routes import (
     authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, outline, replay,
     rulesets, sessions, state, streams, workflows,
@@ -53,10 +53,14 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
     app.state.engine = gateway.engine  # the fire route reads it directly: no dependency on the hot path
     app.state.auth = Authenticator(settings.api)
     app.state.metrics = Metrics()
+    # each rule set's fire threads and queue (gateway.engine.bulkhead): no fire runs on the event loop
+    app.state.bulkheads = Bulkheads(settings.api.fire_workers, settings.api.max_queue, settings.api.max_wait_s)
     app.state.stream_posts = threading.BoundedSemaphore(settings.streams.max_pending_posts)
     app.state.rejected_stream_posts = 0
     gateway.engine.add_listener(app.state.metrics.on_engine_event)
     install_error_handlers(app)
+    # the hot routes first, so they are matched before any other (see gateway.api.lean_route)
+    app.router.routes[0:0] = [rulesets.FIRE_ROUTE, kie_server.BATCH_ROUTE]
     for router in ROUTERS:
         app.include_router(router)
 
@@ -68,8 +72,6 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
     def workflows_page() -> RedirectResponse:
         return RedirectResponse("/workbench/workflows", status_code=307)
 
-    if settings.api.fire_fast_path:
-        app.add_middleware(FastPaths)  # inside the body limit (added last, so outermost)
     app.add_middleware(BodyLimit, max_bytes=settings.api.max_body_bytes)
     if settings.api.is_open:
         log.warning("REST API is open (no tokens configured): every caller acts as developer 'anonymous' and may "

@@ -18,6 +18,8 @@ from prometheus_client import (
     generate_latest,
 )
 
+from gateway.engine.errors import FireTimeout, Overloaded
+
 disable_created_metrics()  # no *_created series: they double the output and nobody graphs them
 
 # Fire latency buckets (seconds) around the 5 ms p99 goal.
@@ -48,6 +50,15 @@ class Metrics:
             "printeps_errors", "Error answers, by kind (HTTP status or engine error type).",
             ["kind"], registry=self.registry,
         )
+        self.refused = Counter(
+            "printeps_fires_refused", "Fires refused before they started because their rule set was overloaded, by "
+            "reason (queue_full: 429, api.max_queue; waited: 503, api.max_wait_s).",
+            ["ruleset", "reason"], registry=self.registry,
+        )
+        self.timeouts = Counter(
+            "printeps_fire_timeouts", "Fires halted after engine.fire_timeout_s (answered 503, nothing recorded).",
+            ["ruleset"], registry=self.registry,
+        )
         self.rulesets = Gauge("printeps_rulesets", "Rule sets currently deployed.", registry=self.registry)
 
     def observe_fire(self, ruleset: str, seconds: float, fired: int) -> None:
@@ -58,6 +69,15 @@ class Metrics:
 
     def fire_failed(self, ruleset: str) -> None:
         self.fires.labels(ruleset, "error").inc()
+
+    def fire_error(self, ruleset: str, exc: BaseException) -> None:
+        """Counts a fire that did not answer: refused (overloaded), halted (timeout) or failed."""
+        if isinstance(exc, Overloaded):
+            self.refused.labels(ruleset, exc.reason).inc()
+            return
+        if isinstance(exc, FireTimeout):
+            self.timeouts.labels(ruleset).inc()
+        self.fire_failed(ruleset)
 
     def on_engine_event(self, kind: str, payload: dict[str, Any]) -> None:
         """Engine listener: count deploys/rollbacks/deletes."""

@@ -99,6 +99,7 @@ class Engine:
         self._warm_up_stop = threading.Event()
         self._warm_up_thread: threading.Thread | None = None
         self.session_manager = SessionManager(self, self.settings.sessions)
+        self._fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)
         self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
 
     # ------------------------------------------------------------------ events
@@ -536,7 +537,7 @@ class Engine:
         self._remember(name, facts_json)
         limit = int(fire_limit or self.settings.engine.fire_limit)
         started = time.perf_counter()
-        answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts))
+        answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts, self._fire_timeout_ms))
         return decode_result(answer, name, version, (time.perf_counter() - started) * 1000)
 
     # ------------------------------------------------------------------ sessions
@@ -556,10 +557,12 @@ class Engine:
                                on_close=on_close, session_id=session_id, clock=clock, on_deploy=on_deploy, kind=kind,
                                record_facts=record_facts)
 
-    @staticmethod
-    def new_java_session(compiled: CompiledRuleSet, clock: str, kind: str, record_facts: bool) -> Any:
-        """A Java ``Session`` of ``compiled``: conversations keep a fact handle registry."""
-        return jvm.helper_class("Session")(compiled.runner, record_facts, clock == "realtime", kind != "stream")
+    def new_java_session(self, compiled: CompiledRuleSet, clock: str, kind: str, record_facts: bool) -> Any:
+        """A Java ``Session`` of ``compiled``: conversations keep a fact handle registry; each fire
+        of it is halted after ``engine.fire_timeout_s``."""
+        java = jvm.helper_class("Session")(compiled.runner, record_facts, clock == "realtime", kind != "stream")
+        java.setFireTimeoutMs(self._fire_timeout_ms)
+        return java
 
     def live_compiled(self, name: str) -> tuple[VersionInfo, CompiledRuleSet]:
         """What ``name`` serves here now (sessions move to it)."""

@@ -231,3 +231,42 @@ class ScenariosFailed(EngineError):
 
     def to_dict(self) -> dict[str, Any]:
         return {"error": str(self), "kind": self.kind, "errors": self.errors, "report": self.report}
+
+
+class FireTimeout(EngineError):
+    """A fire ran past ``engine.fire_timeout_s`` and was halted (``KieSession.halt()``) before its
+    next rule firing; its answer and any decision are dropped (503)."""
+
+    kind = "timeout"
+    setting = "engine.fire_timeout_s"
+
+    def __init__(self, ruleset: str | None, limit_s: float, fired: int = 0) -> None:
+        who = f"rule set {ruleset!r}" if ruleset else "the rule set"
+        super().__init__(f"the fire of {who} was stopped after its time limit of {limit_s:g} s "
+                         f"({fired} rules had fired; nothing was recorded); raise {self.setting} if it needs longer")
+        self.ruleset, self.limit, self.fired = ruleset, limit_s, fired
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "ruleset": self.ruleset, "limit": self.limit,
+                "setting": self.setting}
+
+
+class Overloaded(EngineError):
+    """A fire refused before it started: its rule set's queue is full (``reason`` ``queue_full``,
+    429) or it would wait, or has waited, longer than allowed (``waited``, 503). ``retry_after_s``
+    is when a retry has a fair chance (sent as ``Retry-After``)."""
+
+    kind = "overloaded"
+
+    def __init__(self, ruleset: str, reason: str, limit: float, setting: str, retry_after_s: int, message: str) -> None:
+        super().__init__(message)
+        self.ruleset, self.reason, self.limit, self.setting = ruleset, reason, limit, setting
+        self.retry_after_s = retry_after_s
+
+    @property
+    def status(self) -> int:
+        return 429 if self.reason == "queue_full" else 503
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "reason": self.reason, "ruleset": self.ruleset,
+                "limit": self.limit, "setting": self.setting, "retry_after_s": self.retry_after_s}

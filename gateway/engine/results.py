@@ -11,7 +11,7 @@ from typing import Any
 
 import orjson
 
-from gateway.engine.errors import FactError, RuleRuntimeError, RunawayRules
+from gateway.engine.errors import FactError, FireTimeout, RuleRuntimeError, RunawayRules
 
 
 # The JVM boundary's shared settings for stateful sessions and their feeds:
@@ -128,13 +128,15 @@ def decode_result(answer: str | bytes | bytearray, ruleset: str, version: int, d
         return FireResult(ruleset, version, [], [], [], 0, duration_ms)
     data = orjson.loads(answer)  # ~3x faster than json.loads
     if data.get("ok") is not True:
-        raise_refusal(data)
+        raise_refusal(data, ruleset)
     return FireResult(ruleset, version, data["actions"], data["fired"], data.get("facts", []), data["fireCount"], duration_ms)
 
 
-def raise_refusal(data: dict[str, Any]) -> None:
-    """Raises the error a Java answer with ``"ok": false`` reports."""
+def raise_refusal(data: dict[str, Any], ruleset: str | None = None) -> None:
+    """Raises the error a Java answer with ``"ok": false`` reports (``ruleset``: whose fire it was)."""
     kind = data.get("kind")
+    if kind == "timeout":
+        raise FireTimeout(ruleset, int(data.get("limit_ms", 0)) / 1000, int(data.get("fired", 0)))
     if kind == "facts":
         raise FactError(data.get("errors", []), data.get("errorCount"))
     if kind == "runaway":

@@ -70,6 +70,7 @@ from gateway.stream.results import (
     to_sparql_json,
     triples_as_facts,
 )
+from gateway.stream.binding_fire import BindingFirer, Job
 from gateway.stream.rules import BindingError, RuleBinding, binding_facts, check_binding
 from gateway.stream.windows import StreamBuffer, merge, merge_latest, pane_size
 
@@ -91,7 +92,7 @@ def _new_stats() -> dict[str, int]:
     return {
         "windows": 0, "reported": 0, "empty_windows": 0, "skipped_windows": 0, "fast": 0, "general": 0,
         "fallbacks": 0, "results": 0, "late_dropped": 0, "overflow_dropped": 0, "errors": 0, "rule_fires": 0,
-        "rule_errors": 0, "derived_triples": 0,
+        "rule_errors": 0, "derived_triples": 0, "rule_skipped": 0, "rule_late": 0,
     }
 
 
@@ -116,6 +117,7 @@ class QueryRuntime:
     field_types: dict[str, dict[str, str]] = field(default_factory=dict)  # fact type -> field -> java type
     handled: dict[str, int] = field(default_factory=dict)  # suppress_repeats: key -> window end it fired
     session: Any = None
+    firer: BindingFirer | None = None  # the binding's thread (gateway.stream.binding_fire)
     param_values: dict[str, str] = field(default_factory=dict)
     param_error: str | None = None
     param_version: int = -1
@@ -251,8 +253,8 @@ class StreamEngine:
             if binding is not None:
                 self._check_binding(runtime, binding)
             old = self._queries.get(query.name)
-            if old is not None and old.session is not None:
-                self._close_session(old.session)
+            if old is not None:
+                self._stop_binding(old)
             self._queries[query.name] = runtime
             self._reorder()
             return runtime.info()
@@ -312,9 +314,7 @@ class StreamEngine:
         """Bind (or with None, unbind) a query's (or a stream's) results to a rule set."""
         with self._lock:
             runtime = self._get(name)
-            if runtime.session is not None:
-                self._close_session(runtime.session)
-                runtime.session = None
+            self._stop_binding(runtime)
             runtime.binding = None
             runtime.relevant = relevant_predicates(runtime.query.sparql)
             if binding is not None:
@@ -340,8 +340,7 @@ class StreamEngine:
             runtime = self._queries.pop(name, None)
             if runtime is None:
                 raise QueryNotFound(f"no query named {name!r}")
-            if runtime.session is not None:
-                self._close_session(runtime.session)
+            self._stop_binding(runtime)
             self._reorder()
 
     def queries(self) -> list[dict[str, Any]]:
@@ -810,41 +809,99 @@ class StreamEngine:
         return ResultEvent(payload, rows, query.form)
 
     def _feed_rules(self, runtime: QueryRuntime, rows: list[Row], data: WindowData, instant: int) -> None:
+        """Fires the binding's rule set on this window's rows, on the binding's own thread
+        (:class:`BindingFirer`): answered here when it ends within ``streams.binding_wait_s``,
+        else published when it ends; a window behind a fire in flight waits as the one pending
+        fire, and a newer one replaces it (reported as ``skipped``)."""
         binding = runtime.binding
         assert binding is not None
-        name = runtime.query.name
         if runtime.query.form == "CONSTRUCT":
             rows = triples_as_facts(rows)
         try:
             facts = binding_facts(binding, rows, runtime.field_types, data, self.providers, runtime.handled)
-            if not facts:
-                return  # every row was a repeat: nothing new to decide
-            window = {"start": data.start_ms, "end": data.end_ms}
-            correlation = f"{name}@{data.end_ms}"
-            if binding.mode == "stateful":
-                if runtime.session is None:
-                    runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
-                # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
-                result = runtime.session.push(facts, instant)
-                result.decision_id = self.rules_engine.record_decision(
-                    result, facts, origin="stream", correlation_id=correlation,
-                    context={"query": name, "window": window, "session": runtime.session.id})  # not replayable alone
-            else:
-                result = self.rules_engine.fire(binding.ruleset, facts, origin="stream", correlation_id=correlation,
-                                                context={"query": name, "window": window})
         except Exception as exc:
-            runtime.stats["rule_errors"] += 1
-            runtime.last_error = f"rules {binding.ruleset!r}: {exc}"
-            log.warning("query %s: firing %s failed: %s", name, binding.ruleset, exc)
-            self._publish({"kind": "error", "query": name, "error": runtime.last_error})
+            self._rule_error(runtime, binding, exc)
             return
+        if not facts:
+            return  # every row was a repeat: nothing new to decide
+        window = {"start": data.start_ms, "end": data.end_ms}
+        job = Job(lambda: self._fire_binding(runtime, binding, facts, instant, window),
+                  lambda result, error: self._late(runtime, binding, facts, window, result, error),
+                  lambda: self._skipped(runtime, binding, window))
+        if runtime.firer is None:
+            runtime.firer = BindingFirer(runtime.query.name, self.settings.binding_wait_s)
+        try:
+            done, result = runtime.firer.fire(job)
+        except Exception as exc:
+            self._rule_error(runtime, binding, exc)
+            return
+        if done:
+            self._publish_actions(runtime, binding, facts, window, result)
+
+    def _fire_binding(self, runtime: QueryRuntime, binding: RuleBinding, facts: list[dict[str, Any]], instant: int,
+                      window: dict[str, int]) -> Any:
+        """One window's fire, on the binding's thread (a stateful binding's session is used by it alone)."""
+        name = runtime.query.name
+        correlation = f"{name}@{window['end']}"
+        if binding.mode == "stateful":
+            if runtime.session is None:
+                if runtime.binding is not binding:  # unbound meanwhile: open no session for it
+                    raise BindingError(f"the binding of {name!r} to {binding.ruleset!r} was removed")
+                runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
+            # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
+            result = runtime.session.push(facts, instant)
+            result.decision_id = self.rules_engine.record_decision(
+                result, facts, origin="stream", correlation_id=correlation,
+                context={"query": name, "window": window, "session": runtime.session.id})  # not replayable alone
+            return result
+        return self.rules_engine.fire(binding.ruleset, facts, origin="stream", correlation_id=correlation,
+                                      context={"query": name, "window": window})
+
+    def _publish_actions(self, runtime: QueryRuntime, binding: RuleBinding, facts: list[dict[str, Any]],
+                         window: dict[str, int], result: Any, late: bool = False) -> None:
         runtime.stats["rule_fires"] += 1
         payload = result.to_dict() if hasattr(result, "to_dict") else dict(result)
-        self._publish({
-            "kind": "actions", "query": name, "ruleset": binding.ruleset, "version": payload.get("version"),
+        event = {
+            "kind": "actions", "query": runtime.query.name, "ruleset": binding.ruleset, "version": payload.get("version"),
             "decision_id": payload.get("decision_id"), "window": window, "facts": facts,
             "actions": payload.get("actions", []), "fired": payload.get("fired", []), "dispatch": binding.dispatch,
-        })
+        }
+        if late:
+            event["late"] = True
+        self._publish(event)
+
+    def _late(self, runtime: QueryRuntime, binding: RuleBinding, facts: list[dict[str, Any]], window: dict[str, int],
+              result: Any, error: BaseException | None) -> None:
+        """A fire that outlasted ``streams.binding_wait_s`` (or waited behind one) reports itself."""
+        with self._lock:
+            runtime.stats["rule_late"] += 1
+            if error is not None:
+                self._rule_error(runtime, binding, error)
+            else:
+                self._publish_actions(runtime, binding, facts, window, result, late=True)
+
+    def _skipped(self, runtime: QueryRuntime, binding: RuleBinding, window: dict[str, int]) -> None:
+        """A window replaced by a newer one while the binding's fire was in flight: said, not silent."""
+        runtime.stats["rule_skipped"] += 1
+        self._publish({"kind": "skipped", "query": runtime.query.name, "ruleset": binding.ruleset, "window": window,
+                       "reason": f"the rules of {binding.ruleset!r} were still firing an earlier window; "
+                                 "a newer window replaced this one (streams.binding_wait_s)"})
+
+    def _rule_error(self, runtime: QueryRuntime, binding: RuleBinding, exc: BaseException) -> None:
+        name = runtime.query.name
+        runtime.stats["rule_errors"] += 1
+        runtime.last_error = f"rules {binding.ruleset!r}: {exc}"
+        log.warning("query %s: firing %s failed: %s", name, binding.ruleset, exc)
+        self._publish({"kind": "error", "query": name, "error": runtime.last_error})
+
+    def _stop_binding(self, runtime: QueryRuntime) -> None:
+        """Stops the binding's thread (after its fire in flight) and closes its session."""
+        if runtime.firer is not None:
+            runtime.firer.close()
+            runtime.firer = None
+        if runtime.session is not None:
+            self._close_session(runtime.session)
+            runtime.session = None
 
     def _close_session(self, session: Any) -> None:
         closer = getattr(self.rules_engine, "close_session", None)
@@ -856,9 +913,7 @@ class StreamEngine:
     def close(self) -> None:
         with self._lock:
             for runtime in self._queries.values():
-                if runtime.session is not None:
-                    self._close_session(runtime.session)
-                    runtime.session = None
+                self._stop_binding(runtime)
 
 
 def _with_attributes(relevant: frozenset[NamedNode] | None, binding: RuleBinding) -> frozenset[NamedNode] | None:

@@ -180,12 +180,14 @@ def test_openapi_docs(client):
     assert client.get("/docs").status_code == 200
 
 
-def test_fire_in_a_worker_thread_when_not_inline(api_settings, api_gateway, deployed):
+def test_fires_run_on_the_rule_sets_own_threads(api_settings, api_gateway, deployed):
     from fastapi.testclient import TestClient
 
     from gateway.api.main import create_app
 
-    with TestClient(create_app(api_gateway, api_settings.api.model_copy(update={"inline_fire": False}))) as c:
+    with TestClient(create_app(api_gateway, api_settings.api.model_copy(update={"fire_workers": 1}))) as c:
         r = c.post("/api/rulesets/rest/fire", json={"facts": FACTS})
         assert r.status_code == 200 and r.json()["version"] == 2
         assert c.post("/api/rulesets/rest/fire", json={"facts": [{"type": "Dragon"}]}).status_code == 422
+        stats = c.app.state.bulkheads.stats()["rest"]  # the rule set's bulkhead fired both, on its one thread
+        assert stats["threads"] == 1 and stats["waiting"] == 0 and stats["running"] == 0

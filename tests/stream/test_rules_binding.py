@@ -144,3 +144,70 @@ def test_rules_bound_to_a_derived_stream(settings, rules_engine):
     assert fired["facts"] == [{"type": "HotThing", "id": "a", "hot": 35}]
     assert [a["params"] for a in fired["actions"]] == [{"robot": "pepper", "text": "a is hot"}]
     engine.close()
+
+
+SLOW_DRL = """package org.printeps.slowdetect;
+import org.printeps.gateway.Actions;
+global Actions actions;
+declare CustomerEntered
+    id : String
+    count : int
+    distance : double
+end
+rule "Welcome, when the gate opens"
+when
+    $c : CustomerEntered()
+then
+    String gate = System.getProperty("printeps.test.gate");
+    if (gate != null) {  // only in the test: the deploy's warm-up fires made-up facts without it
+        try { new java.io.File(gate + ".started").createNewFile(); } catch (Exception e) { }
+        long deadline = System.currentTimeMillis() + 120000;
+        while (!new java.io.File(gate).exists() && System.currentTimeMillis() < deadline) {
+            try { Thread.sleep(5); } catch (InterruptedException e) { }
+        }
+    }
+    actions.say("pepper", "Welcome, " + $c.getId());
+end
+"""
+
+
+def test_a_slow_binding_skips_windows_and_never_holds_up_the_stream(settings, rules_engine, tmp_path):
+    """Ten windows detect customers while the binding's first fire is blocked: the stream goes on
+    (it waited only streams.binding_wait_s, once), the windows in between are reported skipped, the
+    newest waits; when the gate opens, the first and the newest fire and report themselves."""
+    import time
+
+    import jpype
+
+    from gw_testing import wait_for
+
+    rules_engine.deploy("slowdetect", {"slow.drl": SLOW_DRL}, author="test")
+    gate = tmp_path / "gate"
+    system = jpype.JClass("java.lang.System")
+    system.setProperty("printeps.test.gate", str(gate))
+    engine = StreamEngine(settings.model_copy(update={"binding_wait_s": 0.2}), rules_engine=rules_engine)
+    try:
+        binding = RuleBinding("slowdetect", "CustomerEntered", {"id": "s", "count": "cnt", "distance": "distance"})
+        engine.register(CUSTOMER_QUERY, binding=binding)
+        events: list[dict] = []
+        engine.subscribe(events.append)
+        tracks = {"c1": approaching(4.0, 0.3), "c2": approaching(5.0, 0.3), "c3": approaching(6.0, 0.3)}
+        t0 = time.monotonic()
+        replay(engine, messages(tracks, hz=1, seconds=14, t0_ms=500))
+        assert time.monotonic() - t0 < 30.0  # the blocked fire (up to 120 s) did not hold the stream
+        assert (tmp_path / "gate.started").exists() and not [e for e in events if e["kind"] == "actions"]
+        skipped = [e["window"]["end"] for e in events if e["kind"] == "skipped"]
+        assert skipped == list(range(5000, 13000, 1000)), skipped
+        assert all(e["ruleset"] == "slowdetect" and "binding_wait_s" in e["reason"] for e in events
+                   if e["kind"] == "skipped")
+        gate.touch()
+        assert wait_for(lambda: len([e for e in events if e["kind"] == "actions"]) == 2, 60), events[-3:]
+        actions = [e for e in events if e["kind"] == "actions"]
+        assert [a["window"]["end"] for a in actions] == [4000, 13000] and all(a["late"] for a in actions)
+        assert actions[1]["actions"][0]["params"]["text"] == "Welcome, c1"
+        stats = engine.query_info("CustomerDetectionQuery")["stats"]
+        assert stats["rule_skipped"] == 8 and stats["rule_fires"] == 2
+    finally:
+        gate.touch()
+        system.clearProperty("printeps.test.gate")
+        engine.close()

@@ -15,7 +15,8 @@ errors included. Statuses: where KIE Server answers a FAILURE with 200 (get cont
 so does the gateway, since KIE clients branch on ``type`` there; where KIE answers an error status
 (a failed batch: 500; a failed ``PUT``: 400) the gateway answers the 4xx that names the kind of
 problem — 400 unreadable body, 404 unknown container or session, 415 XML, 422 a command refused or
-the rules failed, 429 a limit — and 410/503 for a session whose owner process is gone/unreachable.
+the rules failed, 429 a limit or the container's full queue, 503 a batch that would wait too long
+or a fire halted by its time limit — and 410/503 for a session whose owner process is gone/unreachable.
 """
 
 from __future__ import annotations
@@ -30,11 +31,12 @@ from fastapi.responses import Response
 from fastapi.routing import APIRoute
 from starlette.exceptions import HTTPException
 
-from gateway.api.auth import Principal, kie_caller, require_kie
+from gateway.api.auth import Principal, check_kie, kie_caller, require_kie
 from gateway.api.deps import correlation_id
-from gateway.api.errors import ApiError
+from gateway.api.errors import ApiError, command_failed_status, retry_after
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
 from gateway.api.jsonio import JSON, BadBody, parse_json, run_blocking
+from gateway.api.lean_route import LeanRoute
 from gateway.api.kie.batch import (
     Batch,
     BatchError,
@@ -54,6 +56,7 @@ from gateway.api.kie.containers import (
     service_response,
 )
 from gateway.engine import EngineError, FireResult, RuleSetNotFound, VersionNotFound
+from gateway.engine.errors import Overloaded
 from gateway.engine.session import CommandFailed
 from gateway.engine.sessions import (
     SessionElsewhere,
@@ -75,7 +78,7 @@ def failure(status: int, msg: str, headers: dict[str, str] | None = None) -> JSO
 
 def kie_failure(request: Request, exc: Exception) -> JSON:
     """The KIE ``FAILURE`` answer for an error raised while serving a KIE endpoint (shared by
-    :class:`KieRoute` and the batch route's fast path in :mod:`gateway.api.fast_paths`)."""
+    :class:`KieRoute` and the batch's :class:`LeanRoute`)."""
     if isinstance(exc, ApiError):
         return failure(exc.status, exc.message, exc.headers)
     if isinstance(exc, BadBody):
@@ -328,13 +331,11 @@ BATCH_SCHEMA: dict[str, Any] = {
 }
 
 
-@router.post("/containers/instances/{container_id}", openapi_extra=BATCH_SCHEMA)
 async def execute(container_id: str, request: Request, _: Principal = Depends(kie_caller)) -> Response:
-    """Run a command batch on the session its ``lookup`` names (see the module docstring).
-
-    Served by :mod:`gateway.api.fast_paths` in front of FastAPI (``api.fire_fast_path``, the
-    default), which calls this function with the same credential check; ``request``'s body is then
-    already read."""
+    """Run a command batch on the session its ``lookup`` names (see the module docstring). It runs
+    on the container's own threads (its bulkhead): a FAILURE 429 when its queue is full
+    (``api.max_queue``), 503 when it would wait longer than ``api.max_wait_s``, both with
+    ``Retry-After``; 503 when a fire runs past ``engine.fire_timeout_s``."""
     body = await read_body(request)
     state = request.app.state
     engine = _engine(request)
@@ -345,7 +346,11 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         return failure(400 if exc.index < 0 else 422, f"Error calling container {container_id}: {exc}")
     start = time.perf_counter()
     try:
-        session_id, answer = await run_blocking(_run_batch, engine, container_id, batch)
+        engine.live_compiled(container_id)  # RuleSetNotFound before a bulkhead is made for the name
+        session_id, answer = await state.bulkheads.of(container_id).run(lambda: _run_batch(engine, container_id, batch))
+    except Overloaded as exc:
+        metrics.fire_error(container_id, exc)
+        return failure(exc.status, f"Error calling container {container_id}: {exc}", retry_after(exc))
     except SessionElsewhere as elsewhere:
         try:
             return await forward(request, elsewhere)
@@ -358,9 +363,11 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
     except RuleSetNotFound:
         return failure(404, f"Container {container_id} is not instantiated.")
     except CommandFailed as exc:
+        if exc.kind == "timeout":  # halted by engine.fire_timeout_s
+            metrics.timeouts.labels(container_id).inc()
         metrics.fire_failed(container_id)
         metrics.errors.labels("kie_failure").inc()
-        return failure(429 if exc.kind == "limit" else 422, f"Error calling container {container_id}: {_failed(batch, exc)}")
+        return failure(command_failed_status(exc), f"Error calling container {container_id}: {_failed(batch, exc)}")
     except SessionNotFound as exc:
         return failure(404, str(exc))
     except SessionLimit as exc:
@@ -388,6 +395,17 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         headers["X-Decision-Id"] = decision_id
     return JSON(service_response(True, f"Container {container_id} successfully called.", {"execution-results": payload}),
                 headers=headers)
+
+
+async def _batch_arguments(request: Request) -> dict[str, Any]:
+    """The batch endpoint's arguments, as FastAPI would solve them: the container id, the caller."""
+    return {"container_id": request.path_params["container_id"], "request": request,
+            "_": await check_kie(request, "caller")}
+
+
+BATCH_ROUTE = LeanRoute(PREFIX + "/containers/instances/{container_id}", execute, prepare=_batch_arguments,
+                        on_error=kie_failure, methods=["POST"], tags=["KIE Server compatible"],
+                        openapi_extra=BATCH_SCHEMA)
 
 
 def _run_batch(engine: Any, container_id: str, batch: Batch) -> tuple[str | None, Any]:

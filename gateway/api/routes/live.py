@@ -30,6 +30,7 @@ from fastapi.responses import StreamingResponse
 from gateway.api.auth import Principal, event_stream_caller
 from gateway.api.deps import GatewayDep
 from gateway.api.jsonio import JsonRoute
+from gateway.live import KINDS
 
 router = APIRouter(tags=["live"], route_class=JsonRoute)
 
@@ -54,7 +55,8 @@ def resume_after(last_event_id: str | None, feed_id: str) -> int | None:
 async def live(request: Request, gateway: GatewayDep, who: EventStreamCaller,
                replay: bool = True, max_events: int | None = Query(None, ge=1),
                heartbeat_s: float = Query(15.0, ge=0.2, le=300)) -> StreamingResponse:
-    """Readings, detections, decisions and robot actions of this process, as they happen."""
+    """Readings, detections, decisions and robot actions of this process, as they happen (and the
+    windows a rule binding skipped because its rules were still firing an earlier one)."""
     feed = gateway.live
     loop = asyncio.get_running_loop()
     wake = asyncio.Event()
@@ -65,7 +67,7 @@ async def live(request: Request, gateway: GatewayDep, who: EventStreamCaller,
         sent = 0
         try:
             yield sse("hello", {"feed": feed.id, "process": gateway.name, "user": who.name,
-                                "resumed_after": after, "kinds": ["reading", "detection", "decision", "action"]})
+                                "resumed_after": after, "kinds": list(KINDS)})
             while max_events is None or sent < max_events:
                 batch, dropped = subscription.take()
                 if not batch and not dropped and subscription.closed:

@@ -3,14 +3,16 @@
 Why the two styles here: management routes (rare, human-paced) use pydantic models so the OpenAPI
 docs show their bodies; the fire route is the hot path and parses/serializes with orjson itself.
 Engine calls block (they go into the JVM), so management routes are sync (FastAPI runs them in its
-threadpool). The fire route runs the engine on the event loop by default (a fire takes ~0.1-0.5 ms and
-a thread hop costs ~0.2 ms of that again; ``api.inline_fire: false`` moves it to a worker thread).
+threadpool). The fire route is a :class:`gateway.api.lean_route.LeanRoute` (documented by FastAPI,
+served without its dependency solving) and fires on the rule set's own threads
+(:mod:`gateway.engine.bulkhead`): the event loop only parses, routes and answers.
 """
 
 from __future__ import annotations
 
 import difflib
 import json
+import re
 import time
 from pathlib import Path
 from typing import Annotated, Any
@@ -18,10 +20,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path as PathParam, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
+from gateway.api.auth import check_bearer
 from gateway.api.deps import Author, Caller, EngineDep, JobsDep, SettingsDep, correlation_id, wants_async
 from gateway.api.errors import ApiError
-from gateway.engine.errors import FactError
 from gateway.api.jsonio import JSON, JsonRoute, read_json, run_blocking
+from gateway.api.lean_route import LeanRoute
+from gateway.engine.errors import FactError
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"  # as gateway.engine.ruleset.check_name
 
@@ -177,32 +181,49 @@ def delete(name: RuleSetName, engine: EngineDep, who: Author) -> JSON:
     return JSON({"name": name, "deleted": True})
 
 
-@router.post("/api/rulesets/{name}/fire", openapi_extra=FIRE_SCHEMA)
 async def fire(name: RuleSetName, request: Request, _: Caller) -> JSON:
     """Fire the current version on ``facts``: ``{"decision_id", "version", "actions", "fired", "facts",
     ...}``; 422 naming the bad fact/field. The decision is recorded with the ``X-Request-ID`` (or
-    ``traceparent``) header as its correlation id.
-
-    Served by :mod:`gateway.api.fast_paths` in front of FastAPI (``api.fire_fast_path``, the
-    default); this route documents it and serves it when the fast path is off."""
+    ``traceparent``) header as its correlation id. The fire runs on the rule set's own threads: 429
+    (its queue is full, ``api.max_queue``) or 503 (it would wait longer than ``api.max_wait_s``), both
+    ``{"kind": "overloaded", "ruleset", "limit", "setting"}`` with ``Retry-After``; 503 ``{"kind":
+    "timeout"}`` when it runs past ``engine.fire_timeout_s`` (nothing recorded)."""
     return JSON(await fire_answer(request.app.state, name, await read_json(request), correlation_id(request)))
+
+
+_NAME = re.compile(NAME_PATTERN)
+
+
+async def _fire_arguments(request: Request) -> dict[str, Any]:
+    """The fire endpoint's arguments, as FastAPI would solve them: the checked name, the caller."""
+    principal = await check_bearer(request, "caller")
+    name = request.path_params["name"]
+    if _NAME.match(name) is None:
+        raise ApiError(422, "invalid request", errors=[{"field": "path.name",
+                                                        "message": f"String should match pattern '{NAME_PATTERN}'"}])
+    return {"name": name, "request": request, "_": principal}
+
+
+FIRE_ROUTE = LeanRoute("/api/rulesets/{name}/fire", fire, prepare=_fire_arguments, methods=["POST"],
+                       tags=["rule sets"], openapi_extra=FIRE_SCHEMA)
 
 
 async def fire_answer(state: Any, name: str, body: Any, correlation: str | None) -> dict[str, Any]:
     """The answer to a fire request with JSON ``body`` on rule set ``name`` (``state``: the app's
-    state). Raises ApiError / EngineError for the app's error handlers."""
+    state), fired on the rule set's bulkhead. Raises ApiError / EngineError for the app's error handlers."""
     facts = facts_from_body(body, state.settings.engine.max_facts)
     metrics = state.metrics
     engine = state.engine
+    engine.live_compiled(name)  # 404 before a bulkhead is made for a name nobody deployed
     start = time.perf_counter()
     try:
-        if state.settings.api.inline_fire:  # see ApiSettings.inline_fire
-            result = engine.fire(name, facts, origin="rest", correlation_id=correlation)
-        else:
-            result = await run_blocking(lambda: engine.fire(name, facts, origin="rest", correlation_id=correlation))
-    except Exception:
-        metrics.fire_failed(name)
+        # only the fire on the rule set's thread (the JVM releases the GIL there); the decision is
+        # recorded here, on the loop, so the thread holds the GIL as briefly as it can
+        result = await state.bulkheads.of(name).run(lambda: engine.fire(name, facts, record=False))
+    except Exception as exc:
+        metrics.fire_error(name, exc)
         raise
+    result.decision_id = engine.record_decision(result, facts, origin="rest", correlation_id=correlation)
     out = result.to_dict()
     metrics.observe_fire(name, time.perf_counter() - start, len(out.get("fired") or ()))
     return out

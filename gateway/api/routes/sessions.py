@@ -24,7 +24,8 @@ from gateway.api.errors import ApiError
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
 from gateway.api.jsonio import JSON, JsonRoute, run_blocking
 from gateway.api.routes.rulesets import NAME_PATTERN, check_facts
-from gateway.engine import FireResult
+from gateway.engine import EngineError, FireResult
+from gateway.engine.errors import Overloaded
 from gateway.engine.sessions import SessionElsewhere, SessionGone
 
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name")]
@@ -90,10 +91,27 @@ def _facts(facts: list[Any]) -> list[dict[str, Any]]:
     return facts
 
 
+async def _on_ruleset_threads(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
+    """Runs ``fn`` on the rule set's own threads (its bulkhead: a session's fires are held to the
+    same queue, wait and refusals as the rule set's other fires), or on the shared pool when no
+    such rule set is live (``fn`` then answers why)."""
+    name = request.path_params.get("name")
+    state = request.app.state
+    try:
+        state.engine.live_compiled(name)
+    except EngineError:
+        return await run_blocking(fn, *args)
+    try:
+        return await state.bulkheads.of(name).run(lambda: fn(*args))
+    except Overloaded as exc:
+        state.metrics.fire_error(name, exc)
+        raise
+
+
 async def _at_owner(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
     """Runs ``fn`` here, or forwards the request to the process that owns the session."""
     try:
-        return await run_blocking(fn, *args)
+        return await _on_ruleset_threads(request, fn, *args)
     except SessionElsewhere as elsewhere:
         try:
             return await forward(request, elsewhere)

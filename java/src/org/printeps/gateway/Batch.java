@@ -540,6 +540,9 @@ final class Batch {
         String message;
         if ("runaway".equals(kind)) {
             message = "rules still firing after " + m.get("limit") + " firings (a rule loop?): " + Json.toJson(m.get("counts"));
+        } else if ("timeout".equals(kind)) {
+            message = "the fire was stopped after its time limit of " + m.get("limit_ms") + " ms (engine.fire_timeout_s), "
+                    + m.get("fired") + " rules had fired";
         } else {
             Object rule = m.get("rule");
             message = (rule == null ? "" : "rule '" + rule + "': ") + m.get("message");

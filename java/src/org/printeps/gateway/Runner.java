@@ -170,8 +170,14 @@ public final class Runner {
         return kieBase.newKieSession(conf, null);
     }
 
-    /** Fires {@code factsJson} (a JSON list of facts) in a fresh session. */
+    /** Fires {@code factsJson} (a JSON list of facts) in a fresh session, with no time limit. */
     public String fire(String factsJson, int limit, boolean returnFacts, boolean recordFacts) {
+        return fire(factsJson, limit, returnFacts, recordFacts, 0L);
+    }
+
+    /** Fires {@code factsJson} in a fresh session; a fire running longer than {@code timeoutMs}
+     *  (0: no limit) is halted and answers {@code {"ok":false,"kind":"timeout"}} (see {@link Watchdog}). */
+    public String fire(String factsJson, int limit, boolean returnFacts, boolean recordFacts, long timeoutMs) {
         List<Object> facts = new ArrayList<Object>();
         String error = buildFacts(types, factsJson, facts);
         if (error != null) return error;
@@ -183,7 +189,7 @@ public final class Runner {
             Recorder recorder = new Recorder(actions, types, recordFacts);
             session.addEventListener(recorder);
             for (Object f : facts) session.insert(f);
-            String answer = fireAndReport(session, recorder, types, limit, returnFacts);
+            String answer = fireAndReport(session, recorder, types, limit, returnFacts, null, timeoutMs);
             session.removeEventListener(recorder);
             reuse = idle != null && answer.startsWith("{\"ok\":true");  // not after a loop or a failing then-part
             return answer;
@@ -201,9 +207,20 @@ public final class Runner {
     /** {@link #fireAndReport} through an agenda filter (null: none). */
     static String fireAndReport(KieSession session, Recorder recorder, TypeRegistry types, int limit, boolean returnFacts,
                                 org.kie.api.runtime.rule.AgendaFilter filter) {
+        return fireAndReport(session, recorder, types, limit, returnFacts, filter, 0L);
+    }
+
+    /** {@link #fireAndReport} through an agenda filter (null: none), halted after {@code timeoutMs} (0: never). */
+    static String fireAndReport(KieSession session, Recorder recorder, TypeRegistry types, int limit, boolean returnFacts,
+                                org.kie.api.runtime.rule.AgendaFilter filter, long timeoutMs) {
         int n;
+        Watchdog.Watch watch = Watchdog.watch(session, timeoutMs);
         try {
             n = filter == null ? session.fireAllRules(limit) : session.fireAllRules(filter, limit);
+            if (watch != null && watch.halted) {
+                recorder.reset();
+                return timeoutError(timeoutMs, n);
+            }
             if (n >= limit && (filter == null ? session.fireAllRules(1) : session.fireAllRules(filter, 1)) > 0) return recorder.runaway(limit);
         } catch (ConsequenceException ce) {
             recorder.reset();
@@ -211,6 +228,8 @@ public final class Runner {
         } catch (RuntimeException re) {
             recorder.reset();
             return runtimeError(null, rootMessage(re));
+        } finally {
+            Watchdog.release(watch);
         }
         StringBuilder b = new StringBuilder(256);
         recorder.writeSuccess(b, n);
@@ -243,6 +262,11 @@ public final class Runner {
             Json.write(b, o, types);
         }
         b.append(']');
+    }
+
+    /** The answer of a fire halted by its time limit, after {@code fired} firings. */
+    static String timeoutError(long timeoutMs, int fired) {
+        return "{\"ok\":false,\"kind\":\"timeout\",\"limit_ms\":" + timeoutMs + ",\"fired\":" + fired + "}";
     }
 
     static String runtimeError(String rule, String message) {

@@ -33,6 +33,8 @@ public final class Session {
     /** Refraction carried over a move to a new version, until a fire empties the agenda (see Refraction). */
     private Refraction refraction;
     boolean disposed;
+    /** Time limit of each fire in ms (0: none), see {@link Watchdog}. */
+    private volatile long fireTimeoutMs;
 
     public Session(Runner runner, boolean recordFacts) {
         this(runner, recordFacts, false, false);
@@ -52,6 +54,9 @@ public final class Session {
         this.handles = trackHandles ? new Handles() : null;
         if (handles != null) session.addEventListener(handles);
     }
+
+    /** Sets the time limit of this session's fires ({@code engine.fire_timeout_s}; 0: none). */
+    public void setFireTimeoutMs(long timeoutMs) { this.fireTimeoutMs = timeoutMs; }
 
     /** Runs a batch of commands (a JSON list, see {@link Batch}); the answer is JSON. */
     public synchronized String execute(String commandsJson, int fireLimit) {
@@ -92,21 +97,28 @@ public final class Session {
         if (max > 0) {
             AgendaFilter filter = refraction;
             int n;
+            Watchdog.Watch watch = Watchdog.watch(session, fireTimeoutMs);
             try {
                 n = filter == null ? session.fireAllRules(max) : session.fireAllRules(filter, max);
+                if (watch != null && watch.halted) {
+                    recorder.reset();
+                    return Runner.timeoutError(fireTimeoutMs, n);
+                }
             } catch (org.kie.api.runtime.rule.ConsequenceException ce) {
                 recorder.reset();
                 return Runner.runtimeError(ce.getMatch() == null ? null : ce.getMatch().getRule().getName(), Runner.rootMessage(ce));
             } catch (RuntimeException re) {
                 recorder.reset();
                 return Runner.runtimeError(null, Runner.rootMessage(re));
+            } finally {
+                Watchdog.release(watch);
             }
             if (n < max) refraction = null;
             StringBuilder b = new StringBuilder(256);
             recorder.writeSuccess(b, n);
             return b.append('}').toString();
         }
-        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, false, refraction);
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, false, refraction, fireTimeoutMs);
         refraction = null;
         return answer;
     }
@@ -123,8 +135,7 @@ public final class Session {
     public synchronized String pushAt(String factsJson, long timestampMs, int limit, boolean returnFacts) {
         String error = insertFacts(factsJson, timestampMs);
         if (error != null) return error;
-        if (refraction == null) return Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts);
-        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction);
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction, fireTimeoutMs);
         refraction = null;
         return answer;
     }
@@ -245,7 +256,7 @@ public final class Session {
 
     /** Fires what is activated; the result holds the actions and firings since the last fire. */
     public synchronized String fire(int limit, boolean returnFacts) {
-        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction);
+        String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction, fireTimeoutMs);
         refraction = null;
         return answer;
     }

@@ -1,0 +1,255 @@
+"""Soak: the gateway under a steady mixed load for an hour (or as long as asked), so a leak shows as a slope.
+
+Runs ``printeps serve`` (1 worker, the shipped rule sets and queries, embedded database) and
+drives it with, all at once:
+
+- the teahouse entrance stream at 30 Hz (``POST /api/streams``: a party walking up to the
+  entrance and away again, over and over), which the shipped CustomerDetectionQuery turns into
+  reception decisions;
+- REST fires of the reception rule set (the 5-fact teahouse request, 2 connections, ~50/s);
+- KIE-style stateful sessions (``/api/rulesets/reception/sessions``: open, insert, fire, close,
+  one every 2 s, a few left open for a while so the count moves);
+- a deploy of the reception rule set every minute (the greeting changes back and forth).
+
+Every ``--sample-s`` it records the server's RSS (its process and children: the embedded database
+included), the JVM heap in use, the journal backlog (decisions not yet shipped), the open
+sessions, and the REST fire p99 of the interval; at the end it draws them over time as an SVG
+(``docs/img/soak.svg``) and, with ``--write-docs``, writes its section of docs/benchmarks.md.
+
+    .venv/bin/python bench/soak.py [--minutes 60] [--sample-s 10] [--write-docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from http_bench import free_port, start_server, teahouse_facts  # noqa: E402
+from report import machine_note, write_section  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+PLOT = ROOT / "docs" / "img" / "soak.svg"
+SECTION = "## Soak"
+ENTRANCE = "http://printeps.org/cafe/entrance"
+HZ = 30
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of ``pid`` and its descendants (MB), from /proc."""
+    total, todo, seen = 0, [pid], set()
+    while todo:
+        p = todo.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        try:
+            for line in Path(f"/proc/{p}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1])
+            for task in Path(f"/proc/{p}/task").iterdir():
+                children = (task / "children").read_text().split()
+                todo.extend(int(c) for c in children)
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue
+    return total / 1024
+
+
+def entrance_message(k: int, t0_ms: int) -> dict[str, Any]:
+    """The k-th reading: two people walking up to the entrance and away again (a 20 s cycle)."""
+    phase = (k % (20 * HZ)) / HZ
+    distance = round(abs(10.0 - phase) / 2 + 1.0, 3)  # 6 m -> 1 m -> 6 m
+    party = f"p{k // (20 * HZ)}"
+    return {"stream": ENTRANCE, "timestamp": t0_ms + int(k * 1000 / HZ), "message": {
+        "id": f"e{k}", "number_of_customers": 2, "customers": [
+            {"id": f"{party}a", "distance": distance, "age": 34, "gender": "female"},
+            {"id": f"{party}b", "distance": distance + 0.05, "age": 36, "gender": "male"}]}}
+
+
+class Load:
+    """The mixed load's tasks and what they saw."""
+
+    def __init__(self, url: str, until: float) -> None:
+        self.url, self.until = url, until
+        self.fire_latencies: list[float] = []
+        self.counts = {"stream_posts": 0, "stream_errors": 0, "fires": 0, "fire_errors": 0, "sessions": 0,
+                       "session_errors": 0, "deploys": 0, "deploy_errors": 0}
+
+    async def stream(self, client: httpx.AsyncClient) -> None:
+        t0_ms, k, start = int(time.time() * 1000), 0, time.perf_counter()
+        while time.perf_counter() < self.until:
+            r = await client.post("/api/streams", json=entrance_message(k, t0_ms))
+            self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
+            k += 1
+            await asyncio.sleep(max(0.0, start + k / HZ - time.perf_counter()))
+
+    async def fires(self, client: httpx.AsyncClient) -> None:
+        body = {"facts": teahouse_facts()}
+        while time.perf_counter() < self.until:
+            t0 = time.perf_counter()
+            r = await client.post("/api/rulesets/reception/fire", json=body)
+            if r.status_code == 200:
+                self.counts["fires"] += 1
+                self.fire_latencies.append(time.perf_counter() - t0)
+            else:
+                self.counts["fire_errors"] += 1
+            await asyncio.sleep(0.04)
+
+    async def sessions(self, client: httpx.AsyncClient) -> None:
+        held: list[str] = []
+        facts = teahouse_facts()
+        while time.perf_counter() < self.until:
+            try:
+                r = await client.post("/api/rulesets/reception/sessions", json={"facts": facts})
+                r.raise_for_status()
+                sid = r.json()["id"]
+                (await client.post(f"/api/rulesets/reception/sessions/{sid}/fire")).raise_for_status()
+                held.append(sid)
+                while len(held) > 5:  # a few stay open a while, so the count is not always 0
+                    (await client.delete(f"/api/rulesets/reception/sessions/{held.pop(0)}")).raise_for_status()
+                self.counts["sessions"] += 1
+            except httpx.HTTPError:
+                self.counts["session_errors"] += 1
+            await asyncio.sleep(2.0)
+        for sid in held:
+            await client.delete(f"/api/rulesets/reception/sessions/{sid}")
+
+    async def deploys(self, client: httpx.AsyncClient) -> None:
+        current = (await client.get("/api/rulesets/reception")).json()["files"]
+        n = 0
+        while True:
+            await asyncio.sleep(60.0)
+            if time.perf_counter() >= self.until:
+                return
+            n += 1
+            files = {name: text.replace("Welcome", "Welcome back") if n % 2 else text for name, text in current.items()}
+            r = await client.put("/api/rulesets/reception", json={"files": files, "comment": f"soak {n}", "force": True})
+            self.counts["deploys" if r.status_code == 201 else "deploy_errors"] += 1
+
+
+async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, started: float,
+                 rows: list[dict[str, Any]]) -> None:
+    while time.perf_counter() < load.until:
+        await asyncio.sleep(every)
+        latencies, load.fire_latencies = load.fire_latencies, []
+        ordered = sorted(latencies)
+        health = (await client.get("/health")).json()
+        engine, store = health.get("engine", {}), health.get("store", {})
+        row = {"t_min": round((time.perf_counter() - started) / 60, 2), "rss_mb": round(rss_mb(pid), 1),
+               "heap_mb": (engine.get("jvm_heap") or {}).get("used"), "backlog": store.get("buffered"),
+               "sessions": engine.get("sessions"),
+               "fire_p99_ms": round(ordered[int(0.99 * len(ordered))] * 1000, 2) if ordered else None,
+               "fires": len(ordered)}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+
+
+async def soak(url: str, pid: int, minutes: float, every: float) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    started = time.perf_counter()
+    load = Load(url, started + minutes * 60)
+    rows: list[dict[str, Any]] = []
+    limits = httpx.Limits(max_connections=20)
+    async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as client:
+        await asyncio.gather(load.stream(client), load.fires(client), load.fires(client), load.sessions(client),
+                             load.deploys(client), sample(load, client, pid, every, started, rows))
+    return rows, load.counts
+
+
+PANELS = (("RSS, server and children (MB)", "rss_mb"), ("JVM heap in use (MB)", "heap_mb"),
+          ("journal backlog (decisions)", "backlog"), ("open sessions", "sessions"),
+          ("REST fire p99 (ms)", "fire_p99_ms"))
+
+
+def plot(rows: list[dict[str, Any]], note: str) -> str:
+    """Five small panels over time (linear scales), as SVG: no plotting library needed."""
+    w, h, pad = 300, 170, 46
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{2 * w + 20}" height="{3 * (h + 10) + 30}" '
+           'font-family="sans-serif" font-size="11">', '<rect width="100%" height="100%" fill="white"/>']
+    t_max = max((r["t_min"] for r in rows), default=1) or 1
+    for k, (title, key) in enumerate(PANELS):
+        ox, oy = (k % 2) * (w + 20), (k // 2) * (h + 10)
+        pts = [(r["t_min"], r[key]) for r in rows if r.get(key) is not None]
+        hi = max((v for _, v in pts), default=1) * 1.1 or 1
+        x = lambda t: ox + pad + t / t_max * (w - pad - 14)  # noqa: E731
+        y = lambda v: oy + h - 26 - v / hi * (h - 56)  # noqa: E731
+        out.append(f'<text x="{ox + pad}" y="{oy + 16}" font-weight="bold">{title}</text>')
+        out.append(f'<line x1="{ox + pad}" y1="{oy + h - 26}" x2="{ox + w - 10}" y2="{oy + h - 26}" stroke="#888"/>')
+        out.append(f'<line x1="{ox + pad}" y1="{oy + 30}" x2="{ox + pad}" y2="{oy + h - 26}" stroke="#888"/>')
+        for frac in (0, 0.5, 1):
+            v = hi / 1.1 * frac
+            out.append(f'<text x="{ox + pad - 4}" y="{y(v) + 4:.1f}" text-anchor="end">{v:.3g}</text>')
+        for frac in (0, 0.5, 1):
+            out.append(f'<text x="{x(t_max * frac):.1f}" y="{oy + h - 10}" text-anchor="middle">{t_max * frac:.3g}</text>')
+        if len(pts) > 1:
+            path = " ".join(f"{x(t):.1f},{y(v):.1f}" for t, v in pts)
+            out.append(f'<polyline points="{path}" fill="none" stroke="#1565c0" stroke-width="2"/>')
+        out.append(f'<text x="{ox + w - 10}" y="{oy + h}" text-anchor="end" fill="#555">minutes</text>')
+    out.append(f'<text x="10" y="{3 * (h + 10) + 20}" fill="#555">{note}</text>')
+    out.append("</svg>")
+    return "\n".join(out)
+
+
+def slope_per_hour(rows: list[dict[str, Any]], key: str) -> float | None:
+    """Least-squares slope of ``key`` over time, per hour (the second half only: past the warm-up)."""
+    pts = [(r["t_min"], r[key]) for r in rows[len(rows) // 2:] if r.get(key) is not None]
+    if len(pts) < 2:
+        return None
+    mt = sum(t for t, _ in pts) / len(pts)
+    mv = sum(v for _, v in pts) / len(pts)
+    den = sum((t - mt) ** 2 for t, _ in pts)
+    return None if den == 0 else sum((t - mt) * (v - mv) for t, v in pts) / den * 60
+
+
+def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str) -> str:
+    lines = [SECTION, "",
+             f"`bench/soak.py --minutes {minutes:g}` ({started}, {machine}; the load runs on the same cores): "
+             "`printeps serve` (1 worker, embedded database) under the teahouse entrance stream at 30 Hz, REST fires "
+             "of the reception rule set (2 connections, ~50/s), a stateful session opened, fired and closed every 2 s "
+             "(5 kept open) and a deploy of the reception rule set every minute. "
+             f"Load sent: {json.dumps(counts)}.", "",
+             "![Soak: RSS, JVM heap, journal backlog, open sessions and REST fire p99 over time](img/soak.svg)", "",
+             "| measure | first sample | last sample | max | slope per hour (second half) |", "|---|---|---|---|---|"]
+    for title, key in PANELS:
+        values = [r[key] for r in rows if r.get(key) is not None]
+        if not values:
+            continue
+        slope = slope_per_hour(rows, key)
+        lines.append(f"| {title} | {values[0]} | {values[-1]} | {max(values)} | "
+                     f"{'-' if slope is None else f'{slope:+.3g}'} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--minutes", type=float, default=60.0)
+    parser.add_argument("--sample-s", type=float, default=10.0)
+    parser.add_argument("--write-docs", action="store_true", help=f"write {PLOT.name} and the section of docs/benchmarks.md")
+    args = parser.parse_args()
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    machine = machine_note()
+    port = free_port()
+    with tempfile.TemporaryDirectory() as tmp:
+        server = start_server(Path(tmp), port)
+        try:
+            rows, counts = asyncio.run(soak(f"http://127.0.0.1:{port}", server.pid, args.minutes, args.sample_s))
+        finally:
+            server.terminate()
+            server.wait(timeout=60)
+    text = report(rows, counts, args.minutes, started, machine)
+    print(text)
+    if args.write_docs:
+        PLOT.parent.mkdir(parents=True, exist_ok=True)
+        PLOT.write_text(plot(rows, f"bench/soak.py, {started}, {args.minutes:g} min, 2 shared cores; linear scales"))
+        write_section(SECTION, text)
+
+
+if __name__ == "__main__":
+    main()
