@@ -38,7 +38,7 @@ system-deps:
 browser:
 	@command -v chromium >/dev/null || ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q chromium)
 
-# Node runs the workbench's own JavaScript tests (web/test/*.mjs, through tests/web/test_node.py).
+# Node runs the workbench's own JavaScript tests (web/test/*.mjs, tests/workbench/test_workbench_checks.py).
 node:
 	@command -v node >/dev/null || ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q nodejs)
 

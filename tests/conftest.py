@@ -10,6 +10,10 @@ import pytest
 
 from gw_testing import open_test_store
 
+# Under CI=true a skip is a failure unless tests/skip_allowlist.txt lists it (tests/ci_skips.py).
+from ci_skips import (  # noqa: F401
+    pytest_collectreport, pytest_runtest_makereport, pytest_sessionfinish, pytest_terminal_summary)
+
 # Keep the test runs' caches (compiled Java helpers) in one place across runs.
 os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printeps"))
 

@@ -9,6 +9,9 @@ from pathlib import Path
 
 import pytest
 
+pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
+pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
+
 from gateway.ros.convert import dict_to_entrance, to_dict
 from gateway.ros.runtime import RosRuntime
 from gateway.ros.scenario import load_scenario
