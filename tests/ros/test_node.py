@@ -55,10 +55,13 @@ def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_i
         sensor = rt.make(EntranceSensorSim, load_scenario(SCENARIO), speed=4.0)
         sensor.start()
         assert sensor.done.wait(30)
-        # the scenario ends with the party of four taken to its table: wait for that last call
+        # every published reading has been taken in, and the scenario's last call (the party of
+        # four taken to its table) made; 60 s is a safety limit
         last = ("move_to", "table for four")
-        assert wait_for(lambda: gateway.idle() and robot.calls and (
-            robot.calls[-1]["service"], robot.calls[-1].get("location")) == last, 20), robot.calls
+        stats = gateway.ros.stats
+        assert wait_for(lambda: gateway.idle() and stats["readings"] + stats["rejected"] + stats.get("dropped", 0) == sensor.published
+                        and robot.calls and (robot.calls[-1]["service"], robot.calls[-1].get("location")) == last,
+                        60), (stats, sensor.published, robot.calls)
         store = gateway.store
         assert store.flush()
         said = [c["text"] for c in robot.calls if c["service"] == "speak"]
