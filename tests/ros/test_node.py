@@ -59,8 +59,9 @@ def test_scenario_reaches_the_robot_in_order_and_everything_is_recorded(domain_i
         # four taken to its table) made; 60 s is a safety limit
         last = ("move_to", "table for four")
         stats = gateway.ros.stats
-        assert wait_for(lambda: gateway.idle() and stats["readings"] + stats["rejected"] + stats.get("dropped", 0) == sensor.published
-                        and robot.calls and (robot.calls[-1]["service"], robot.calls[-1].get("location")) == last,
+        taken_in = lambda: stats["readings"] + stats["rejected"] + stats.get("dropped", 0)  # noqa: E731
+        assert wait_for(lambda: gateway.idle() and taken_in() == sensor.published and robot.calls
+                        and (robot.calls[-1]["service"], robot.calls[-1].get("location")) == last,
                         60), (stats, sensor.published, robot.calls)
         store = gateway.store
         assert store.flush()
