@@ -1,20 +1,28 @@
 # Two commands on a fresh machine (see README):
 #   make run    installs everything, then starts the gateway with the teahouse demo
-#   make test   installs everything (plus the test browser), then runs the test suite
+#   make test   installs everything (plus the test browser and node), then runs the whole test suite
+#   make test-fast  the inner loop: the suite without the tests marked `slow` (see README)
+#   make lock   refreshes requirements.lock on purpose (exact versions + hashes of every dependency)
 PY      ?= python3.11
 VENV    ?= .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install system-deps browser run serve test bench clean
+.PHONY: install system-deps browser node run serve test test-fast lock bench clean
 
-$(STAMP): pyproject.toml ros/install.sh ros/requirements-jazzy.txt $(wildcard ros/printeps_interfaces/msg/*.msg ros/printeps_interfaces/srv/*.srv)
+# Installs come from the lock files only: exact versions with their hashes (pyproject.toml keeps
+# lower bounds for people who install the package into an environment of their own).
+LOCK        := requirements.lock
+LOCK_NODEPS := requirements-nodeps.lock
+
+$(STAMP): pyproject.toml $(LOCK) $(LOCK_NODEPS) ros/install.sh ros/requirements-jazzy.txt $(wildcard ros/printeps_interfaces/msg/*.msg ros/printeps_interfaces/srv/*.srv)
 	$(MAKE) system-deps
 	[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[embedded-db,test]"
-	$(BIN)/pip install -q --no-deps python-drools-sdk==0.0.3
+	$(BIN)/pip install -q --require-hashes -r $(LOCK)
+	$(BIN)/pip install -q --require-hashes --no-deps -r $(LOCK_NODEPS)
+	$(BIN)/pip install -q --no-deps -e .
 	bash ros/install.sh $(BIN)/python
 	$(BIN)/printeps build-java
 	touch $(STAMP)
@@ -31,14 +39,37 @@ system-deps:
 browser:
 	@command -v chromium >/dev/null || ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q chromium)
 
+# Node runs the workbench's own JavaScript tests (web/test/*.mjs, tests/workbench/test_workbench_checks.py).
+node:
+	@command -v node >/dev/null || ($(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q nodejs)
+
+# Refresh the lock files on purpose, after changing a dependency in pyproject.toml or
+# ros/requirements-jazzy.txt. uv runs from a throwaway venv of its own, never from .venv.
+LOCK_VENV ?= /tmp/printeps-lock-venv
+UV_VERSION := 0.13.9
+lock:
+	[ -x $(LOCK_VENV)/bin/uv ] || ($(PY) -m venv $(LOCK_VENV) && $(LOCK_VENV)/bin/pip install -q uv==$(UV_VERSION))
+	$(LOCK_VENV)/bin/uv pip compile pyproject.toml ros/requirements-jazzy.txt --extra embedded-db --extra test \
+	  --generate-hashes --python-version 3.11 --python-platform x86_64-unknown-linux-gnu \
+	  --custom-compile-command "make lock" -o $(LOCK)
+	$(LOCK_VENV)/bin/uv pip compile requirements-nodeps.in --no-deps \
+	  --generate-hashes --python-version 3.11 --python-platform x86_64-unknown-linux-gnu \
+	  --custom-compile-command "make lock" -o $(LOCK_NODEPS)
+
 run: install
 	$(BIN)/printeps demo
 
 serve: install
 	$(BIN)/printeps serve
 
-test: install browser
+# Everything, slow tests included (what CI runs). Under CI=true a skipped test is a failure unless
+# tests/skip_allowlist.txt names it with its reason.
+test: install browser node
 	$(BIN)/pytest
+
+# The inner loop: everything but the tests marked `slow` (long soaks, cluster faults, browser stories).
+test-fast: install browser node
+	$(BIN)/pytest -m "not slow"
 
 bench: install
 	$(BIN)/python bench/run_all.py

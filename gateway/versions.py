@@ -220,6 +220,14 @@ class MemoryCatalog:
         self._log: list[Change] = []
         self._lock = threading.Condition()
 
+    def sharing(self, origin: str) -> "MemoryCatalog":
+        """Another process's catalog over this one's versions and log (one shared source, the
+        in-memory stand-in for one database): its changes carry its own origin, so tests of two
+        processes run over two objects, not one object twice."""
+        other = MemoryCatalog(origin)
+        other._items, other._log, other._lock = self._items, self._log, self._lock
+        return other
+
     def head(self, kind: str, name: str) -> Head | None:
         with self._lock:
             item = self._items.get((kind, name))

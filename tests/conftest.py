@@ -10,6 +10,10 @@ import pytest
 
 from gw_testing import open_test_store
 
+# Under CI=true a skip is a failure unless tests/skip_allowlist.txt lists it (tests/ci_skips.py).
+from ci_skips import (  # noqa: F401
+    pytest_collectreport, pytest_runtest_makereport, pytest_sessionfinish, pytest_terminal_summary)
+
 # Keep the test runs' caches (compiled Java helpers) in one place across runs.
 os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printeps"))
 
@@ -27,8 +31,11 @@ def browser():
     running instance per thread, so every browser test shares this one."""
     if not os.path.exists(CHROMIUM):
         pytest.skip(f"{CHROMIUM} is missing: apt-get install -y chromium")
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
 
+    # expect()'s wait is a safety limit, not a speed claim: 5 s (Playwright's default) is missed on a
+    # loaded 2-core machine by a first check that has to warm the JVM up.
+    expect.set_options(timeout=20_000)
     with sync_playwright() as playwright:
         launched = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
         yield launched

@@ -47,3 +47,26 @@ def built_gateway(settings, mongo, folder: Path, **options):
             gateway.close()
     finally:
         store.close()
+
+
+def hold_build(monkeypatch, engine, comment: str, stage: str = "compile"):
+    """Hold the real build of the deploy with ``comment`` at its first report of ``stage`` until
+    the returned event is set: a test hook on the real engine (the build, its progress, its cancel
+    and the gateway's answers are all real), so a test's steps never race the build's own pace on
+    a loaded machine or with a warm compile cache. The job's progress reporter runs first, so the
+    job is seen at that stage and a cancel asked for meanwhile is heard at the next report."""
+    import threading
+
+    release = threading.Event()
+    deploy = engine.deploy
+
+    def held(name, files, *args, on_progress=None, **kwargs):
+        def progress(done: int, total: int, reported: str) -> None:
+            if on_progress is not None:
+                on_progress(done, total, reported)
+            if reported == stage and kwargs.get("comment") == comment:
+                release.wait(120)
+        return deploy(name, files, *args, on_progress=progress, **kwargs)
+
+    monkeypatch.setattr(engine, "deploy", held)
+    return release

@@ -110,7 +110,10 @@ def _locate_unencodable(facts: Any, exc: Exception) -> dict[str, Any]:
                         "message": f"field name {key!r}: a {type(key).__name__} is not a JSON object key"}
             try:
                 json.dumps(value, allow_nan=False, default=_uuid_or_enum)
-            except (ValueError, TypeError, RecursionError):
+            except RecursionError:
+                return {"index": index, "type": fact.get("type"), "id": fact.get("id"), "field": str(key),
+                        "message": f"field '{key}': a {type(value).__name__} nested too deeply to encode as JSON"}
+            except (ValueError, TypeError):
                 bad = "NaN or infinity" if isinstance(value, float) and not math.isfinite(value) else type(value).__name__
                 return {"index": index, "type": fact.get("type"), "id": fact.get("id"), "field": str(key),
                         "message": f"field '{key}': {bad} is not a JSON value"}

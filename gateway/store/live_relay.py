@@ -42,6 +42,9 @@ class LiveRelay:
         self.poll_interval_s = poll_interval_s
         self.relayed = 0
         self.last_error: str | None = None
+        # set while the relay follows the database (a subscriber watches and the stream or poll is
+        # open): what is written from then on is relayed. Lets callers (and tests) wait on it.
+        self.following = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="live-relay", daemon=True)
         self._thread.start()
@@ -83,21 +86,29 @@ class LiveRelay:
         match = {"operationType": "insert", "ns.coll": {"$in": list(RELAYED)},
                  "fullDocument._meta.process": {"$ne": self.process}}
         with self.db.watch([{"$match": match}], max_await_time_ms=int(IDLE_CHECK_S * 1000)) as stream:
-            while not self._stop.is_set() and self._watched():
-                change = stream.try_next()
-                if change is not None:
-                    self.relay(change["ns"]["coll"], change["fullDocument"])
+            self.following.set()
+            try:
+                while not self._stop.is_set() and self._watched():
+                    change = stream.try_next()
+                    if change is not None:
+                        self.relay(change["ns"]["coll"], change["fullDocument"])
+            finally:
+                self.following.clear()
 
     def _poll(self) -> None:
         """Without change streams: new documents by ``_id`` (time-ordered ObjectIds) every interval."""
         since = {name: ObjectId() for name in RELAYED}  # from now on
-        while not self._stop.is_set() and self._watched():
-            for name in RELAYED:
-                for doc in self.db[name].find({"_id": {"$gt": since[name]}, "_meta.process": {"$ne": self.process}}
-                                              ).sort("_id", 1).limit(1000):
-                    since[name] = doc["_id"]
-                    self.relay(name, doc)
-            self._stop.wait(self.poll_interval_s)
+        self.following.set()
+        try:
+            while not self._stop.is_set() and self._watched():
+                for name in RELAYED:
+                    for doc in self.db[name].find({"_id": {"$gt": since[name]}, "_meta.process": {"$ne": self.process}}
+                                                  ).sort("_id", 1).limit(1000):
+                        since[name] = doc["_id"]
+                        self.relay(name, doc)
+                self._stop.wait(self.poll_interval_s)
+        finally:
+            self.following.clear()
 
     # ---- one document --------------------------------------------------------------------------------
     def relay(self, collection: str, doc: dict[str, Any]) -> None:

@@ -8,6 +8,8 @@ import pytest
 
 from gateway.workflow.agile import TABLES, OwnerClient, apply, behaviour, running_gateway, scenarios
 
+pytestmark = pytest.mark.slow  # the sixteen Table-2 changes one after another on one gateway: a story
+
 SCENARIOS = scenarios()
 
 

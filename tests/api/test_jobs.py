@@ -166,27 +166,32 @@ def test_a_running_build_is_cancelled_while_compiling_and_nothing_changes(client
 
 
 def test_a_full_job_queue_is_told_as_429_over_rest(client, api_gateway, monkeypatch):
-    import threading
+    """The gateway's own job service and engine: one real build held while compiling, one queued
+    behind it, the next refused (the queue bound lowered to 1 for this test)."""
+    import uuid
 
-    gate = threading.Event()
+    from gw_testing import hold_build
 
-    class SlowEngine:
-        def deploy(self, *args, **kwargs):
-            gate.wait(30)
-            raise AssertionError("not reached in this test")
-
-    service = JobService(SlowEngine(), JobRecords(), "process-d", max_queued=1)
-    monkeypatch.setattr(api_gateway, "jobs", service)
+    marker = uuid.uuid4().hex[:8]  # a build no compile cache has seen
+    release = hold_build(monkeypatch, api_gateway.engine, f"held {marker}")
+    monkeypatch.setattr(api_gateway.jobs, "max_queued", 1)
+    locations = []
     try:
-        first = client.put("/api/rulesets/jobs-g", json={"files": files("g")}, headers=ASYNC)
+        first = client.put("/api/rulesets/jobs-g", json={"files": files(marker), "comment": f"held {marker}"},
+                           headers=ASYNC)
         assert first.status_code == 202
-        deadline = time.monotonic() + 10  # running (out of the queue) before the next ones come
-        while client.get(first.headers["location"]).json()["status"] != "running" and time.monotonic() < deadline:
-            time.sleep(0.01)
-        queued = client.put("/api/rulesets/jobs-g", json={"files": files("g")}, headers=ASYNC)
-        assert queued.status_code == 202
-        refused = client.put("/api/rulesets/jobs-g", json={"files": files("g")}, headers=ASYNC)
-        assert refused.status_code == 429 and "engine.max_queued_jobs" in refused.json()["error"]
+        locations.append(first.headers["location"])
+        deadline = time.monotonic() + 120  # a safety limit: the build is held at its compile stage
+        while (client.get(first.headers["location"]).json().get("progress") or {}).get("stage") != "compile":
+            assert time.monotonic() < deadline, client.get(first.headers["location"]).json()
+            time.sleep(0.02)
+        queued = client.put("/api/rulesets/jobs-g", json={"files": files(marker)}, headers=ASYNC)
+        assert queued.status_code == 202 and queued.json()["status"] == "queued"
+        locations.append(queued.headers["location"])
+        refused = client.put("/api/rulesets/jobs-g", json={"files": files(marker)}, headers=ASYNC)
+        assert refused.status_code == 429 and "engine.max_queued_jobs = 1" in refused.json()["error"], refused.text
     finally:
-        gate.set()
-        service.close()
+        for location in reversed(locations):
+            client.delete(location)
+        release.set()
+    assert [follow(client, location)["status"] for location in locations] == ["cancelled", "cancelled"]

@@ -242,8 +242,10 @@ def test_deploys_during_load_fail_no_fire(cluster):
         w.start()
     try:
         deployed = [deploy([a, b, c][k % 3].url, f"Round{k}").json()["version"] for k in range(10)]
+        # the load goes on past the last deploy: a dozen more fires answered (or failed) after it
+        after = len(results)
+        assert wait_for(lambda: len(results) >= after + 12, 60) is not None, "the load stopped after the deploys"
     finally:
-        time.sleep(1.0)
         stop.set()
         for w in workers:
             w.join(timeout=30)
@@ -259,10 +261,24 @@ def test_sigkill_under_load_fails_nothing_on_the_others_and_loses_no_acknowledge
     workers = [threading.Thread(target=load, args=([p.url for p in (a, b, c)], stop, results)) for _ in range(4)]
     for w in workers:
         w.start()
-    time.sleep(2.0)
-    c.signal(signal.SIGKILL)
-    time.sleep(2.0)
-    stop.set()
+
+    def answered(urls: set[str], since: int, each: int) -> bool:
+        counts = {u: 0 for u in urls}
+        for url, status, _ in results[since:]:
+            if url in counts and status == 200:
+                counts[url] += 1
+        return all(n >= each for n in counts.values())
+
+    try:
+        # every process is under load and answering before C dies...
+        assert wait_for(lambda: answered({a.url, b.url, c.url}, 0, 5), 60) is not None, results[-5:]
+        c.signal(signal.SIGKILL)
+        killed_at = len(results)
+        # ...and the others go on answering after it (C's calls fail meanwhile)
+        assert wait_for(lambda: answered({a.url, b.url}, killed_at, 10)
+                        and any(r[0] == c.url and r[1] != 200 for r in results[killed_at:]), 60) is not None, results[-5:]
+    finally:
+        stop.set()
     for w in workers:
         w.join(timeout=30)
     others = [r for r in results if r[0] != c.url]

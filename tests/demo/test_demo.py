@@ -12,7 +12,7 @@ pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built
 from gateway.config import Settings  # noqa: E402
 from gateway.demo import run_demo  # noqa: E402
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]  # the whole demo end to end
 
 
 def test_teahouse_reception_end_to_end(tmp_path, monkeypatch) -> None:

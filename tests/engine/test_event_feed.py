@@ -668,14 +668,16 @@ def test_close_from_a_callback_in_the_submitting_thread_returns_promptly(session
     def on_result(result: FireResult) -> None:
         if seq_of(result) == 0 and threading.current_thread() is threading.main_thread():
             begun = time.monotonic()
-            feed.close(timeout=1.5)
+            feed.close(timeout=30)
             took.append(time.monotonic() - begun)
 
     feed = session.feed(on_result, linger_ms=60_000)  # the feed's thread leaves the answer to us
     feed.submit(ping(0))
     feed.flush(5)  # delivers it here, in the main thread, which closes from the callback
     assert took, "the answer was not delivered by the main thread"
-    assert took[0] < 1.0
+    # the bug waited out the whole close timeout (30 s); a prompt close is far below it even on a
+    # loaded machine (a safety limit, not a speed claim)
+    assert took[0] < 10.0, took
 
 
 @pytest.mark.timeout(60)

@@ -308,27 +308,27 @@ def test_values_json_cannot_carry_are_refused_naming_the_field(value):
     assert type(value).__name__ in problem["message"]
 
 
-@pytest.mark.parametrize("depth", [300, 5_000])
-def test_deep_nesting_encodes_or_is_refused(depth):
-    nested: object = 1
+def _nested(depth: int, kind: str) -> object:
+    nested: object = 1 if kind == "list" else {}
     for _ in range(depth):
-        nested = [nested]
-    facts = [{"type": "X", "deep": nested}]
-    try:
-        data = encode_facts_bytes(facts, 10)
-    except FactError as err:
-        assert err.errors and err.errors[0]["index"] in (0, -1)
-    else:
-        assert json.loads(data) == facts
-    nested_dict: dict = {}
-    cursor = nested_dict
-    for _ in range(depth):
-        cursor["d"] = {}
-        cursor = cursor["d"]
-    try:
-        encode_facts_bytes([{"type": "X", "deep": nested_dict}], 10)
-    except FactError:
-        pass
+        nested = [nested] if kind == "list" else {"d": nested}
+    return nested
+
+
+@pytest.mark.parametrize("kind", ["list", "dict"])
+def test_moderate_nesting_encodes_exactly(kind):
+    facts = [{"type": "X", "deep": _nested(300, kind)}]
+    assert json.loads(encode_facts_bytes(facts, 10)) == facts
+
+
+@pytest.mark.parametrize("kind", ["list", "dict"])
+def test_nesting_too_deep_for_json_is_refused_naming_the_fact_and_field(kind):
+    facts = [{"type": "Ok", "id": "a"}, {"type": "X", "id": "b", "deep": _nested(5_000, kind)}]
+    with pytest.raises(FactError) as err:
+        encode_facts_bytes(facts, 10)
+    problem = err.value.errors[0]
+    assert (problem["index"], problem["id"], problem["field"]) == (1, "b", "deep")
+    assert "nested too deeply" in problem["message"]
 
 
 def test_300_deep_nesting_behaves_like_the_strict_encoder():

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
-pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
+from gateway.config import Settings
 
-from gateway.config import Settings  # noqa: E402
+# No folder-wide skip: test_core.py is plain Python and runs everywhere. The modules that need rclpy
+# skip on their own without it (and under CI=true a skip is a failure, tests/conftest.py).
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 _domains = itertools.count(30 + os.getpid() % 40)

@@ -11,6 +11,9 @@ from pathlib import Path
 
 import pytest
 
+pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
+pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
+
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -46,11 +46,11 @@ def test_other_processes_writes_reach_a_watched_feed_and_its_own_do_not(store: I
         record.on_engine_event("fire", {"decision_id": decision_id, "ruleset": "reception", "version": 2,
                                         "origin": "ros", "fired": ["greet"], "actions": [{"module": "say"}]})
         assert store.flush(10)
-        time.sleep(0.5)
-        assert relay.relayed == 0  # nobody watches: nothing is followed, nothing relayed
+        # nobody watches: nothing is followed (that decision is never relayed: see the first event below)
+        assert not relay.following.is_set() and relay.relayed == 0
         watcher = feed.subscribe(replay=False)
         own.feed.subscribe(replay=False)
-        time.sleep(0.6)  # the relay notices its subscriber and opens its stream
+        wait_until(lambda: relay.following.is_set() and own.following.is_set())  # both noticed their subscriber
         decision_id = str(ObjectId())
         record.on_engine_event("fire", {"decision_id": decision_id, "ruleset": "reception", "version": 2,
                                         "origin": "ros", "fired": ["greet"], "actions": [{"module": "say"}]})

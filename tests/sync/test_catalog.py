@@ -43,13 +43,14 @@ def wait_for(cond, timeout: float = 10.0) -> bool:
 def catalogs(request, store):
     """Two catalogs over the same source of truth (two processes), on MongoDB or in memory."""
     if request.param == "memory":
-        shared = MemoryCatalog("p1")
-        return shared, shared
+        first = MemoryCatalog("p1")
+        return first, first.sharing("p2")
     return MongoCatalog(store.db, "p1"), MongoCatalog(store.db, "p2")
 
 
 def test_versions_heads_conflicts_rollback_delete_history(catalogs):
     one, two = catalogs
+    assert one is not two and (one.origin, two.origin) == ("p1", "p2")
     info, seq1 = one.save("ruleset", "r", {"files": {"a.drl": "x"}}, author="alice", comment="first", hash="h1",
                           base_version=0)
     assert info.version == 1 and two.head("ruleset", "r").current == 1
@@ -70,6 +71,8 @@ def test_versions_heads_conflicts_rollback_delete_history(catalogs):
     info3, _ = one.save("ruleset", "r", {"files": {}}, author="alice", comment="again", hash="h3")
     assert info3.version == 3  # numbering continues after a delete
     assert [c.event for c in two.history("ruleset", "r")] == ["deploy", "deploy", "rollback", "delete", "deploy"]
+    # each change names the process that made it, seen alike from both
+    assert [c.origin for c in one.history("ruleset", "r")] == ["p1", "p2", "p1", "p2", "p1"]
     assert [v.version for v in two.versions("ruleset", "r")] == [1, 2, 3]
     assert one.changes_since(0)[-1].seq == two.last_seq()
 

@@ -40,15 +40,13 @@ def approaching_party(t0_ms: int = 10_000) -> list[dict]:
 
 
 def test_decisions_from_every_origin_are_recorded_and_survive_a_restart(tmp_path, mongo):
-    pytest.importorskip("rclpy")
+    """REST, KIE, stream and workflow decisions (no ROS needed: the ROS origin has its own test)."""
     from gateway.app import build_gateway
-    from gateway.ros.runtime import RosRuntime
 
     settings = settings_in(tmp_path)
-    settings.ros.domain_id = 77
     store = open_test_store(mongo, tmp_path)
     try:
-        gateway = build_gateway(settings, store=store, ros=True, warm_up=False)
+        gateway = build_gateway(settings, store=store, ros=False, warm_up=False)
         try:
             http = TestClient(gateway.app)
             rest = http.post("/api/rulesets/reception/fire", json={"facts": RECEPTION_FACTS},
@@ -63,16 +61,8 @@ def test_decisions_from_every_origin_are_recorded_and_survive_a_restart(tmp_path
                                 if r["key"] == "decision-id")
             for message in approaching_party():
                 assert http.post("/api/streams", json=message).status_code == 200
-            from printeps_interfaces.srv import FireBusinessRules
-            from rclpy.node import Node
-
-            with RosRuntime(domain_id=77) as rt:
-                client = rt.make(Node, "caller").create_client(FireBusinessRules, "fire_business_rules")
-                assert client.wait_for_service(timeout_sec=15)
-                ros = client.call(FireBusinessRules.Request(ruleset="reception", facts_json=json.dumps(RECEPTION_FACTS),
-                                                            request_id="ros-req"), timeout_sec=10)
-            assert ros.success
-            run = http.post("/api/workflows/greeting/run", json={"inputs": {}}).json()
+            run = http.post("/api/workflows/greeting/run", json={"inputs": {}})
+            assert run.status_code == 200, run.text
             assert gateway.store.flush()
         finally:
             gateway.close()
@@ -82,13 +72,13 @@ def test_decisions_from_every_origin_are_recorded_and_survive_a_restart(tmp_path
             http = TestClient(again.app)
             page = http.get("/api/decisions", params={"limit": 100}).json()
             origins = {d["origin"] for d in page["decisions"]}
-            assert {"rest", "kie", "stream", "ros"} <= origins, origins
-            if any(s.get("module") == "fire_rules" for s in run.get("steps", [])):
-                assert "workflow" in origins
+            # the greeting workflow's first step always fires the reception rules
+            assert {"rest", "kie", "stream", "workflow"} <= origins, origins
+            workflow = http.get("/api/decisions", params={"origin": "workflow"}).json()["decisions"]
+            assert workflow and workflow[0]["ruleset"] == "reception", workflow
             one = http.get(f"/api/decisions/{rest.json()['decision_id']}").json()
             assert one["correlation_id"] == "4bf92f3577b34da6a3ce929d0e0e4736"
             assert http.get(f"/api/decisions/{kie_decision}").json()["origin"] == "kie"
-            assert http.get(f"/api/decisions/{ros.decision_id}").json()["correlation_id"] == "ros-req"
             stream = http.get("/api/decisions", params={"origin": "stream"}).json()["decisions"]
             assert stream and stream[0]["ruleset"] == "reception" and stream[0]["correlation_id"].startswith(
                 "CustomerDetectionQuery@")
@@ -100,6 +90,40 @@ def test_decisions_from_every_origin_are_recorded_and_survive_a_restart(tmp_path
             first = http.get("/api/decisions", params={"limit": 1}).json()
             second = http.get("/api/decisions", params={"limit": 1, "cursor": first["next_cursor"]}).json()
             assert first["decisions"][0]["decision_id"] > second["decisions"][0]["decision_id"]  # newest first
+        finally:
+            again.close()
+    finally:
+        store.close()
+
+
+@pytest.mark.ros
+def test_ros_decisions_are_recorded_with_their_request_id_and_survive_a_restart(tmp_path, mongo):
+    from printeps_interfaces.srv import FireBusinessRules
+    from rclpy.node import Node
+
+    from gateway.app import build_gateway
+    from gateway.ros.runtime import RosRuntime
+
+    settings = settings_in(tmp_path)
+    settings.ros.domain_id = 77
+    store = open_test_store(mongo, tmp_path)
+    try:
+        gateway = build_gateway(settings, store=store, ros=True, warm_up=False)
+        try:
+            with RosRuntime(domain_id=77) as rt:
+                client = rt.make(Node, "caller").create_client(FireBusinessRules, "fire_business_rules")
+                assert client.wait_for_service(timeout_sec=15)
+                ros = client.call(FireBusinessRules.Request(ruleset="reception", facts_json=json.dumps(RECEPTION_FACTS),
+                                                            request_id="ros-req"), timeout_sec=10)
+            assert ros.success
+            assert gateway.store.flush()
+        finally:
+            gateway.close()
+        again = build_gateway(settings, store=store, ros=False, warm_up=False)
+        try:
+            http = TestClient(again.app)
+            recorded = http.get(f"/api/decisions/{ros.decision_id}").json()
+            assert (recorded["origin"], recorded["correlation_id"]) == ("ros", "ros-req")
         finally:
             again.close()
     finally:

@@ -23,7 +23,7 @@ from gateway.workflow.agile import TABLES, OwnerClient, behaviour
 from table2_steps import Setup, make_all, markdown, prepare, restore, snapshot
 from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, REFUSED_REQUEST, console_errors, new_page
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a browser story: make test runs it, make test-fast not
 
 
 @pytest.fixture()

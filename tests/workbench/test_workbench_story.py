@@ -10,7 +10,7 @@ from playwright.sync_api import expect
 from wb_helpers import reception_files
 from wb_helpers import EDITOR, example_facts, line_of, open_ruleset, replace_text, said, try_example
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a browser story: make test runs it, make test-fast not
 
 OLD_GREETING = "Welcome. Two seats?"
 NEW_GREETING = "Welcome to our teahouse, you two!"

@@ -202,15 +202,27 @@ def test_a_broken_recorder_does_not_break_runs(robots, small):
     ex.close()
 
 
-def test_teahouse_workflows_run_with_simulated_robots_and_humans(executor, robots, teahouse_dir):
+def test_teahouse_workflows_run_with_simulated_robots_and_humans(executor, robots, teahouse_dir, tmp_path):
+    """All eight teahouse workflows, those that fire the reception rules on the real engine too."""
+    from gateway.config import Settings
+    from gateway.engine import Engine
+    from gateway.workflow.adapters import RulesAdapter
     from gateway.workflow.loader import load
 
+    engine = Engine(Settings(data_dir=str(tmp_path / "data")))
+    assert engine.seed_from(engine.settings.engine.rules_dir)["reception"] == "seeded v1"
+    executor.adapters["fire_rules"] = RulesAdapter(engine)
+    fired_rules = []
     for path in sorted(teahouse_dir.glob("*.yaml")):
         wf = load(path)
-        if any(m.kind in ("fire_rules", "dialogue") for m in wf.modules.values()):
-            continue  # needs the engine: see test_engine_integration.py, tests/dialogue/test_take_order_workflow.py
+        if any(m.kind == "dialogue" for m in wf.modules.values()):
+            continue  # take_order talks with the customer: tests/dialogue/test_take_order_workflow.py runs it
         result = executor.run(wf)
         assert result.status == "succeeded", (path.name, result.error)
         assert result.actions(), path.name
+        if any(m.kind == "fire_rules" for m in wf.modules.values()):
+            fired_rules.append(path.name)
+    assert fired_rules == ["1_greeting.yaml"]
+    assert any(c["module"] == "say" for c in robots.calls)  # the reception rules' then-part spoke
     approach = [c for c in robots.calls if c["step"] == "approach"][0]
     assert approach["params"]["x"] == 1.0 + 1.2  # the ontology's robot-human distance (1.2 in the fixture)
