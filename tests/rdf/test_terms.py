@@ -11,7 +11,7 @@ from pyoxigraph import BlankNode, Literal, NamedNode
 
 from gateway.rdf.terms import (PRINTEPS, XSD, XSD_BOOLEAN, XSD_DECIMAL, XSD_DOUBLE, XSD_FLOAT, XSD_INTEGER,
                                TermError, canonical_decimal, canonical_double, canonical_term, canonical_triple,
-                               decimal_literal, local_name, numeric_value, parse_node, parse_object, parse_triple,
+                               decimal_literal, local_name, parse_node, parse_object, parse_triple,
                                term_from_sparql_json, term_to_json, term_to_sparql_json, value_to_term)
 
 
@@ -154,12 +154,6 @@ def test_canonical_helpers_and_triples():
 def test_terms_as_json_values(term, value):
     got = term_to_json(term)
     assert got == value and type(got) is type(value)
-
-
-def test_numeric_value_is_exact_and_only_for_exact_types():
-    assert numeric_value(lit("2.6", "decimal")) - numeric_value(lit("2.5", "decimal")) == Decimal("0.1")
-    assert numeric_value(lit("1.0E1", "double")) is None
-    assert numeric_value(Literal("3")) is None
 
 
 @pytest.mark.parametrize("term", [
