@@ -158,7 +158,7 @@ def test_export_writes_the_seed_layout_and_import_of_it_changes_nothing(gateway,
     for rel in seeds:
         assert (out / rel).read_bytes() == (PROJECT_ROOT / rel).read_bytes(), rel
     report = import_from(gateway, out, author="git", comment="nothing changed")
-    assert len(report) == 3 + 2 + 8 + 3 + 2  # rule sets, knowledge, workflows, mappings, queries
+    assert len(report) == 4 + 2 + 8 + 3 + 2  # rule sets, knowledge, workflows, mappings, queries
     assert all(outcome.startswith("unchanged") for _, outcome in report), report
     # exported again into the copy: the same files, none added under another name
     assert sorted(export_to(gateway.catalog, out)) == seeds
