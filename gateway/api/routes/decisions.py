@@ -11,6 +11,8 @@ any decision, also after restarts. Newest first, paged with an opaque cursor.
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter, Query
 
 from gateway.api.deps import Caller, DecisionsDep, iso_datetime
@@ -54,10 +56,15 @@ def list_decisions(
 @router.get("/api/decisions/{decision_id}")
 def get_decision(decision_id: str, decisions: DecisionsDep, _: Caller) -> JSON:
     """One decision with ``outcomes``: what the robots did for it (status, attempts, message)."""
+    return JSON(recorded_decision(decisions, decision_id))
+
+
+def recorded_decision(decisions: Any, decision_id: str) -> dict[str, Any]:
+    """The recorded decision ``decision_id``, or ApiError 404 (none) / 503 (the store is unreachable)."""
     try:
         found = decisions.get(decision_id)
     except StoreUnavailable as exc:
         raise ApiError(503, str(exc)) from None
     if found is None:
         raise ApiError(404, f"no decision {decision_id!r}", decision_id=decision_id)
-    return JSON(found)
+    return found

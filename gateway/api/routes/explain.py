@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from gateway.api.deps import Caller, DecisionsDep, EngineDep, SettingsDep, StoreDep
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute
+from gateway.api.routes.decisions import recorded_decision
 from gateway.api.routes.rulesets import MAX_FILES, RuleSetName, facts_from_body
 from gateway.engine.replay import not_replayable
 from gateway.store.store import StoreUnavailable
@@ -53,12 +54,7 @@ def explain_decision(decision_id: str, engine: EngineDep, decisions: DecisionsDe
     """A recorded decision explained on its version and its facts, with what was recorded; a
     decision whose facts were cut or that was made in a session says that its explanation sees only
     the recorded facts."""
-    try:
-        found = decisions.get(decision_id)
-    except StoreUnavailable as exc:
-        raise ApiError(503, str(exc)) from None
-    if found is None:
-        raise ApiError(404, f"no decision {decision_id!r}", decision_id=decision_id)
+    found = recorded_decision(decisions, decision_id)
     out = engine.explain(found["ruleset"], list(found.get("facts") or []), version=int(found["version"]))
     out.update(decision_id=decision_id, recorded={"fired": found.get("fired"), "actions": found.get("actions"),
                                                   "at": found.get("at")})
