@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from gateway.api.auth import check_bearer
 from gateway.api.deps import Author, Caller, EngineDep, JobsDep, SettingsDep, correlation_id, wants_async
 from gateway.api.errors import ApiError
-from gateway.api.jsonio import JSON, JsonRoute, read_json, run_blocking
+from gateway.api.jsonio import JSON, JsonRoute, read_json
 from gateway.api.lean_route import LeanRoute
 from gateway.engine.errors import FactError
 
