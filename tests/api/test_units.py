@@ -127,9 +127,9 @@ def test_kie_command_parsing():
                                              "get-session-time"]
     assert batch.commands == [
         {"op": "insert", "facts": [{"type": "org.x.Customer", "id": "c1"}], "ep": "DEFAULT", "out": "c", "ret": True},
-        {"op": "fire", "max": -1, "out": None},
+        {"op": "fire", "max": -1, "out": ""},  # a bare string is the out-identifier, as KIE Server reads it
         {"op": "delete", "handle": "0:1:2:3:4:DEFAULT:NON_TRAIT:x"},
-        {"op": "modify", "handle": "0:1:2", "set": [["age", "3"]]},
+        {"op": "modify", "handle": "0:1:2", "set": [["age", "3"]], "whole": True},  # KIE modify: every rule re-evaluated
         {"op": "advance", "ms": 2000, "out": "session-advancecurrenttime"},
         {"op": "get_time", "out": "session-currenttime"},
     ]

@@ -495,7 +495,7 @@ def test_every_teahouse_workflow_opens_without_problems(author_page: Page, gatew
     open_workflow(page, "take_order")
     step_button(page, "send_order").click()  # a topic: its parameters as text fields
     expect(page.get_by_test_id("wf-form").locator("[data-field='with.data']")).to_have_value(
-        "${input.table.id}: ${input.order.cups} x ${input.order.drink}")
+        "${input.table.id}: ${order.cups} x ${order.drink}")
 
 
 def test_an_unknown_workflow_is_said_so_and_discard_can_be_undone(author_page: Page, gateway):
