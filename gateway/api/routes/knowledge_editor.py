@@ -10,6 +10,8 @@ Invalid input answers 422 naming the field (``errors: [{field, message, ...}]``)
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Annotated, Any
 
 from fastapi import APIRouter
@@ -87,20 +89,28 @@ def individuals(knowledge: KnowledgeDep, _: Caller) -> JSON:
     return JSON(KnowledgeEditor(knowledge).individuals())
 
 
+@contextmanager
+def _edit_refusals(what: str, field: str) -> Iterator[None]:
+    """An edit's refusals as the API answers them: a bad value 422 naming its field, a value Pellet
+    finds inconsistent 422 on ``field`` (each reason), a stale base 409."""
+    try:
+        yield
+    except ValueInvalid as exc:
+        raise ApiError(422, exc.message, field=exc.field, errors=[exc.to_dict()]) from None
+    except KnowledgeInvalid as exc:
+        raise ApiError(422, f"{what}: {exc.errors[0]['message']}", field=field,
+                       errors=[{"field": field, **e} for e in exc.errors]) from None
+    except KnowledgeConflict as exc:
+        raise _conflict(exc) from None
+
+
 @router.post("/api/knowledge/individuals", status_code=201)
 def add_individual(body: IndividualBody, knowledge: KnowledgeDep, who: Author) -> JSON:
     """Add an individual of a class with its values (Pellet-checked, versioned, live at once): a new
     ``Beverage`` with its ``label`` can be ordered by talking to Pepper straight away."""
-    try:
+    with _edit_refusals(body.name, "values"):
         info, added = KnowledgeEditor(knowledge).add_individual(body.name, body.class_, body.values, author=who.name,
                                                                 comment=body.comment)
-    except ValueInvalid as exc:
-        raise ApiError(422, exc.message, field=exc.field, errors=[exc.to_dict()]) from None
-    except KnowledgeInvalid as exc:
-        raise ApiError(422, f"{body.name}: {exc.errors[0]['message']}", field="values",
-                       errors=[{"field": "values", **e} for e in exc.errors]) from None
-    except KnowledgeConflict as exc:
-        raise _conflict(exc) from None
     return JSON({**added, "version": info.version}, status_code=201)
 
 
@@ -113,16 +123,9 @@ def individual(name: Name, knowledge: KnowledgeDep, _: Caller) -> JSON:
 def put_value(name: Name, prop: Name, body: ValueBody, knowledge: KnowledgeDep, who: Author) -> JSON:
     """Change one data value: type-checked, written into the ontology text, Pellet-checked, saved as
     a new ontology version, live at once (workflows' ``ontology_value`` steps see it)."""
-    try:
+    with _edit_refusals(f"{name}.{prop}", "value"):
         info, value = KnowledgeEditor(knowledge).set_value(name, prop, body.value, author=who.name,
                                                            comment=body.comment, base_hash=body.base_hash)
-    except ValueInvalid as exc:
-        raise ApiError(422, exc.message, field=exc.field, errors=[exc.to_dict()]) from None
-    except KnowledgeInvalid as exc:
-        raise ApiError(422, f"{name}.{prop}: {exc.errors[0]['message']}", field="value",
-                       errors=[{"field": "value", **e} for e in exc.errors]) from None
-    except KnowledgeConflict as exc:
-        raise _conflict(exc) from None
     return JSON({**value, "version": info.version, "comment": info.comment})
 
 
