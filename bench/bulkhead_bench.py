@@ -25,7 +25,7 @@ from pathlib import Path
 import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from http_bench import free_port, request_bytes, start_server, teahouse_facts  # noqa: E402
+from http_bench import free_port, read_response, request_bytes, start_server, teahouse_facts  # noqa: E402
 from report import machine_note, write_section  # noqa: E402
 
 SECTION = "## Bulkheads and overload"
@@ -54,12 +54,7 @@ async def connection(port: int, req: bytes, until: float, out: list[tuple[int, f
         while time.perf_counter() < until:
             t0 = time.perf_counter()
             writer.write(req)
-            head = await reader.readuntil(b"\r\n\r\n")
-            length = 0
-            for line in head.split(b"\r\n"):
-                if line[:15].lower() == b"content-length:":
-                    length = int(line[15:])
-            await reader.readexactly(length)
+            head, _body = await read_response(reader)
             status = int(head[9:12])
             out.append((status, time.perf_counter() - t0))
             if status in (429, 503):

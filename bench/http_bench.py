@@ -101,6 +101,16 @@ def request_bytes(method: str, path: str, body: bytes | None) -> bytes:
     return head.encode() + b"\r\n" + (body or b"")
 
 
+async def read_response(reader: asyncio.StreamReader) -> tuple[bytes, bytes]:
+    """One HTTP/1.1 response off a keep-alive connection: its head and its body (Content-Length)."""
+    head = await reader.readuntil(b"\r\n\r\n")
+    length = 0
+    for line in head.split(b"\r\n"):
+        if line[:15].lower() == b"content-length:":
+            length = int(line[15:])
+    return head, await reader.readexactly(length)
+
+
 async def one_connection(port: int, req: bytes, until: float, latencies: list[float], check: bytes) -> int:
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     errors = 0
@@ -108,12 +118,7 @@ async def one_connection(port: int, req: bytes, until: float, latencies: list[fl
         while time.perf_counter() < until:
             t0 = time.perf_counter()
             writer.write(req)
-            head = await reader.readuntil(b"\r\n\r\n")
-            length = 0
-            for line in head.split(b"\r\n"):
-                if line[:15].lower() == b"content-length:":
-                    length = int(line[15:])
-            body = await reader.readexactly(length)
+            head, body = await read_response(reader)
             latencies.append(time.perf_counter() - t0)
             if not head.startswith(b"HTTP/1.1 200") or check not in body:
                 errors += 1
