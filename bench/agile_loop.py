@@ -2,7 +2,7 @@
 
 For each repetition a fresh gateway is started in a fresh process (a new JVM: the engine's compile
 cache must not serve a repeated edit; engine + rule sets + workflows + reasoner, robots and humans
-simulated) and the sixteen scenarios of ``gateway.workflow.agile`` are applied in the
+simulated) and the sixteen scenarios of ``tests/agile_harness.py`` are applied in the
 paper's order; per scenario we record the edit size and the machine time from submit until the
 robots' behaviour shows the change. The peer measured in the same run is the conventional way to
 apply a change: restart the gateway process (``printeps serve``) until it answers again.
@@ -32,7 +32,10 @@ from pathlib import Path
 import httpx
 
 from gateway.config import PROJECT_ROOT
-from gateway.workflow.agile import Measurement, apply, running_gateway, scenarios
+
+sys.path.insert(0, str(PROJECT_ROOT / "tests"))  # the agile harness is test support (tests/agile_harness.py)
+
+from agile_harness import Measurement, apply, running_gateway, scenarios  # noqa: E402
 
 MARK_START, MARK_END = "<!-- agile-table -->", "<!-- /agile-table -->"
 

@@ -57,7 +57,7 @@ def main() -> int:
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     trials = int(args[0]) if args else 200
     note = machine_note()
-    # the gateway process sets 1 ms (gateway/ros/run.py, gateway/demo.py); SWITCH_INTERVAL=0.005 = Python's default
+    # the gateway process sets 1 ms (gateway/ros_launch.py, gateway/demo.py); SWITCH_INTERVAL=0.005 = Python's default
     sys.setswitchinterval(float(os.environ.get("SWITCH_INTERVAL", "0.001")))
     domain = 90 + os.getpid() % 10
     settings = Settings(data_dir=tempfile.mkdtemp(prefix="bench-ros-"))

@@ -160,7 +160,7 @@ def memory() -> dict:
 import json, gc
 from gateway.config import Settings
 from gateway.engine import Engine
-from gateway import jvm
+from gateway.base import jvm
 import jpype
 e = Engine(Settings.model_validate({{"sessions": {{"max_facts": 1000000}}}}))
 e.deploy("visits", {json.dumps(RULES)}, force=True)

@@ -28,11 +28,12 @@ from types import SimpleNamespace
 from gateway.config import PROJECT_ROOT, Settings
 
 sys.path.insert(0, str(PROJECT_ROOT / "tests" / "workbench"))
+sys.path.insert(0, str(PROJECT_ROOT / "tests"))  # the agile harness (tests/agile_harness.py)
 
 from table2_steps import Done, Setup, make_all, markdown, prepare, steps_markdown  # noqa: E402
 from wb_helpers import AUTHOR_TOKEN, TOKENS, new_page  # noqa: E402
 
-from gateway.workflow.agile import OwnerClient  # noqa: E402
+from agile_harness import OwnerClient  # noqa: E402
 
 MARK_START, MARK_END = "<!-- browser-table -->", "<!-- /browser-table -->"
 CHROMIUM = "/usr/bin/chromium"

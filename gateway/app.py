@@ -1,7 +1,7 @@
 """The composition root: the one place a gateway is built, run and shut down.
 
 Every entry point — ``printeps serve`` (and each of its ``--workers``), ``printeps demo``, the ROS
-launcher ``printeps ros`` / ``python -m gateway.ros.run``, the agile-loop harness and the tests —
+launcher ``printeps ros`` / ``python -m gateway.ros_launch``, the agile-loop harness and the tests —
 calls :func:`build_gateway` with its settings; there is no second wiring. One gateway process is:
 
 - the Information State (MongoDB: ``MONGO_URI`` or the embedded SecantusDB), with the catalog of
@@ -25,21 +25,21 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from gateway import jvm
-from gateway.actions import ActionRouter, workflow_handler
+from gateway.base import jvm
+from gateway.runtime.actions import ActionRouter, workflow_handler
 from gateway.config import Settings
 from gateway.dialogue.service import DialogueService
 from gateway.engine import Engine
-from gateway.follower import ChangeFollower
-from gateway.jobs import JobRecords, JobService
-from gateway.live import LiveFeed
+from gateway.runtime.follower import ChangeFollower
+from gateway.runtime.jobs import JobRecords, JobService
+from gateway.runtime.live import LiveFeed
 from gateway.ontology.knowledge import KnowledgeBase
 from gateway.rdf.mapping import Mapper
 from gateway.ros.robots import RobotStates
 from gateway.store.store import QUERY_RESULTS
 from gateway.stream.engine import StreamEngine
 from gateway.stream.services import MappingService, QueryService
-from gateway.versions import Catalog, MemoryCatalog
+from gateway.base.versions import Catalog, MemoryCatalog
 from gateway.workflow.recorder import CallableRecorder, FanOutRecorder
 from gateway.workflow.service import WorkflowService, build_service
 
@@ -73,7 +73,7 @@ class Gateway:
     live: LiveFeed = field(default_factory=LiveFeed)  # what this process sees happen (GET /api/live)
     app: Any = None
     members: Any = None  # gateway.store.members.Membership: where other processes reach this one
-    jobs: Any = None  # gateway.jobs.JobService: deploys and validations in the background
+    jobs: Any = None  # gateway.runtime.jobs.JobService: deploys and validations in the background
     dialogue: Any = None  # gateway.dialogue.service.DialogueService: conversations at the tables
 
     name: str = field(default_factory=process_name)

@@ -173,7 +173,7 @@ def _run_or_explain(start: Any) -> None:
     """Run; a gateway that cannot start (database held by another process, …) says why, no traceback."""
     from gateway.store.embedded import EmbeddedDbError
     from gateway.store.store import StoreUnavailable
-    from gateway.versions import CatalogUnavailable
+    from gateway.base.versions import CatalogUnavailable
 
     try:
         start()
@@ -211,7 +211,7 @@ def export_cmd(
     from the Information State into FOLDER (for git). Joins a running embedded database."""
     from gateway.store import open_store
     from gateway.store.catalog import MongoCatalog
-    from gateway.transfer import export_to, seed_folders
+    from gateway.runtime.transfer import export_to, seed_folders
 
     settings = _settings(config)
     store = _open_store_or_fail(open_store, settings)
@@ -238,7 +238,7 @@ def import_cmd(
     deploy; running gateways follow within a second. Exit 1 if any item was refused."""
     from gateway.app import build_gateway
     from gateway.store import open_store
-    from gateway.transfer import import_from
+    from gateway.runtime.transfer import import_from
 
     if not folder.is_dir():
         _fail(f"{folder}: no such folder", code=2)
@@ -284,7 +284,7 @@ def rules_validate(
     name, files = read_ruleset(path)
     folder = path if path.is_dir() else path.parent
     engine = Engine(_settings(config))
-    from gateway.progress import TerminalProgress
+    from gateway.runtime.progress import TerminalProgress
 
     progress = TerminalProgress() if sys.stderr.isatty() else None  # big sets take a while: show how far
     try:
@@ -433,7 +433,7 @@ def _follow_job(server: str, location: str, token: Optional[str], succeeded: Any
 
     import httpx
 
-    from gateway.progress import TerminalProgress
+    from gateway.runtime.progress import TerminalProgress
 
     progress = TerminalProgress() if sys.stderr.isatty() else None
     try:
@@ -590,7 +590,7 @@ def workflow_generate(
 @app.command("build-java")
 def build_java(config: Optional[Path] = ConfigOption) -> None:
     """Start the JVM once so the Java helpers (java/src) are compiled into the cache now."""
-    from gateway import jvm
+    from gateway.base import jvm
 
     settings = _settings(config)
     try:

@@ -1,4 +1,4 @@
-"""The ROS launcher as a module: ``python -m gateway.ros.run`` = ``printeps ros``.
+"""The ROS launcher as a module: ``python -m gateway.ros_launch`` = ``printeps ros``.
 
 There is no ``ros2 launch`` here (no ``launch`` wheels on PyPI): this is the launch-equivalent. It
 builds the gateway through the one composition root (:func:`gateway.app.run`) with the ROS node on
@@ -6,7 +6,7 @@ and no HTTP, and runs it until SIGINT/SIGTERM — the ingress finishes its messa
 joined, the node destroyed and the context shut down (so Fast DDS removes its /dev/shm files), the
 Information State ships its journal (or keeps it on disk) and the embedded database is stopped.
 
-    python -m gateway.ros.run [--config printeps.yaml]
+    python -m gateway.ros_launch [--config printeps.yaml]
 """
 
 from __future__ import annotations

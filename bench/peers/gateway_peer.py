@@ -217,7 +217,7 @@ def reception(requests: int) -> None:
 
 def cold() -> None:
     """JVM start and the first compile of the 32-rule set, in a process that never ran Java."""
-    from gateway import jvm
+    from gateway.base import jvm
     from gateway.engine.ruleset import read_folder
 
     t0 = time.perf_counter()

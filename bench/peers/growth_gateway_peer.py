@@ -65,7 +65,7 @@ def new_engine(cache_dir: str, incremental: bool = True):
 
 
 def start_jvm() -> float:
-    from gateway import jvm
+    from gateway.base import jvm
 
     with Clock() as clock:
         jvm.start()
@@ -151,7 +151,7 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     # the whole path recompiles everything per edit: at 10,000 rules one edit tells enough
     out["redeploy"] = redeploys(engine, n, EDITS if incremental or n < 10_000 else 1)
     out["fire"] = fire_latency(engine, n, out["redeploy"]["live_variants"])
-    from gateway import jvm
+    from gateway.base import jvm
 
     runtime = jvm.jclass("java.lang.Runtime").getRuntime()
     jvm.jclass("java.lang.System").gc()

@@ -92,7 +92,7 @@ QueriesDep = Annotated[QueryService, Depends(_queries)]
 MappingsDep = Annotated[MappingService, Depends(_mappings)]
 WorkflowsDep = Annotated[WorkflowService, Depends(_workflows)]
 MetricsDep = Annotated[Any, Depends(_metrics)]
-JobsDep = Annotated[Any, Depends(_jobs)]  # gateway.jobs.JobService
+JobsDep = Annotated[Any, Depends(_jobs)]  # gateway.runtime.jobs.JobService
 
 Caller = Annotated[Principal, Depends(caller)]
 Author = Annotated[Principal, Depends(author)]

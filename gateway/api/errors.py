@@ -16,7 +16,7 @@ from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gateway.api.jsonio import JSON, BadBody
-from gateway.jobs import JobError
+from gateway.runtime.jobs import JobError
 from gateway.ontology.editor import NotFound as KnowledgeItemNotFound
 from gateway.rdf.mapping import MappingError
 from gateway.rdf.terms import TermError
@@ -24,7 +24,7 @@ from gateway.store.store import StoreUnavailable
 from gateway.stream.engine import QueryNotFound, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.rules import BindingError
-from gateway.versions import CatalogUnavailable
+from gateway.base.versions import CatalogUnavailable
 from gateway.engine import EngineError, VersionConflict
 from gateway.engine.errors import FireTimeout, Overloaded
 from gateway.engine.session import CommandFailed

@@ -20,7 +20,7 @@ from gateway.engine.errors import (
 )
 from gateway.engine.results import FireResult
 from gateway.engine.session import StatefulSession
-from gateway.versions import VersionInfo
+from gateway.base.versions import VersionInfo
 
 __all__ = [
     "CompileError", "CompileFailed", "CompileResourceError", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",

@@ -30,7 +30,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from gateway import jvm
+from gateway.base import jvm
 from gateway.engine import decision_table, drl_items, scenarios
 from gateway.engine.errors import CompileError, CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.ruleset import check_files, content_hash, is_table_file

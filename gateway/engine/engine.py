@@ -6,7 +6,7 @@ flight finish on the version they started with), a failed build changes nothing,
 kept. The live map holds ``name -> LiveRuleSet`` entries; replacing one entry is atomic in Python,
 so firing needs no lock.
 
-Versions live in a catalog (:mod:`gateway.versions`): the Information State when the gateway has
+Versions live in a catalog (:mod:`gateway.base.versions`): the Information State when the gateway has
 one, shared by every gateway process. A deploy made here is live here at once; a deploy made by
 another process reaches this one through :meth:`sync` (called by the change follower), which
 compiles the new version off the serving path and then swaps it in. Each live entry remembers the
@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 from bson import ObjectId
 
-from gateway import jvm
+from gateway.base import jvm
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
 from gateway.engine.compiler import CompiledRuleSet
@@ -45,7 +45,7 @@ from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
 from gateway.engine.sessions import SessionManager, SessionNotFound, rule_fingerprints
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 

@@ -63,7 +63,7 @@ class EventFeed:
         return_facts: bool = False,
         linger_ms: float = 1.0,
     ):
-        from gateway import jvm
+        from gateway.base import jvm
 
         if capacity < 1:
             raise ValueError("capacity must be at least 1")

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gateway import jvm
+from gateway.base import jvm
 from gateway.engine import drl_items, plain_rules
 from gateway.engine.drl_items import RuleSetItems, SourceItems
 from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError, says_out_of_memory

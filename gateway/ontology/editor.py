@@ -36,7 +36,7 @@ from gateway.ontology.values import (
     set_value_in_text,
     value_type,
 )
-from gateway.versions import VersionInfo
+from gateway.base.versions import VersionInfo
 
 
 class NotFound(LookupError):

@@ -28,7 +28,7 @@ from pyoxigraph import Literal, NamedNode, RdfFormat, parse
 from gateway.ontology.reasoner import KnowledgeText, Reasoner, ReasonerError
 from gateway.rdf.terms import Triple
 from gateway.stream.params import OntologySource
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 

@@ -4,7 +4,7 @@ Why this way:
 - Pellet is needed (HermiT cannot infer data-property values nor run SWRL built-ins, and the
   papers' greeting rule infers ``greeting(?pepper, "Welcome. Two seats?")``).
 - owlready2's ``sync_reasoner_pellet`` starts a new Java process per call (2.5–4 s); here Pellet's
-  OWL API reasoner (owlready2's own bundled jars, put on the classpath by ``gateway.jvm``) runs in
+  OWL API reasoner (owlready2's own bundled jars, put on the classpath by ``gateway.base.jvm``) runs in
   the already-running JVM: tens of milliseconds per call.
 - owlready2 keeps inferred facts forever (``http://inferrences/``); every call therefore builds a
   fresh owlready2 World (ontology + SWRL rules + posted individuals) and a fresh Pellet reasoner,
@@ -194,7 +194,7 @@ class Reasoner:
         return buf.getvalue().decode("utf-8"), asserted
 
     def _pellet(self, world_xml: str, asserted: set[tuple[str, str, str]]) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:
-        from gateway import jvm
+        from gateway.base import jvm
 
         manager = jvm.jclass("org.semanticweb.owlapi.apibinding.OWLManager").createOWLOntologyManager()
         source = jvm.jclass("org.semanticweb.owlapi.io.StringDocumentSource")(world_xml)

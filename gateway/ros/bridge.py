@@ -7,7 +7,7 @@ builds none of them itself (cf. ros2/examples ``composed.py``: several nodes, on
 main). Workflows reach robot services through the same node (:attr:`caller`).
 
 The data path: topic → message dict → mapping → RDF on the subscription's stream → windows →
-rule binding → decision → ``actions`` event → the action router (:mod:`gateway.actions`) → for
+rule binding → decision → ``actions`` event → the action router (:mod:`gateway.runtime.actions`) → for
 robot modules this side's :class:`ActionDispatcher` → robot services → outcome recorded with its
 decision. The bridge also moves the clock of the streams named in ``ros.heartbeats`` once a
 second, so windows close (and, e.g., an empty table is noticed) while every sensor is silent.

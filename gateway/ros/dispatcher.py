@@ -3,7 +3,7 @@
 Why separate from ROS: which service a robot's action goes to and how often to retry is policy;
 the actual call is injected (``ServiceCaller``), so this is tested without ROS and the ROS adapter
 (:class:`gateway.ros.node.RosServiceCaller`) stays a few lines. The dispatcher is the handler of
-the robot modules in the gateway's action registry (:mod:`gateway.actions`), which records every
+the robot modules in the gateway's action registry (:mod:`gateway.runtime.actions`), which records every
 outcome with its decision.
 
 Mapping: robot name → service namespace from config (pepper → /pepper), action module → service:
@@ -56,7 +56,7 @@ class ActionDispatcher:
 
     def dispatch(self, action: dict[str, Any], context: dict[str, Any] | None = None) -> dict[str, Any]:
         """Call the action's service (retrying up to ``retries`` times): ``{"service", "status",
-        "message", "attempts"}`` (an action handler of :class:`gateway.actions.ActionRouter`)."""
+        "message", "attempts"}`` (an action handler of :class:`gateway.runtime.actions.ActionRouter`)."""
         service, type_name = self.service_for(action)
         attempts = 0
         if service is None:

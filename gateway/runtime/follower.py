@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Callable, Protocol
 
-from gateway.versions import Catalog, Change
+from gateway.base.versions import Catalog, Change
 
 log = logging.getLogger(__name__)
 

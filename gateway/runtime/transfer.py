@@ -24,7 +24,7 @@ from typing import Any
 import yaml
 
 from gateway.engine.ruleset import write_file
-from gateway.versions import Catalog
+from gateway.base.versions import Catalog
 
 RULES = Path("rules") / "drl"
 WORKFLOWS = Path("workflows")

@@ -1,6 +1,6 @@
 """The catalog of versions in MongoDB: the source of truth every gateway process follows.
 
-Collections (see :mod:`gateway.versions` for the model):
+Collections (see :mod:`gateway.base.versions` for the model):
 
 - ``catalog_versions``  ``{_id: "kind/name/n", kind, name, version, deployed_at, author, comment,
   hash, payload}`` — immutable; the payload is kept as JSON text (file names such as
@@ -35,7 +35,7 @@ from typing import Any
 from pymongo import ReturnDocument
 from pymongo.errors import DuplicateKeyError, OperationFailure, PyMongoError
 
-from gateway.versions import (
+from gateway.base.versions import (
     Change, CatalogConflict, CatalogUnavailable, Head, Version, VersionInfo, VersionMissing, now_iso,
 )
 
@@ -73,7 +73,7 @@ def change_from_doc(doc: dict[str, Any]) -> Change:
 
 
 class MongoCatalog:
-    """:class:`gateway.versions.Catalog` over one MongoDB database (pymongo)."""
+    """:class:`gateway.base.versions.Catalog` over one MongoDB database (pymongo)."""
 
     def __init__(self, db: Any, origin: str, *, change_streams: bool = True, poll_interval_s: float = 0.25) -> None:
         self.db = db

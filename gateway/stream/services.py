@@ -26,7 +26,7 @@ from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, Served, VersionInfo, VersionMissing
+from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, Served, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 

@@ -2,7 +2,7 @@
 
 Why: domain experts edit a workflow and the next run must use it, without a restart and without
 disturbing a run in progress. ``get`` hands out an immutable snapshot; ``replace`` validates the
-new text completely, then stores it as a new version in the catalog (:mod:`gateway.versions`),
+new text completely, then stores it as a new version in the catalog (:mod:`gateway.base.versions`),
 which every gateway process follows. Rollback moves the current pointer back, as for rule sets.
 The ``workflows/`` folder is the seed: a workflow the catalog has never had is imported from it
 at start (author "seed"); one the catalog has is never overwritten by files.
@@ -16,7 +16,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from gateway.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 from gateway.workflow.loader import Problem, WorkflowInvalid, parse
 from gateway.workflow.model import Workflow
 

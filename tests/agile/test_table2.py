@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from gateway.workflow.agile import TABLES, OwnerClient, apply, behaviour, running_gateway, scenarios
+from agile_harness import TABLES, OwnerClient, apply, behaviour, running_gateway, scenarios
 
 pytestmark = pytest.mark.slow  # the sixteen Table-2 changes one after another on one gateway: a story
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.jobs import JobRecords, JobService
+from gateway.runtime.jobs import JobRecords, JobService
 
 from api_helpers import BROKEN, FACTS, files
 
@@ -112,7 +112,7 @@ def test_another_process_answers_for_a_job_and_a_dead_owner_is_reported(api_gate
 def test_queued_jobs_can_be_cancelled_and_a_full_queue_refuses(api_gateway):
     import threading
 
-    from gateway.jobs import JobError
+    from gateway.runtime.jobs import JobError
 
     gate = threading.Event()
 

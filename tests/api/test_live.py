@@ -15,7 +15,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from gateway.config import Settings
-from gateway.live import LiveFeed, distances_in
+from gateway.runtime.live import LiveFeed, distances_in
 
 from api_helpers import ServerThread
 from gw_testing import built_gateway

@@ -236,7 +236,7 @@ def test_the_docs_drl_examples_pass_the_policy():
 
 
 def test_import_checks_each_rule_set_for_the_role_it_is_given(api, api_gateway, tmp_path):
-    from gateway.transfer import import_from
+    from gateway.runtime.transfer import import_from
 
     marker = tmp_path / "marker"
     folder = tmp_path / "export" / "rules" / "drl" / "probe-imported"

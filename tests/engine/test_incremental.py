@@ -597,7 +597,7 @@ def test_the_compile_time_limit_is_a_resource_error_and_leaves_serving_alone(tmp
     from gateway.api.errors import engine_error_response
     from gateway.config import Settings
     from gateway.engine import Engine
-    from gateway.versions import MemoryCatalog
+    from gateway.base.versions import MemoryCatalog
 
     settings = {"rules_dir": str(tmp_path / "rules"), "compile_cache_dir": options.cache_dir}
     catalog = MemoryCatalog()  # two processes' engines over one catalog
@@ -619,7 +619,7 @@ def test_running_out_of_heap_while_compiling_is_a_resource_error(tmp_path):
         import json, sys
         sys.path.insert(0, %r)
         import growth_rules
-        from gateway import jvm
+        from gateway.base import jvm
         from gateway.config import JvmSettings
         jvm.start(JvmSettings(max_heap="32m"))
         from gateway.engine import compiler
@@ -705,7 +705,7 @@ def test_reused_sessions_answer_as_fresh_ones(options, seed):
     """The Runner empties a session after a request and gives it to the next: over a varied
     request stream (rules that modify facts, joins, accumulates, queries, salience) every answer
     equals that of a session of its own."""
-    from gateway import jvm
+    from gateway.base import jvm
 
     rule_set = RandomSet(seed, queries=False)  # a rule opening with a query call disables reuse (below)
     compiled = compiler.compile_files(rule_set.files(), "reuse", options)

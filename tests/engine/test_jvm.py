@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway import jvm
+from gateway.base import jvm
 
 PROBE = """
 import sys, tempfile
@@ -72,7 +72,7 @@ def test_missing_java_home_is_a_clear_error(tmp_path):
 
 
 def test_python_garbage_collection_never_runs_a_full_java_collection():
-    """JPype's link from Python's GC to ``System.gc()`` is cut (gateway.jvm.unlink_garbage_collectors):
+    """JPype's link from Python's GC to ``System.gc()`` is cut (gateway.base.jvm.unlink_garbage_collectors):
     it made stop-the-world full collections of 30–70 ms every second under KIE batch load."""
     import gc
 

@@ -28,7 +28,7 @@ def test_clean_shutdown(sig, domain_id, tmp_path) -> None:
     env = {**os.environ, "PRINTEPS_DATA_DIR": str(tmp_path), "ROS_DOMAIN_ID": str(domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     env.pop("MONGO_URI", None)
-    proc = subprocess.Popen([sys.executable, "-m", "gateway.ros.run"], cwd=ROOT, env=env, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "gateway.ros_launch"], cwd=ROOT, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     lines = []
     try:

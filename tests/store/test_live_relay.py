@@ -8,7 +8,7 @@ import time
 import pytest
 from bson import ObjectId
 
-from gateway.live import LiveFeed
+from gateway.runtime.live import LiveFeed
 from gateway.store.decisions import DecisionRecord
 from gateway.store.live_relay import LiveRelay
 from gateway.store.store import InformationState

@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from gateway.follower import ChangeFollower
+from gateway.runtime.follower import ChangeFollower
 from gateway.store.catalog import CHANGES, MongoCatalog
-from gateway.versions import CatalogConflict, MemoryCatalog, VersionMissing
+from gateway.base.versions import CatalogConflict, MemoryCatalog, VersionMissing
 
 
 class Recorder:

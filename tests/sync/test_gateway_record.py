@@ -148,7 +148,7 @@ def test_export_writes_the_seed_layout_and_import_of_it_changes_nothing(gateway,
     the same names (``workflows/1_greeting.yaml``, ``ontology/queries/customer_detection.rq``) and
     bytes — and importing them reports every item unchanged. Before, it wrote ``greeting.yaml`` and
     ``CustomerDetectionQuery.rq`` and re-dumped the YAML sidecars."""
-    from gateway.transfer import export_to, import_from, seed_folders
+    from gateway.runtime.transfer import export_to, import_from, seed_folders
 
     out = tmp_path / "out"
     written = sorted(export_to(gateway.catalog, out, seed_folders(gateway.settings)))
@@ -195,7 +195,7 @@ def test_mappings_are_data_checked_against_the_message_type(gateway):
 
 
 def test_export_then_import_round_trips_and_bad_items_are_refused(gateway, tmp_path):
-    from gateway.transfer import export_to, import_from
+    from gateway.runtime.transfer import export_to, import_from
 
     written = export_to(gateway.catalog, tmp_path / "out")
     assert "rules/drl/reception/reception.dslr" in written and "workflows/greeting.yaml" in written

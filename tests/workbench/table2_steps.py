@@ -5,7 +5,7 @@ in under a minute, live. Each ``change_N`` function below is what the owner does
 (clicks and fields filled in the workflow editor, the rules editor and the knowledge editor; no
 YAML, DRL or Python typed for the workflow and knowledge changes); :func:`make_all` makes them in
 the paper's order and, after each, checks on the running gateway with the probe of
-:mod:`gateway.workflow.agile` (a workflow run's trace, a rule fire, Pellet's inference) that the
+:mod:`agile_harness` (tests/agile_harness.py: a workflow run's trace, a rule fire, Pellet's inference) that the
 behaviour changed. It records the steps (counted by :class:`Owner`) and the seconds from starting
 the change to the behaviour verified, and saves a screenshot per change.
 
@@ -30,8 +30,8 @@ from pathlib import Path
 import httpx
 from playwright.sync_api import Locator, Page, expect
 
-from gateway.workflow.agile import DIRTY_TABLE_DRL as AGILE_DIRTY_TABLE_DRL
-from gateway.workflow.agile import (
+from agile_harness import DIRTY_TABLE_DRL as AGILE_DIRTY_TABLE_DRL
+from agile_harness import (
     BLANKET_DSLR, SEAT_INFO_DRL, TABLES, Observation, OwnerClient, Scenario, scenarios,
 )
 

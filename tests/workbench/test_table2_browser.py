@@ -19,7 +19,7 @@ import pytest
 from playwright.sync_api import Page
 
 from gateway.config import PROJECT_ROOT
-from gateway.workflow.agile import TABLES, OwnerClient, behaviour
+from agile_harness import TABLES, OwnerClient, behaviour
 from table2_steps import Setup, make_all, markdown, prepare, restore, snapshot
 from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, REFUSED_REQUEST, console_errors, new_page
 

@@ -331,7 +331,7 @@ def test_a_robot_new_to_the_workflow_comes_with_its_actor(author_page: Page, gat
 
 
 def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, gateway):
-    from gateway.workflow.agile import SEAT_INFO_DRL, TABLES
+    from agile_harness import SEAT_INFO_DRL, TABLES
 
     ruleset = f"seat_info_{os.getpid()}"
     response = gateway.deploy(ruleset, {"seat_info.drl": SEAT_INFO_DRL}, "Table 2 #8: seat information")

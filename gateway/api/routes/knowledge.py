@@ -22,7 +22,7 @@ from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute, read_json
 from gateway.ontology.knowledge import KnowledgeConflict, KnowledgeInvalid, digest
 from gateway.ontology.reasoner import ReasonerError
-from gateway.versions import VersionMissing
+from gateway.base.versions import VersionMissing
 
 router = APIRouter(tags=["knowledge"], route_class=JsonRoute)
 Kind = Literal["ontology", "swrl"]

@@ -1,6 +1,6 @@
 """``GET /api/live``: the live feed of this gateway process as Server-Sent Events.
 
-What the workbench's Live view draws (:mod:`gateway.live`): one SSE event type per kind —
+What the workbench's Live view draws (:mod:`gateway.runtime.live`): one SSE event type per kind —
 ``reading`` (people's distances to the entrance), ``detection`` (a stream query found something),
 ``decision`` (rules fired; open it at ``/api/decisions/{decision_id}``), ``action`` (what a robot
 was asked to do and how it went) — each with JSON data and ``id: <feed>-<seq>``. On connect the
@@ -8,7 +8,7 @@ kept events are replayed (``replay=false``: only new ones; a reconnecting ``Even
 ``Last-Event-ID`` and gets only what it missed from the same process). ``hello`` opens the stream,
 ``heartbeat`` comes every ``heartbeat_s`` seconds of quiet, ``dropped`` says how many events a slow
 reader lost (its queue is bounded: the gateway never waits for a browser). The stream ends when
-the server stops (:meth:`gateway.live.LiveFeed.close`), so an open Live view never holds up a
+the server stops (:meth:`gateway.runtime.live.LiveFeed.close`), so an open Live view never holds up a
 shutdown.
 
 Auth: the caller role, by ``Authorization: Bearer`` or ``?access_token=`` (``EventSource`` cannot
@@ -30,7 +30,7 @@ from fastapi.responses import StreamingResponse
 from gateway.api.auth import Principal, event_stream_caller
 from gateway.api.deps import GatewayDep
 from gateway.api.jsonio import JsonRoute
-from gateway.live import KINDS
+from gateway.runtime.live import KINDS
 
 router = APIRouter(tags=["live"], route_class=JsonRoute)
 

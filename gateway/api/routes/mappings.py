@@ -34,7 +34,7 @@ from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute
 from gateway.rdf.mapping import Mapper, MappingError
 from gateway.rdf.spec_text import SpecSyntaxError, SpecText, read_spec_text, spec_to_text
-from gateway.versions import CatalogConflict
+from gateway.base.versions import CatalogConflict
 
 router = APIRouter(tags=["streams"], route_class=JsonRoute)
 MappingName = Annotated[str, PathParam(pattern=r"^[A-Za-z][A-Za-z0-9_.:-]{0,63}$")]

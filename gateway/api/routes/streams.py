@@ -45,7 +45,7 @@ from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, ReportPolicy
 from gateway.stream.results import report_to_sparql_json, to_sparql_json
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.versions import CatalogConflict
+from gateway.base.versions import CatalogConflict
 
 router = APIRouter(tags=["streams"], route_class=JsonRoute)
 MAX_BATCH = 10_000
