@@ -1,4 +1,4 @@
-"""The composition root: the one place a gateway is built, run and shut down.
+"""The composition root: the one place a gateway is built (and its parts closed again).
 
 Every entry point — ``printeps serve`` (and each of its ``--workers``), ``printeps demo``, the ROS
 launcher ``printeps ros`` / ``python -m gateway.ros_launch``, the agile-loop harness and the tests —
@@ -13,7 +13,9 @@ calls :func:`build_gateway` with its settings; there is no second wiring. One ga
 - a change follower that keeps all of them on the catalog's current versions, so a change made
   through any process is live in every process.
 
-Imports go downward only: cli/demo → app → api/ros → stream/engine/ontology/store → config/jvm.
+Imports go downward only: entry points (cli, serve, demo, worker, ros_launch) → app → api/ros →
+runtime → workflow → engine/stream/ontology → store/rdf → base → config (tests/meta/test_layers.py).
+Running a built gateway until a signal is the entry points' part (:func:`gateway.serve.run`).
 Data flows one way: sensor → RDF → window → binding → rules → action → Information State.
 """
 
@@ -26,20 +28,20 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from gateway.base import jvm
-from gateway.runtime.actions import ActionRouter, workflow_handler
+from gateway.base.versions import Catalog, MemoryCatalog
 from gateway.config import Settings
 from gateway.dialogue.service import DialogueService
 from gateway.engine import Engine
-from gateway.runtime.follower import ChangeFollower
-from gateway.runtime.jobs import JobRecords, JobService
-from gateway.runtime.live import LiveFeed
 from gateway.ontology.knowledge import KnowledgeBase
 from gateway.rdf.mapping import Mapper
 from gateway.ros.robots import RobotStates
+from gateway.runtime.actions import ActionRouter, workflow_handler
+from gateway.runtime.follower import ChangeFollower
+from gateway.runtime.jobs import JobRecords, JobService
+from gateway.runtime.live import LiveFeed
 from gateway.store.store import QUERY_RESULTS
 from gateway.stream.engine import StreamEngine
 from gateway.stream.services import MappingService, QueryService
-from gateway.base.versions import Catalog, MemoryCatalog
 from gateway.workflow.recorder import CallableRecorder, FanOutRecorder
 from gateway.workflow.service import WorkflowService, build_service
 
@@ -317,30 +319,3 @@ def _result_recorder(store: Any) -> Callable[[dict[str, Any]], None]:
                          stored_type=f"printeps/QueryResult/{event.get('query', 'query')}", inserted_by="stream_engine")
 
     return record
-
-
-def run(settings: Settings, *, rest: bool = True, ros: bool | None = None, host: str | None = None,
-        port: int | None = None) -> None:
-    """Build a gateway, run it until SIGINT/SIGTERM, shut it down (``printeps serve`` / ``printeps ros``).
-
-    With ``rest`` uvicorn serves the app (and handles the signals); without, the process waits on
-    the signals itself (the ROS launcher).
-    """
-    import signal
-    import threading
-
-    from gateway.serve import serve
-
-    gateway = build_gateway(settings, rest=rest, ros=ros)
-    try:
-        if rest:
-            serve(gateway, host or settings.api.host, port or settings.api.port)
-            return
-        stop = threading.Event()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
-        print("gateway node ready" if gateway.ros is not None else "gateway ready (no ROS node)", flush=True)
-        stop.wait()
-        print("gateway node stopping", flush=True)
-    finally:
-        gateway.close()

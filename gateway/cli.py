@@ -121,7 +121,7 @@ def serve(
         supervisor = Supervisor(workers, host or settings.api.host, port or settings.api.port,
                                 config=config_path(config), ros=ros)
         raise typer.Exit(supervisor.run(settings))
-    from gateway.app import run
+    from gateway.serve import run
 
     sys.setswitchinterval(0.001)  # GIL hand-offs between the ROS executor and the workers: see docs/ros.md
     _run_or_explain(lambda: run(settings, rest=True, ros=ros, host=host, port=port))
@@ -138,7 +138,7 @@ def ros_node(
 
     Arguments after ``--ros-args`` go to the node as on ``ros2 run``, e.g. ``printeps ros --ros-args
     -p call_timeout_s:=3.0 -p robots:="[pepper=/pepper]"``."""
-    from gateway.app import run
+    from gateway.serve import run
 
     settings = _settings(config)
     settings.ros.args = ros_arguments(ctx.args)

@@ -21,7 +21,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from gateway.app import build_gateway
 from gateway.config import PROJECT_ROOT, Settings, load_settings
+from gateway.serve import free_port, serve_in_thread
 
 log = logging.getLogger(__name__)
 
@@ -154,10 +156,8 @@ def run_demo(settings: Settings | None = None, headless: bool = True, *, scenari
              out: Callable[[str], None] = print, stop_event: threading.Event | None = None) -> dict[str, Any]:
     """Play the teahouse reception (entrance) and the tables (a party leaves, its table is
     cleared) end to end; returns the summary (also printed)."""
-    from gateway.app import build_gateway
     from gateway.ros.runtime import ros_env_defaults
     from gateway.ros.scenario import TableScenario, load_scenario
-    from gateway.serve import free_port, serve_in_thread
 
     settings = settings or load_settings()
     say = Printer(out)

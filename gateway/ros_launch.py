@@ -1,7 +1,7 @@
 """The ROS launcher as a module: ``python -m gateway.ros_launch`` = ``printeps ros``.
 
 There is no ``ros2 launch`` here (no ``launch`` wheels on PyPI): this is the launch-equivalent. It
-builds the gateway through the one composition root (:func:`gateway.app.run`) with the ROS node on
+builds the gateway through the one composition root (:func:`gateway.serve.run`) with the ROS node on
 and no HTTP, and runs it until SIGINT/SIGTERM — the ingress finishes its message, the executor is
 joined, the node destroyed and the context shut down (so Fast DDS removes its /dev/shm files), the
 Information State ships its journal (or keeps it on disk) and the embedded database is stopped.
@@ -15,11 +15,11 @@ import argparse
 import logging
 import sys
 
+from gateway.config import load_settings
+from gateway.serve import run
+
 
 def main(argv: list[str] | None = None) -> int:
-    from gateway.app import run
-    from gateway.config import load_settings
-
     ap = argparse.ArgumentParser(description="PRINTEPS gateway ROS node (the same gateway as `printeps serve`, no HTTP)")
     ap.add_argument("--config", default=None)
     args, ros_args = ap.parse_known_args(sys.argv[1:] if argv is None else argv)

@@ -1,4 +1,5 @@
-"""Serving a gateway over HTTP: one process, a background thread (demo, tests), or N workers on one port.
+"""Running a gateway: one process until a signal (:func:`run`), a background thread (demo, tests), or
+N workers on one port. An entry point: it stands above the composition root it calls.
 
 ``printeps serve --workers N`` runs N worker processes listening on one port: each binds its own
 socket with ``SO_REUSEPORT``, so the kernel spreads new connections evenly over the workers (one
@@ -25,6 +26,9 @@ import threading
 import time
 from pathlib import Path
 from typing import Any
+
+from gateway.app import build_gateway
+from gateway.config import Settings, load_settings
 
 log = logging.getLogger(__name__)
 
@@ -252,9 +256,6 @@ def worker_main(argv: list[str] | None = None) -> int:
     """One worker of ``printeps serve --workers N`` (``python -m gateway.worker``)."""
     import argparse
 
-    from gateway.app import build_gateway
-    from gateway.config import load_settings
-
     ap = argparse.ArgumentParser(description="a PRINTEPS gateway worker (started by `printeps serve --workers`)")
     ap.add_argument("--index", type=int, default=0)
     ap.add_argument("--host", default="127.0.0.1")
@@ -289,3 +290,25 @@ def worker_main(argv: list[str] | None = None) -> int:
 
 def config_path(config: Path | None) -> str | None:
     return str(config) if config else os.environ.get("PRINTEPS_CONFIG")
+
+
+def run(settings: Settings, *, rest: bool = True, ros: bool | None = None, host: str | None = None,
+        port: int | None = None) -> None:
+    """Build a gateway, run it until SIGINT/SIGTERM, shut it down (``printeps serve`` / ``printeps ros``).
+
+    With ``rest`` uvicorn serves the app (and handles the signals); without, the process waits on
+    the signals itself (the ROS launcher).
+    """
+    gateway = build_gateway(settings, rest=rest, ros=ros)
+    try:
+        if rest:
+            serve(gateway, host or settings.api.host, port or settings.api.port)
+            return
+        stop = threading.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        print("gateway node ready" if gateway.ros is not None else "gateway ready (no ROS node)", flush=True)
+        stop.wait()
+        print("gateway node stopping", flush=True)
+    finally:
+        gateway.close()

@@ -3,7 +3,8 @@
 See docs/engine-api.md for the contract. Import what you need from here.
 """
 
-from gateway.engine.compiler import CompiledRuleSet
+from gateway.base.versions import VersionInfo
+from gateway.engine.build import CompiledRuleSet
 from gateway.engine.engine import Engine, LiveRuleSet, RuleSetVersion
 from gateway.engine.errors import (
     CompileError,
@@ -20,7 +21,6 @@ from gateway.engine.errors import (
 )
 from gateway.engine.results import FireResult
 from gateway.engine.session import StatefulSession
-from gateway.base.versions import VersionInfo
 
 __all__ = [
     "CompileError", "CompileFailed", "CompileResourceError", "CompiledRuleSet", "Engine", "EngineError", "FactError", "FireResult",

@@ -18,13 +18,12 @@ from __future__ import annotations
 import io
 import json
 import zipfile
-from typing import TYPE_CHECKING
 
+from gateway.engine import compiler, incremental
+from gateway.engine.build import DEFAULT_OPTIONS, CompiledRuleSet, CompileOptions
 from gateway.engine.errors import EngineError
+from gateway.engine.ruleset import content_hash
 from gateway.engine.unit_cache import FORMAT, UnitArtifact
-
-if TYPE_CHECKING:  # pragma: no cover
-    from gateway.engine.compiler import CompiledRuleSet, CompileOptions
 
 ARCHIVE_FORMAT = "printeps-compiled-ruleset-1"
 
@@ -38,13 +37,11 @@ class IncompatibleArtifact(EngineError):
 def export_compiled(compiled: CompiledRuleSet, options: CompileOptions | None = None) -> bytes:
     """``compiled`` as one archive (see the module docstring); its units come from the unit cache
     that built it (or the one of ``options``)."""
-    from gateway.engine import compiler, incremental
-
     plan = compiled.plan
     if not plan:
         raise IncompatibleArtifact("this compiled rule set has no assembly plan to export")
     cache = compiled.unit_cache if options is None and compiled.unit_cache is not None else \
-        incremental.unit_cache(options or compiler.DEFAULT_OPTIONS)
+        incremental.unit_cache(options or DEFAULT_OPTIONS)
     unit_ids = [plan["declarations"]] + [u for u in dict.fromkeys(r[0] for r in plan["rules"]) if u != plan["declarations"]]
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:  # unit zips are compressed already
@@ -67,10 +64,7 @@ def load_compiled(data: bytes, files: dict[str, str], options: CompileOptions | 
     this Drools and these Java helpers. Its units join the unit cache (and the disk cache), so
     later edits of the set compile only what changed.
     """
-    from gateway.engine import compiler, incremental
-    from gateway.engine.ruleset import content_hash
-
-    options = options or compiler.DEFAULT_OPTIONS
+    options = options or DEFAULT_OPTIONS
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
         manifest = json.loads(archive.read("manifest.json"))

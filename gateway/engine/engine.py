@@ -30,7 +30,7 @@ from bson import ObjectId
 from gateway.base import jvm
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
-from gateway.engine.compiler import CompiledRuleSet
+from gateway.engine.build import CompiledRuleSet
 from gateway.engine.errors import (
     CompileError,
     CompileFailed,

@@ -40,16 +40,24 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from gateway.base import jvm
 from gateway.engine import drl_items, plain_rules
+from gateway.engine.build import (
+    CompiledRuleSet,
+    CompileOptions,
+    Source,
+    build_unit,
+    java_classes,
+    kiebase_configuration,
+    memory_error,
+    sorted_errors,
+)
 from gateway.engine.drl_items import RuleSetItems, SourceItems
 from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError, says_out_of_memory
+from gateway.engine.ruleset import content_hash
 from gateway.engine.unit_cache import UnitArtifact, UnitCache
-
-if TYPE_CHECKING:  # pragma: no cover
-    from gateway.engine.compiler import CompiledRuleSet, CompileOptions, _Source
 
 log = logging.getLogger(__name__)
 
@@ -176,7 +184,7 @@ def _timeout(timeout_s: float | None) -> CompileResourceError:
 
 def build(
     files: dict[str, str],
-    sources: list[_Source],
+    sources: list[Source],
     described: list[str | None],
     expanded: dict[str, str],
     label: str,
@@ -185,7 +193,6 @@ def build(
 ) -> CompiledRuleSet:
     """Compiles ``sources`` (syntax-checked, ``described`` by ``Units.describe``) in units; raises
     CompileFailed with positioned errors, or CompileResourceError when out of memory or time."""
-    from gateway.engine.ruleset import content_hash
 
     started = time.perf_counter()
     deadline = _Deadline(options.timeout_s)
@@ -207,7 +214,7 @@ def build(
     return compiled
 
 
-def _split(sources: list[_Source], described: list[str | None]) -> RuleSetItems | None:
+def _split(sources: list[Source], described: list[str | None]) -> RuleSetItems | None:
     split: list[SourceItems] = []
     for source, info in zip(sources, described):
         if info is None:
@@ -222,7 +229,6 @@ def _split(sources: list[_Source], described: list[str | None]) -> RuleSetItems 
 def _compile_whole(sources, items, env, cache, deadline, stats, on_progress, options) -> _Plan:
     """The whole set as one unit (the non-incremental path, and the fallback). Its rules are not
     offered to other builds: taking one would load all of them."""
-    from gateway.engine import compiler
 
     unit_id = drl_items.digest("whole", env, *(f"{s.file}\0{s.drl}" for s in sources))
     order: list[tuple[str, str, str]] = []
@@ -235,7 +241,7 @@ def _compile_whole(sources, items, env, cache, deadline, stats, on_progress, opt
     if unit is None:
         _progress(on_progress, 0, max(len(order), 1), "compile")
         started = time.perf_counter()
-        built = _run_with_deadline(lambda: compiler.build_unit(sources, unit_id, deadline), deadline)
+        built = _run_with_deadline(lambda: build_unit(sources, unit_id, deadline), deadline)
         stats.compile_s = time.perf_counter() - started
         unit = UnitArtifact(unit_id, "whole", built.model_classes, {}, built.data)
         cache.put(unit, persist=options.incremental and options.disk_cache)
@@ -248,7 +254,6 @@ def _compile_whole(sources, items, env, cache, deadline, stats, on_progress, opt
 
 def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, deadline, stats, on_progress,
                          options) -> _Plan:
-    from gateway.engine import compiler
 
     _check_duplicates(items, sources)
     by_file = {s.file: s for s in sources}
@@ -307,7 +312,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             try:
                 unit_sources = [_unit_source(by_file[s.file], s, s.blanked(lambda i: i.kind != "rule"))
                                 for s in items.sources]
-                built = compiler.build_unit(unit_sources, decl_id, deadline)
+                built = build_unit(unit_sources, decl_id, deadline)
                 unit = UnitArtifact(decl_id, "declarations", built.model_classes, {}, built.data)
                 declarations.append(_load(unit, None))
                 return unit, []
@@ -323,7 +328,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             else:  # only its declarations matter here
                 text = s.blanked(lambda i: i.kind != "rule")
             unit_sources.append(_unit_source(by_file[s.file], s, text))
-        built = compiler.build_unit(unit_sources, unit_id, deadline)
+        built = build_unit(unit_sources, unit_id, deadline)
         unit = UnitArtifact(unit_id, "rules", built.model_classes,
                             {key: (src.package, item.name) for key, src, item in rules}, built.data)
         # load it here, while other workers compile: the assembly then only links
@@ -376,7 +381,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             pool.shutdown(wait=not deadline.cancelled.is_set(), cancel_futures=True)
     stats.compile_s = time.perf_counter() - compile_started
     if errors:
-        raise CompileFailed(compiler._sorted(errors))
+        raise CompileFailed(sorted_errors(errors))
     return _Plan(decl_id, [(found[key], src.package, item.name) for key, src, item in order])
 
 
@@ -463,13 +468,12 @@ def _batch_size(missing: int, workers: int) -> int:
     return max(1, min(MAX_BATCH, math.ceil(missing / (max(workers, 1) * 3))))
 
 
-def _unit_source(original: _Source, items: SourceItems, text: str) -> _Source:
-    from gateway.engine.compiler import _Source
+def _unit_source(original: Source, items: SourceItems, text: str) -> Source:
 
-    return _Source(original.file, text, original.line_map)
+    return Source(original.file, text, original.line_map)
 
 
-def _check_duplicates(items: RuleSetItems, sources: list[_Source]) -> None:
+def _check_duplicates(items: RuleSetItems, sources: list[Source]) -> None:
     """Two rules (or queries) of one name in one package: an error a one-unit build reports too,
     but units compiled apart would not see."""
     by_file = {s.file: s for s in sources}
@@ -559,8 +563,6 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
 
     import jpype
 
-    from gateway.engine import compiler
-    from gateway.engine.ruleset import content_hash
 
     def fetch(unit_id: str) -> UnitArtifact:
         unit = cache.get(unit_id) if cache is not None else None
@@ -583,7 +585,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         raise _resource_error_of(exc) or RuntimeError(f"loading compiled rule units failed: {exc}") from exc
     stats.load_s = time.perf_counter() - load_started
     position = {unit_id: k for k, unit_id in enumerate(unit_ids)}
-    j = compiler._j()
+    j = java_classes()
     ks = j["KieServices"].Factory.get()
     units = jvm.helper_class("Units")
     ArrayList = jpype.JClass("java.util.ArrayList")
@@ -593,12 +595,12 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
     _progress(on_progress, 0, 1, "assemble")
     started = time.perf_counter()
     try:
-        kbase = (units.build(declarations.models, compiler._kiebase_configuration(ks)) if plan.whole and not plan.rules else units.assemble(
+        kbase = (units.build(declarations.models, kiebase_configuration(ks)) if plan.whole and not plan.rules else units.assemble(
             declarations.models, unit_models,
             jpype.JArray(jpype.JInt)([position[u] for u, _, _ in plan.rules]),
             jpype.JArray(jpype.JString)([p for _, p, _ in plan.rules]),
             jpype.JArray(jpype.JString)([n for _, _, n in plan.rules]),
-            compiler._kiebase_configuration(ks)))
+            kiebase_configuration(ks)))
         runner = j["Runner"](kbase)
     except jpype.JException as exc:
         resource = _resource_error_of(exc)
@@ -607,7 +609,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         raise
     stats.assemble_s = time.perf_counter() - started
     _progress(on_progress, 1, 1, "assemble")
-    return compiler.CompiledRuleSet(
+    return CompiledRuleSet(
         hash=content_hash(files),
         runner=runner,
         container=None,
@@ -631,7 +633,6 @@ def build_from_plan(files: dict[str, str], options: CompileOptions, on_progress:
                     ) -> CompiledRuleSet | None:
     """The rule set assembled from its cached plan and units (nothing parsed or compiled), or None
     when there is no plan or one of its units is gone."""
-    from gateway.engine.ruleset import content_hash
 
     if not (options.incremental and options.disk_cache):
         return None
@@ -678,16 +679,3 @@ def _resource_error_of(exc: BaseException) -> CompileResourceError | None:
     if says_out_of_memory(text):
         return memory_error()
     return None
-
-
-def memory_error() -> CompileResourceError:
-    heap = ""
-    try:
-        runtime = jvm.jclass("java.lang.Runtime").getRuntime()
-        heap = f"{int(runtime.maxMemory()) // (1024 * 1024)} MB"
-        jvm.jclass("java.lang.System").gc()  # give back what the failed build held
-    except Exception:  # the JVM may be in no state to answer
-        pass
-    return CompileResourceError(
-        "memory", "the JVM ran out of memory while compiling" + (f" (heap limit {heap})" if heap else ""),
-        setting="PRINTEPS_JVM_HEAP (jvm.max_heap)", limit=heap or None)

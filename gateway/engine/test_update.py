@@ -30,7 +30,8 @@ import yaml
 
 from gateway.engine import decision_table
 from gateway.engine.ruleset import is_table_file, is_test_file
-from gateway.engine.scenarios import ScenarioResult, _Engine, _equal, _match_actions, compare, parse_file, run_scenarios
+from gateway.engine.scenario_files import parse_file
+from gateway.engine.scenarios import ScenarioResult, _Engine, _equal, _match_actions, compare, run_scenarios
 
 SCAN_LINES = 20  # how far below an expected action's first line its params may stand (block style)
 

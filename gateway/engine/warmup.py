@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gateway.engine.compiler import CompiledRuleSet
+    from gateway.engine.build import CompiledRuleSet
 
 log = logging.getLogger(__name__)
 

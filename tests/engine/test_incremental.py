@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.engine import compiler, incremental
+from gateway.engine import build, compiler, incremental
 from gateway.engine.artifacts import (
     IncompatibleArtifact,
     export_compiled,
@@ -647,7 +647,7 @@ def test_a_build_out_of_memory_is_not_blamed_on_the_rules_by_what_jpype_says_nex
         def getRepository(self) -> Repository:
             return Repository()
 
-    compiler._forget_module(Services(), "release")  # the error being raised is kept, not replaced
+    build._forget_module(Services(), "release")  # the error being raised is kept, not replaced
 
 
 def test_progress_is_reported_by_stage(options):

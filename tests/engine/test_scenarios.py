@@ -10,7 +10,7 @@ import pytest
 
 from gateway.config import PROJECT_ROOT, Settings
 from gateway.engine import CompileFailed, Engine
-from gateway.engine import scenarios
+from gateway.engine import scenario_files, scenarios
 from gateway.engine.ruleset import read_folder
 
 from authoring_samples import files_with, xlsx_text
@@ -65,7 +65,7 @@ def rule_set(tests: str, name: str = "tests/greetings.yaml") -> dict[str, str]:
     ("- name: a\n  expect:\n    no_other_actions: yes please\n", 3, 23, "'no_other_actions' must be true or false"),
 ])
 def test_malformed_scenario_files_name_file_line_and_column(text, line, column, message):
-    errors = scenarios.format_errors({"tests/bad.yaml": text})
+    errors = scenario_files.format_errors({"tests/bad.yaml": text})
     assert errors, text
     first = errors[0]
     assert (first.file, first.line, first.column) == ("tests/bad.yaml", line, column), first
@@ -73,7 +73,7 @@ def test_malformed_scenario_files_name_file_line_and_column(text, line, column, 
 
 
 def test_names_are_unique_across_files():
-    errors = scenarios.format_errors({"tests/a.yaml": GOOD, "tests/b.yaml": "- name: a pair is welcomed\n  expect: {fired: [X]}\n"})
+    errors = scenario_files.format_errors({"tests/a.yaml": GOOD, "tests/b.yaml": "- name: a pair is welcomed\n  expect: {fired: [X]}\n"})
     assert [(e.file, e.line) for e in errors] == [("tests/b.yaml", 1)]
     assert "the first is at tests/a.yaml:1" in errors[0].message
 
