@@ -29,6 +29,8 @@ from typing import Any
 
 from gateway.app import build_gateway
 from gateway.config import Settings, load_settings
+from gateway.store.embedded import EmbeddedMongo
+from gateway.store.factory import embedded_dir, store_uri
 
 log = logging.getLogger(__name__)
 
@@ -175,12 +177,8 @@ class Supervisor:
 
     def start_database(self, settings: Any) -> None:
         """The embedded database, once for all workers, unless a MongoDB URI is configured."""
-        from gateway.store.factory import embedded_dir, store_uri
-
         if store_uri(settings):
             return
-        from gateway.store.embedded import EmbeddedMongo
-
         self.embedded = EmbeddedMongo(embedded_dir(settings), settings.store.embedded_port, settings.store.embedded_cache)
         self.env["MONGO_URI"] = self.embedded.start()
         print(f"embedded database at {self.env['MONGO_URI']} (shared by {self.workers} workers)", flush=True)

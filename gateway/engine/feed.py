@@ -27,6 +27,7 @@ from typing import Any, Callable
 import jpype.nio
 import orjson
 
+from gateway.base import jvm
 from gateway.engine.errors import EngineError
 from gateway.engine.results import BUFFER_BYTES, NO_TIMESTAMP, FireResult, encode_facts_bytes, raise_refusal
 
@@ -63,8 +64,6 @@ class EventFeed:
         return_facts: bool = False,
         linger_ms: float = 1.0,
     ):
-        from gateway.base import jvm
-
         if capacity < 1:
             raise ValueError("capacity must be at least 1")
         self.session = session

@@ -26,6 +26,8 @@ from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, Callable
 
+from gateway.base import jvm
+
 log = logging.getLogger(__name__)
 
 OWL_THING = "http://www.w3.org/2002/07/owl#Thing"
@@ -194,8 +196,6 @@ class Reasoner:
         return buf.getvalue().decode("utf-8"), asserted
 
     def _pellet(self, world_xml: str, asserted: set[tuple[str, str, str]]) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:
-        from gateway.base import jvm
-
         manager = jvm.jclass("org.semanticweb.owlapi.apibinding.OWLManager").createOWLOntologyManager()
         source = jvm.jclass("org.semanticweb.owlapi.io.StringDocumentSource")(world_xml)
         factory = jvm.jclass("com.clarkparsia.pellet.owlapiv3.PelletReasonerFactory").getInstance()

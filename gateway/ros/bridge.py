@@ -23,6 +23,7 @@ from typing import Any, Callable
 from gateway.config import RosSubscription, Settings
 from gateway.rdf.mapping import MappingError, check_against, element_type, introspected_spec, node_map_from_spec
 from gateway.ros.convert import describe
+from gateway.ros.dialogue import DialogueTopics
 from gateway.ros.dispatcher import ActionDispatcher
 from gateway.ros.ingress import Ingress, checks, topic_mapping
 from gateway.ros.node import GatewayNode
@@ -92,8 +93,6 @@ class RosGateway:
     def attach_dialogue(self, dialogue: Any) -> None:
         """Take turns from the ``Utterance`` topic and publish completed orders (see
         :mod:`gateway.ros.dialogue`)."""
-        from gateway.ros.dialogue import DialogueTopics
-
         cfg = self.settings.dialogue
         self.dialogue = DialogueTopics(self.node, dialogue, utterance_topic=cfg.utterance_topic,
                                        orders_topic=cfg.orders_topic)

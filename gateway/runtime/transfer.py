@@ -23,8 +23,11 @@ from typing import Any
 
 import yaml
 
-from gateway.engine.ruleset import write_file
 from gateway.base.versions import Catalog
+from gateway.engine.ruleset import write_file
+from gateway.stream.query import ParamSpec, parse_query
+from gateway.stream.rules import RuleBinding
+from gateway.workflow.loader import parse
 
 RULES = Path("rules") / "drl"
 WORKFLOWS = Path("workflows")
@@ -120,14 +123,10 @@ def _workflow_name(text: str) -> str | None:
 
 
 def _query_name(text: str) -> str:
-    from gateway.stream.query import parse_query
-
     return parse_query(text).name
 
 
 def _binding_of(raw: Any) -> Any:
-    from gateway.stream.rules import RuleBinding
-
     return RuleBinding.from_dict(raw).to_dict()
 
 
@@ -196,8 +195,6 @@ def _import_knowledge(knowledge: Any, kind: str, path: Path, author: str, commen
 
 
 def _import_workflow(registry: Any, path: Path, author: str, comment: str) -> str:
-    from gateway.workflow.loader import parse
-
     text = path.read_text(encoding="utf-8")
     name = parse(text, file=str(path)).name
     if name in registry.names():
@@ -216,9 +213,6 @@ def _import_mapping(mappings: Any, path: Path, author: str, comment: str) -> str
 
 
 def _import_query(gateway: Any, path: Path, author: str, comment: str) -> str:
-    from gateway.stream.query import ParamSpec, parse_query
-    from gateway.stream.rules import RuleBinding
-
     text = path.read_text(encoding="utf-8")
     sidecar = path.with_name(path.stem + ".binding.yaml")
     binding = RuleBinding.from_dict(yaml.safe_load(sidecar.read_text(encoding="utf-8")), sidecar.name) \

@@ -35,7 +35,7 @@ from typing import Any
 from pyoxigraph import Literal, NamedNode
 
 from gateway.config import StreamSettings
-from gateway.rdf.terms import XSD, Term, Triple, canonical_term, canonical_triple
+from gateway.rdf.terms import DEFAULT_PREFIXES, XSD, Term, Triple, canonical_term, canonical_triple, parse_node
 from gateway.stream.analysis import construct_fields, relevant_predicates
 from gateway.stream.evaluate import (
     Evaluation,
@@ -921,8 +921,6 @@ def _with_attributes(relevant: frozenset[NamedNode] | None, binding: RuleBinding
     (``attributes``: a detected customer's age is not in the query, but the rules need it)."""
     if relevant is None or not binding.attributes:
         return relevant
-    from gateway.rdf.terms import DEFAULT_PREFIXES, parse_node
-
     return relevant | {parse_node(p, "attributes", DEFAULT_PREFIXES) for p in binding.attributes.values()}
 
 

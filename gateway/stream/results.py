@@ -26,7 +26,7 @@ from typing import Any
 
 from pyoxigraph import BlankNode, Literal, NamedNode
 
-from gateway.rdf.terms import Term, Triple, term_to_json, term_to_sparql_json
+from gateway.rdf.terms import RDF, Term, Triple, local_name, term_to_json, term_to_sparql_json
 
 Row = dict[str, Term]
 
@@ -124,8 +124,6 @@ def triples_as_facts(rows: list[Row]) -> list[Row]:
     """CONSTRUCT rows grouped by subject: one row per subject, ``subject`` plus one entry per
     predicate (its local name; ``rdf:type`` is ``type``; several values: the first in term order).
     This is what a rule binding on a stream reads."""
-    from gateway.rdf.terms import RDF, local_name
-
     by_subject: dict[Term, Row] = {}
     for r in sorted(rows, key=lambda r: (term_sort_key(r.get("subject")), term_sort_key(r.get("predicate")),
                                          term_sort_key(r.get("object")))):

@@ -32,7 +32,7 @@ from typing import Any, Callable, Mapping
 
 from pyoxigraph import BlankNode, NamedNode
 
-from gateway.rdf.terms import Term, local_name, term_to_json
+from gateway.rdf.terms import DEFAULT_PREFIXES, Term, local_name, parse_node, term_to_json
 
 _INT_TYPES = {"int", "integer", "long", "short", "byte", "java.lang.integer", "java.lang.long"}
 _FLOAT_TYPES = {"double", "float", "java.lang.double", "java.lang.float", "bigdecimal", "java.math.bigdecimal"}
@@ -224,8 +224,6 @@ def _subject_term(binding: RuleBinding, row: dict[str, Term]) -> Term | None:
 
 def _attribute_index(binding: RuleBinding, window: Any) -> dict[tuple[Term, str], Term]:
     """(subject, predicate as written) -> the object of its latest occurrence in the window."""
-    from gateway.rdf.terms import DEFAULT_PREFIXES, parse_node
-
     wanted = {parse_node(p, "attributes", DEFAULT_PREFIXES).value: p for p in binding.attributes.values()}
     latest: dict[tuple[Term, str], tuple[int, Term]] = {}
     for (s, p, o), ts in window.stamped.items():

@@ -10,6 +10,7 @@ from pyoxigraph import Literal, NamedNode
 from gateway.rdf.terms import (
     XSD,
     Term,
+    canonical_term,
 )
 from gateway.stream.evaluate import TIMESTAMP_FN
 from gateway.stream.fastpath.common import (
@@ -415,8 +416,6 @@ def _is_iri(x: Any) -> bool:
 
 
 def _to_ox(term: Any) -> Term | None:
-    from gateway.rdf.terms import canonical_term
-
     if _is_iri(term):
         return NamedNode(str(term))
     if _is_literal(term):
