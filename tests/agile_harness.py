@@ -5,7 +5,10 @@ workflow, a business rule, the ontology or a SWRL rule. Each scenario here is on
 concrete edit, a probe that observes the robots' behaviour, and the behaviour expected after the
 edit. :func:`apply` checks the old behaviour, submits the edit to the running gateway, and measures
 the edit's size and the machine time from submit until the probe shows the new behaviour.
-The tests (``tests/agile``) and the benchmark (``bench/agile_loop.py``) share these definitions.
+The tests (``tests/agile``, the workbench's Table 2 story) and the benchmarks (``bench/agile_loop.py``,
+``bench/table2_browser.py``) share these definitions. It is test support, not product: it lives in
+``tests/`` (imported as ``agile_harness``) and may import the gateway's top, the composition root and
+its entry points.
 
 Scenarios build on each other in Table 2 order (the teahouse evolves: #11 extends the rule set
 that #8 created), so run them in order on one gateway.
@@ -24,6 +27,10 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import httpx
+
+from gateway.app import build_gateway
+from gateway.config import PROJECT_ROOT, Settings
+from gateway.serve import free_port, serve_in_thread
 
 Observation = list[str]
 
@@ -462,10 +469,6 @@ def running_gateway(workdir: str | Path, *, token: str | None = None) -> Iterato
     """A real gateway, built as ``printeps serve`` builds it (no ROS: robots and humans are
     simulated), over its own embedded Information State in ``workdir`` seeded from the
     repository, served by uvicorn on 127.0.0.1."""
-    from gateway.app import build_gateway
-    from gateway.config import PROJECT_ROOT, Settings
-    from gateway.serve import free_port, serve_in_thread
-
     workdir = Path(workdir)
     settings = Settings.model_validate({
         "data_dir": str(workdir / "var"),

@@ -173,7 +173,7 @@ def restart(n: int, cache_dir: str) -> None:
 def load(n: int, cache_dir: str, archive: str) -> None:
     """Another process given the exported bytes: load_compiled, no compiling."""
     from gateway.engine.artifacts import load_compiled
-    from gateway.engine.compiler import CompileOptions
+    from gateway.engine.build import CompileOptions
 
     jvm_s = start_jvm()
     data = Path(archive).read_bytes()

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from gateway.engine import compiler, incremental
-from gateway.engine.compiler import CompileOptions
+from gateway.engine.build import CompileOptions
 from gateway.engine.results import encode_facts
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -22,7 +22,7 @@ from gateway.engine.artifacts import (
     export_compiled,
     load_compiled,
 )
-from gateway.engine.compiler import CompileOptions
+from gateway.engine.build import CompileOptions
 from gateway.engine.errors import CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.results import encode_facts
 from gateway.engine.warmup import plain_facts, warm
