@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import random
 import statistics
 import sys
@@ -69,9 +70,10 @@ def run(n: int, explains: int, traces: int) -> dict:
     settings = Settings.model_validate({"data_dir": str(tmp / "var"),
                                         "engine": {"rules_dir": str(ROOT / "rules" / "drl")},
                                         "streams": {"queries_dir": None}})
+    started_at = time.perf_counter()
     gateway = build_gateway(settings, store=store, ros=False, warm_up=False)
     server = ServerThread(gateway.app).start()
-    out: dict = {"n": n}
+    out: dict = {"n": n, "load_before": os.getloadavg()[0]}
     try:
         http = httpx.Client(base_url=server.url, timeout=600)
         rng = random.Random(29)
@@ -98,6 +100,12 @@ def run(n: int, explains: int, traces: int) -> dict:
         assert body["replayed"] == n, body.get("note")
         out.update(replayed=body["replayed"], changed=body["changed"])
         examples = json.loads(files["examples.json"])
+        # the live version's explain queries are built in the background when it loads
+        # (engine.explain_prebuild); the first explanation after that compiles nothing
+        while not gateway.engine.explain_ready(files):
+            time.sleep(0.2)
+        out["prebuilt_after_start_s"] = time.perf_counter() - started_at
+        builds = gateway.engine.explain_builds()
         started = time.perf_counter()
         http.post("/api/rulesets/reception/explain", json={"facts": examples[0]["facts"]}).raise_for_status()
         out["explain_first_s"] = time.perf_counter() - started
@@ -107,7 +115,11 @@ def run(n: int, explains: int, traces: int) -> dict:
             started = time.perf_counter()
             http.post("/api/rulesets/reception/explain", json={"facts": facts}).raise_for_status()
             times.append((time.perf_counter() - started) * 1000)
-        out.update(explain_p50_ms=statistics.median(times), explain_p99_ms=pct(times, 0.99))
+        assert gateway.engine.explain_builds() == builds, "an explanation built its queries"
+        cpu = [c for _wall, c in gateway.engine.explain_timings()[-explains:]]
+        out.update(explain_p50_ms=statistics.median(times), explain_p99_ms=pct(times, 0.99),
+                   explain_cpu_p50_ms=statistics.median(cpu), explain_cpu_p99_ms=pct(cpu, 0.99),
+                   load_explain=os.getloadavg()[0])
         times = []
         for k in range(traces):
             started = time.perf_counter()
@@ -134,8 +146,10 @@ one after the other, then replayed on a draft that moves the child age bound (12
 |---|---|---|---|
 | {r['n']} REST fires that recorded the decisions (the peer) | {r['fire_s']:.2f} s | {r['fire_s'] / r['n'] * 1000:.2f} ms | 1.00 |
 | replay of those {r['replayed']} decisions on the draft (one synchronous request; {r['changed']} changed) | {r['replay_s']:.2f} s | {r['replay_s'] / r['replayed'] * 1000:.3f} ms | **{ratio:.2f}** (goal < 0.5) |
-| explain, first call of the version (builds the diagnostic queries) | {r['explain_first_s']:.1f} s | | |
-| explain, 32 rules, p50 / p99 | | {r['explain_p50_ms']:.1f} / {r['explain_p99_ms']:.1f} ms (goal < 50 ms) | |
+| explain queries built in the background after the gateway started (`engine.explain_prebuild`) | ready {r['prebuilt_after_start_s']:.1f} s after start | | |
+| explain, first call of the version (its queries already built: no compile) | {r['explain_first_s'] * 1000:.0f} ms | | |
+| explain, 32 rules, over HTTP, p50 / p99 (load average {r['load_explain']:.1f}) | | {r['explain_p50_ms']:.1f} / {r['explain_p99_ms']:.1f} ms (goal < 50 ms) | |
+| explain, 32 rules, CPU time of the explanation (explain thread, JVM included), p50 / p99 | | {r['explain_cpu_p50_ms']:.1f} / {r['explain_cpu_p99_ms']:.1f} ms | |
 | trace read with {r['n']} decisions stored, p50 / p99 | | {r['trace_p50_ms']:.1f} / {r['trace_p99_ms']:.1f} ms | |
 
 A replay reads the decisions a page (1,000) at a time and fires each in a fresh stateless session

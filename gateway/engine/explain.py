@@ -27,8 +27,9 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +46,7 @@ QUERY_FILE = "zz_explain_{n}.drl"
 FACT = "$__f"
 CACHE_SIZE = 8
 QUERIES_PER_PACKAGE = 40
+MAX_SHOWN = 10  # facts shown for a condition (the blockers of a "not"); a query's other rows are not read
 MAX_WAITING = 8  # explanations queued or running per process; more are refused (429)
 _PACKAGE = re.compile(r"^\s*package\s+[\w.]+\s*;?")
 _STRING_OR_COMMENT = re.compile(r'"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'|//[^\n]*|/\*.*?\*/', re.DOTALL)
@@ -436,6 +438,10 @@ class ExplainCache:
         self._built: OrderedDict[str, Explainer] = OrderedDict()
         self._lock = threading.Lock()
         self._building: dict[str, threading.Lock] = {}
+        self._prebuild: OrderedDict[str, dict[str, str]] = OrderedDict()  # rule set -> its newest live files
+        self._draining = False
+        self.timings: deque[tuple[float, float]] = deque(maxlen=1000)  # (wall ms, CPU ms) of the last explanations
+        self.builds = 0  # explainers built (a test asserts an explanation after a deploy builds none)
 
     def run(self, engine: Any, files: dict[str, str], facts: list[dict[str, Any]]) -> dict[str, Any]:
         """Explain ``facts`` on ``files``: built (once) and asked on the cache's own long-lived
@@ -447,9 +453,60 @@ class ExplainCache:
         if not self._waiting.acquire(blocking=False):
             raise ExplainBusy(f"{MAX_WAITING} explanations are already waiting on this gateway process; try again shortly")
         try:
-            return self._worker.submit(lambda: explain(engine, self.get(engine, files), facts)).result()
+            return self._worker.submit(self._timed, engine, files, facts).result()
         finally:
             self._waiting.release()
+
+    def _timed(self, engine: Any, files: dict[str, str], facts: list[dict[str, Any]]) -> dict[str, Any]:
+        """One explanation on the explain thread, its wall and CPU time kept (``timings``): on a
+        loaded machine the wall time says more about the neighbours than about explaining. The
+        thread's CPU time includes the JVM's work, which runs on this same thread."""
+        explainer = self.get(engine, files)
+        wall, cpu = time.perf_counter(), time.thread_time()
+        answer = explain(engine, explainer, facts)
+        self.timings.append(((time.perf_counter() - wall) * 1000, (time.thread_time() - cpu) * 1000))
+        return answer
+
+    def has(self, files: dict[str, str]) -> bool:
+        """Whether the explainer of ``files`` is built (an explanation of them compiles nothing)."""
+        with self._lock:
+            return content_hash(files) in self._built
+
+    def prebuild(self, engine: Any, name: str, files: dict[str, str]) -> None:
+        """Build the explainer of ``files`` (rule set ``name``'s new live version) soon, on the
+        explain thread, off the serving path: the first explanation of a version then finds its
+        queries compiled instead of compiling them (~10 s for the 32 reception rules).
+
+        Bounded: one pending build per rule set (a newer deploy replaces an older one not started
+        yet), at most CACHE_SIZE rule sets pending (the oldest dropped: it would leave the cache
+        anyway); explanations asked meanwhile wait behind at most the build in progress."""
+        with self._lock:
+            if content_hash(files) in self._built:
+                return
+            self._prebuild.pop(name, None)
+            self._prebuild[name] = files
+            while len(self._prebuild) > self._size:
+                self._prebuild.popitem(last=False)
+            start, self._draining = not self._draining, True
+        if start:
+            try:
+                self._worker.submit(self._drain, engine)
+            except RuntimeError:  # the explain thread is shut down (closing): nothing to prepare for
+                with self._lock:
+                    self._draining = False
+
+    def _drain(self, engine: Any) -> None:
+        """On the explain thread: build the pending explainers, newest deploy of each rule set."""
+        while True:
+            with self._lock:
+                if not self._prebuild:
+                    self._draining = False
+                    return
+                name, files = self._prebuild.popitem(last=False)
+            try:
+                self.get(engine, files)
+            except Exception as exc:  # an explanation will build it again and report the error then
+                log.warning("explain queries of %s not built in advance: %s", name, exc)
 
     def close(self) -> None:
         """Stop the explain thread (detached from the JVM first, as a thread that ends should be)
@@ -480,6 +537,7 @@ class ExplainCache:
                     return self._built[key]
             explainer = build(engine, files)
             with self._lock:
+                self.builds += 1
                 self._built[key] = explainer
                 while len(self._built) > self._size:
                     self._built.popitem(last=False)
@@ -547,6 +605,10 @@ class ThrowawaySession:
     def query(self, name: str) -> dict[str, Any]:
         return _checked(self._java.query(str(name), "[]"))
 
+    def queries(self, names: list[str], max_rows: int) -> dict[str, list[dict[str, Any]]]:
+        """Several queries in one JVM call, at most ``max_rows`` rows each."""
+        return _checked(self._java.queries(orjson.dumps(names).decode(), int(max_rows)))["results"]
+
     def close(self) -> None:
         self._java.dispose()
 
@@ -569,6 +631,16 @@ class Run:
         if name not in self._rows:
             self._rows[name] = self.session.query(name)["rows"]
         return self._rows[name]
+
+    def prefetch(self, names: list[str]) -> None:
+        """Ask ``names`` at once (one JVM call): what explaining the rules that did not fire needs.
+        Rows beyond MAX_SHOWN are never shown, so they are not fetched."""
+        if names:
+            self._rows.update(self.session.queries(names, MAX_SHOWN))
+
+    @property
+    def fetched(self) -> set[str]:
+        return set(self._rows)
 
 
 def _closest(run: Run, plan: RulePlan, k: int, cond: Condition) -> tuple[Any, int]:
@@ -618,6 +690,19 @@ def _why_pattern(run: Run, plan: RulePlan, k: int, cond: Condition) -> dict[str,
     return out
 
 
+def prefetch(run: Run, plans: list[RulePlan]) -> None:
+    """Ask, in two JVM calls, the queries explaining ``plans`` (the rules that did not fire) will
+    read: every prefix ``C1 … Ck``, then the candidate queries of each rule's first failing
+    condition. One call per query cost more than the queries (~95 calls for the reception set)."""
+    run.prefetch([plan.prefix_query(k) for plan in plans for k in range(1, len(plan.conditions) + 1)])
+    second = []
+    for plan in plans:
+        k = next((k for k in range(1, len(plan.conditions) + 1) if not run.rows(plan.prefix_query(k))), None)
+        if k is not None and _has_candidates(plan.conditions[k - 1]):
+            second.extend(plan.candidate_query(k, j) for j in range(len(plan.conditions[k - 1].constraints) + 1))
+    run.prefetch([name for name in second if name not in run.fetched])
+
+
 def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]]) -> dict[str, Any]:
     """What one rule did: fired with its matches, or the condition that stopped it and why."""
     base: dict[str, Any] = {"rule": plan.name, "file": plan.file, "line": plan.line}
@@ -631,7 +716,7 @@ def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]]) -> dict[str, 
         out = {**base, "fired": False, "condition": {**cond.where(), "of": len(plan.conditions)}}
         if cond.kind == "not":
             blockers = [r.get(FACT) for r in run.rows(plan.candidate_query(k, len(cond.constraints)))]
-            out.update(constraint=None, exists=blockers[:10],
+            out.update(constraint=None, exists=blockers[:MAX_SHOWN],
                        reason=f"{_describe(blockers[0])} exists, and the rule wants no such {cond.type}"
                        if blockers else f"a {cond.type} fact exists, and the rule wants none")
         elif cond.kind in ("pattern", "exists", "from", "accumulate"):
@@ -662,6 +747,7 @@ def explain(engine: Any, explainer: Explainer, facts: list[dict[str, Any]]) -> d
     try:
         queries.insert(result.facts)
         run = Run(queries)
+        prefetch(run, [plan for plan in explainer.plans if plan.name not in matches and not plan.broken])
         rules = [explain_rule(run, plan, matches.get(plan.name, [])) for plan in explainer.plans]
     finally:
         queries.close()

@@ -206,3 +206,38 @@ def test_a_rest_fire_is_traced_by_its_request_id(client, api_gateway, drl_set):
     assert body["items"][0]["at"][:10] == body["items"][0]["record"]["at"][:10]  # when it was written: that day
     missing = client.get("/api/traces/never-seen")
     assert missing.status_code == 404 and "never-seen" in missing.json()["error"]
+
+
+def test_an_explanation_after_a_deploy_compiles_nothing(client, api_gateway):
+    """With ``engine.explain_prebuild`` the deploy builds the version's explain queries on the
+    explain thread; the explanation afterwards finds them: no explainer built, no compile."""
+    from gateway.engine import compiler
+    from gw_testing import wait_for
+
+    engine = api_gateway.engine
+    files = {"r.drl": DRL.replace('"Hello"', '"Hello again"')}  # a text no other test built
+    engine.settings.engine.explain_prebuild = True
+    try:
+        assert client.put("/api/rulesets/explain-prebuilt", json={"files": files}).status_code == 201
+        assert wait_for(lambda: engine.explain_ready(files), timeout_s=120), "the explain queries were not built"
+    finally:
+        engine.settings.engine.explain_prebuild = False
+    builds, compiles = engine.explain_builds(), compiler.stats["compiles"]
+    answer = client.post("/api/rulesets/explain-prebuilt/explain",
+                         json={"facts": [{"type": "Guest", "id": "g9", "age": 30, "language": "fr"}]})
+    assert answer.status_code == 200, answer.text
+    assert by_rule(answer.json())["Greet in English"]["fired"] is False
+    assert engine.explain_builds() == builds and compiler.stats["compiles"] == compiles
+
+
+def test_without_prebuild_the_first_explanation_builds(client, api_gateway):
+    """The counter the test above relies on does count: an explanation of a text nobody built
+    builds its explainer (and compiles)."""
+    from gateway.engine import compiler
+
+    engine = api_gateway.engine
+    files = {"r.drl": DRL.replace('"Hello"', '"Hello there"')}
+    builds, compiles = engine.explain_builds(), compiler.stats["compiles"]
+    answer = client.post("/api/rulesets/explain-drl/explain", json={"facts": [], "files": files})
+    assert answer.status_code == 200, answer.text
+    assert engine.explain_builds() == builds + 1 and compiler.stats["compiles"] > compiles
