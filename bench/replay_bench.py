@@ -10,7 +10,7 @@ One gateway in this process (real JVM, the embedded MongoDB-protocol server, uvi
 3. **Explain**: ``POST /api/rulesets/reception/explain`` on the examples' facts: the first call
    (the diagnostic queries' build) and then p50/p99 over repeated calls (goal: under 50 ms).
 4. **Trace**: ``GET /api/traces/{id}`` of REST fires' request ids with the N decisions stored
-   (``correlation_id`` is not indexed: a trace scans the decisions).
+   (the decisions are indexed by ``(correlation_id, _id)``: a trace does not scan them).
 
     .venv/bin/python bench/replay_bench.py [--n 10000] [--explain 200] [--write]
 """
@@ -154,8 +154,8 @@ one after the other, then replayed on a draft that moves the child age bound (12
 
 A replay reads the decisions a page (1,000) at a time and fires each in a fresh stateless session
 in-process: no HTTP, no recording, no journal write per decision — that is where it saves on the
-fires that made them. The trace scans the decisions for the correlation id (not indexed on purpose:
-an index would cost every recorded fire a write), so its cost grows with the decisions kept.
+fires that made them. The trace finds its decisions through the `(correlation_id, _id)` index,
+so its cost does not grow with the decisions kept.
 """
 
 
