@@ -54,7 +54,7 @@ def pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-def run(n: int, explains: int, traces: int) -> dict:
+def run(n: int, explains: int, traces: int, store_timeout_ms: int = 1000) -> dict:
     from gateway.app import build_gateway
     from gateway.config import Settings
     from gateway.engine.ruleset import read_folder
@@ -66,7 +66,7 @@ def run(n: int, explains: int, traces: int) -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="replay-bench-"))
     mongo = EmbeddedMongo(tmp / "mongo")
     mongo.start()
-    store = InformationState(mongo.uri, "bench", tmp / "journal", backend="embedded")
+    store = InformationState(mongo.uri, "bench", tmp / "journal", backend="embedded", timeout_ms=store_timeout_ms)
     settings = Settings.model_validate({"data_dir": str(tmp / "var"),
                                         "engine": {"rules_dir": str(ROOT / "rules" / "drl")},
                                         "streams": {"queries_dir": None}})
@@ -165,10 +165,13 @@ def main() -> None:
     parser.add_argument("--explain", type=int, default=200, help="timed explain calls")
     parser.add_argument("--traces", type=int, default=50, help="timed trace reads")
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
+    parser.add_argument("--store-timeout-ms", type=int, default=1000,
+                        help="the store's timeout (store.timeout_ms; raise it on a loaded machine, where the "
+                             "embedded database answers a replay's reads slower than the default allows)")
     parser.add_argument("--note", default="", help="added to the machine note (e.g. why the run is small)")
     args = parser.parse_args()
     note = machine_note() + (f"; {args.note}" if args.note else "")
-    result = run(args.n, args.explain, args.traces)
+    result = run(args.n, args.explain, args.traces, args.store_timeout_ms)
     print("BENCH-RESULT " + json.dumps(result))
     text = section(result, note)
     print(text)
