@@ -35,7 +35,7 @@ from typing import Any, Callable
 
 import orjson
 
-from gateway.engine import compiler
+from gateway.engine import compiler, warmup
 from gateway.engine.errors import CompileError, CompileFailed, EngineError, FactError
 from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import content_hash
@@ -605,7 +605,11 @@ class ExplainCache:
                     return
                 name, files = self._prebuild.popitem(last=False)
             try:
-                self.get(engine, files)
+                explainer = self.get(engine, files)
+                # one explanation on the rule set's first example (or no facts) loads the queries'
+                # classes and warms their code in the JVM: the first real one is then as quick as the next
+                examples = warmup.example_fact_sets(files)
+                explain(engine, explainer, examples[0] if examples else [])
             except Exception as exc:  # an explanation will build it again and report the error then
                 log.warning("explain queries of %s not built in advance: %s", name, exc)
 
