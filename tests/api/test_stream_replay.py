@@ -189,3 +189,16 @@ def test_bad_input_is_named(client, recorded):
     assert empty.status_code == 200 and empty.json()["replayed"] == 0 and "nothing was replayed" in empty.json()["note"]
     over = post(limit=10)
     assert over.json()["replayed"] == 10 and f"{N} recorded messages" in over.json()["note"]
+
+
+def test_a_stateful_binding_is_replayed_for_its_detections_only_and_says_so(client, recorded):
+    distances = recorded
+    body = client.post("/api/streams/replay", json={**PERIOD, "queries": [
+        {"query": query(3.3), "rules": {**BINDING, "mode": "stateful"}}]})
+    assert body.status_code == 200, body.text
+    body = body.json()
+    assert [(b["query"], b["side"]) for b in body["not_replayable_bindings"]] == [("ReplayNear", "after")]
+    assert "stateful" in body["not_replayable_bindings"][0]["reason"]
+    detected = sum(d < 3.3 for d in distances)
+    assert body["detections"] == {"before": detected, "after": detected, "changed": 0}
+    assert body["decisions"] == {"before": detected, "after": 0, "changed": detected}
