@@ -615,7 +615,11 @@ class ExplainCache:
 
     def close(self) -> None:
         """Stop the explain thread (detached from the JVM first, as a thread that ends should be)
-        and forget the built explainers."""
+        and forget the built explainers. Builds waiting to be made in advance are dropped (only
+        the one in progress is waited for)."""
+        with self._lock:
+            self._prebuild.clear()
+
         def detach() -> None:
             import jpype
 
