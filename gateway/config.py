@@ -76,6 +76,9 @@ class EngineSettings(BaseModel):
         default=30.0, description="Shared rule units not used for this long are removed (TTL).")
     warm_budget_s: float = Field(
         default=0.25, description="Time spent firing a new version on sample facts before it serves.")
+    explain_prebuild: bool = Field(
+        default=True, description="After a deploy (rollback, load, sync) build the version's explain queries on "
+        "the explain thread, so the first explanation of it does not compile them (seconds, one core).")
     rule_policy: RulePolicySettings = Field(default_factory=RulePolicySettings)
     max_queued_jobs: int = Field(
         default=16, ge=1, description="Build jobs (asynchronous deploys/validations) waiting per process; "

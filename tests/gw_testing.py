@@ -38,6 +38,10 @@ def built_gateway(settings, mongo, folder: Path, **options):
     closes the gateway and its store afterwards."""
     from gateway.app import build_gateway
 
+    if "explain_prebuild" not in settings.engine.model_fields_set:
+        # every test gateway would otherwise compile the explain queries of each rule set it loads
+        # or deploys in the background (seconds of a core each); the tests of that turn it on
+        settings.engine.explain_prebuild = False
     store = open_test_store(mongo, folder)
     try:
         gateway = build_gateway(settings, store=store, **{"ros": False, "warm_up": False, **options})

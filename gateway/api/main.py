@@ -22,7 +22,7 @@ from gateway.api.metrics import Metrics
 from gateway.config import ApiSettings
 from gateway.engine.bulkhead import Bulkheads
 from gateway.api.routes import (
-    authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, outline, replay,
+    authoring, decisions, dialogue, explain, health, jobs, kie_server, knowledge, knowledge_editor, live, mappings, metrics, outline, replay, stream_replay,
     rulesets, sessions, state, streams, workflows,
 )
 from gateway.workbench import router as workbench
@@ -31,7 +31,7 @@ log = logging.getLogger(__name__)
 
 ROUTERS = (
     rulesets.router, jobs.router, sessions.router, authoring.router, outline.router, decisions.router, kie_server.router, streams.router, mappings.router, knowledge_editor.router, knowledge.router,
-    dialogue.router, workflows.router, state.router, health.router, metrics.router, live.router, replay.router, explain.router,
+    dialogue.router, workflows.router, state.router, health.router, metrics.router, live.router, replay.router, stream_replay.router, explain.router,
     workbench.router,
 )
 

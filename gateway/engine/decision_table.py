@@ -283,6 +283,7 @@ class _SheetCompiler:
         self.current: _Rule | None = None
         self.sequential = False
         self.escape_quotes = True
+        self.headings: dict[tuple[int, int], str] = {}  # value cell -> its column's label (or template)
 
     def cell(self, row: int, col: int) -> CellRef:
         return CellRef(self.sheet.name, row, col)
@@ -453,6 +454,7 @@ class _SheetCompiler:
                 column.builder.add_value(col, value, cell)
             except ValueError as exc:
                 raise TableError(cell, str(exc)) from None
+            self.headings[(row, col)] = column.label or column.builder.templates[col][0]
         elif code == "PRIORITY":
             if self.sequential:
                 return
@@ -555,6 +557,23 @@ class ConvertedTable:
     package: str = DEFAULT_PACKAGE
     anchor: CellRef | None = None
     rule_count: int = 0
+    rows: list[list[str]] = field(default_factory=list, repr=False)  # the sheet's cell texts
+    headings: dict[tuple[int, int], str] = field(default_factory=dict, repr=False)  # value cell -> column label
+
+    def cell_text(self, cell: CellRef | None) -> str:
+        """The text an author wrote in ``cell`` ("" for none): explain shows a table rule's
+        conditions as their cells' texts, not only as where they are."""
+        if cell is None or not 0 < cell.row <= len(self.rows) or not 0 < cell.col <= len(self.rows[cell.row - 1]):
+            return ""
+        text = self.rows[cell.row - 1][cell.col - 1].strip()
+        return text[:-3].rstrip() if text.endswith("...") else text  # a CSV cell marked as merged
+
+    def cell_words(self, cell: CellRef | None) -> str:
+        """A cell as the author reads it in the table: ``At least: 2`` (its column's label, or
+        template, and its text), or the text alone for a cell that is no rule value."""
+        text = self.cell_text(cell)
+        heading = self.headings.get((cell.row, cell.col)) if cell is not None else None
+        return f"{heading}: {text}" if heading and text else text
 
     def locate(self, error: CompileError) -> CompileError:
         """A compile error of the generated DRL, moved to the cell its line came from."""
@@ -595,7 +614,8 @@ def convert(file_name: str, text: str) -> ConvertedTable:
     drl, cells, package = _render(file_name, sheet.name, compiler)
     errors = [sheet_error(file_name, e.cell, e.message, sheet.name) for e in compiler.errors]
     rules = [r for r in compiler.rules if r.cells]
-    return ConvertedTable(file_name, sheet.name, drl, cells, errors, package, compiler.tables[0], len(rules))
+    return ConvertedTable(file_name, sheet.name, drl, cells, errors, package, compiler.tables[0], len(rules),
+                          rows=sheet.rows, headings=compiler.headings)
 
 
 def _render(file_name: str, sheet: str, comp: _SheetCompiler) -> tuple[str, list[CellRef | None], str]:

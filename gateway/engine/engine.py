@@ -236,7 +236,8 @@ class Engine:
             stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
             entry = LiveRuleSet(stored.info, self._compile(stored.payload, name), head.seq)
             self._live[name] = entry
-            return entry
+        self.prepare_explain(name, stored.payload)
+        return entry
 
     def _swap(self, name: str, entry: LiveRuleSet | None, seq: int) -> bool:
         """Make ``entry`` live (None: stop serving) unless a newer change is live already."""
@@ -337,6 +338,7 @@ class Engine:
         except CatalogConflict as conflict:
             raise VersionConflict(name, conflict.base, conflict.current) from None
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
+        self.prepare_explain(name, files)
         elapsed = (time.perf_counter() - started) * 1000
         log.info("deployed %s version %d (%d rules) in %.0f ms", name, info.version, compiled.rule_count, elapsed)
         self._notify("deploy", {**info.to_dict(), "rules": compiled.rule_count, "duration_ms": elapsed})
@@ -352,6 +354,7 @@ class Engine:
         info, seq = self.catalog.set_current(KIND, name, stored.info.version, author=author, comment=comment,
                                              role=_audit_role(role))
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
+        self.prepare_explain(name, stored.files)
         self._notify("rollback", {**info.to_dict(), "by": author})
         return info
 
@@ -382,6 +385,7 @@ class Engine:
         stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
         compiled = self._compile(stored.payload, name)
         if self._swap(name, LiveRuleSet(stored.info, compiled, head.seq), head.seq):
+            self.prepare_explain(name, stored.payload)
             log.info("rule set %s: now serving version %d (changed elsewhere)", name, stored.info.version)
             self._notify("sync", {**stored.info.to_dict()})
 
@@ -488,6 +492,24 @@ class Engine:
             files, label = stored.files, {"version": stored.info.version}
         encode_facts(facts, self.settings.engine.max_facts)  # bad facts: the fire's own error, before any build
         return {"ruleset": name, **label, **self._explainers.run(self, files, facts)}
+
+    def prepare_explain(self, name: str, files: dict[str, str]) -> None:
+        """A version of ``name`` went live here: build its explain queries in the background
+        (``engine.explain_prebuild``), so its first explanation answers in milliseconds."""
+        if self.settings.engine.explain_prebuild:
+            self._explainers.prebuild(self, name, files)
+
+    def explain_ready(self, files: dict[str, str]) -> bool:
+        """Whether explaining ``files`` would find its queries built (no compile)."""
+        return self._explainers.has(files)
+
+    def explain_builds(self) -> int:
+        """How many explainers this engine built (a counter, for tests and metrics)."""
+        return self._explainers.builds
+
+    def explain_timings(self) -> list[tuple[float, float]]:
+        """(wall ms, CPU ms of the explain thread) of the last explanations (a bench reads them)."""
+        return list(self._explainers.timings)
 
     def close_explain(self) -> None:
         """Stop explaining (at shutdown): the explain thread ends, detached from the JVM."""

@@ -9,8 +9,8 @@ can be joined: a decision carries its correlation id (the caller's ``X-Request-I
 decision names its query and window, a query result names its query and window, the RDF items and
 sensor messages carry their stamp (inside the window), and an action outcome names its decision.
 
-Reads only; the decisions' ``correlation_id`` is deliberately not indexed (every index costs each
-recorded fire a write): a trace scans, which suits a human's question, not a hot path.
+Reads only; the decisions are indexed by ``(correlation_id, _id)`` (:mod:`gateway.store.decisions`),
+so finding a chain's decisions does not scan the record.
 """
 
 from __future__ import annotations

@@ -190,6 +190,9 @@ class StreamEngine:
         self._lock = threading.RLock()
         self.stream_stats: dict[str, dict[str, int]] = {}
         self.subscriber_errors = 0
+        # a replay's scratch engine fires its bindings on the pushing thread, in window order:
+        # no binding thread, no skipped or late window (see gateway.stream.replay)
+        self.inline_fires = False
 
     # -- static graphs -----------------------------------------------------------------------------
     def add_static_graph(self, iri: str, triples: set[Triple] | frozenset[Triple]) -> None:
@@ -825,6 +828,14 @@ class StreamEngine:
         if not facts:
             return  # every row was a repeat: nothing new to decide
         window = {"start": data.start_ms, "end": data.end_ms}
+        if self.inline_fires:
+            try:
+                result = self._fire_binding(runtime, binding, facts, instant, window)
+            except Exception as exc:
+                self._rule_error(runtime, binding, exc)
+                return
+            self._publish_actions(runtime, binding, facts, window, result)
+            return
         job = Job(lambda: self._fire_binding(runtime, binding, facts, instant, window),
                   lambda result, error: self._late(runtime, binding, facts, window, result, error),
                   lambda: self._skipped(runtime, binding, window))

@@ -16,6 +16,7 @@ import hashlib
 import json
 import logging
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -47,6 +48,17 @@ def _params_from(raw: list[dict[str, Any]] | None) -> list[ParamSpec] | None:
     if raw is None:
         return None
     return [ParamSpec(name=p["name"], sparql=p.get("sparql"), value=p.get("value")) for p in raw]
+
+
+@dataclass
+class QueryDefinition:
+    """A query as it is registered: its text and the registration's options."""
+
+    name: str
+    text: str
+    params: list[ParamSpec] | None = None
+    binding: RuleBinding | None = None
+    report: str | None = None
 
 
 class QueryService:
@@ -146,6 +158,22 @@ class QueryService:
         return {**stored.info.to_dict(), "text": stored.payload["text"], "params": stored.payload.get("params"),
                 "binding": stored.payload.get("binding"), "report": stored.payload.get("report"),
                 "current": wanted == current}
+
+    def definitions(self) -> list[QueryDefinition]:
+        """What every query served here was registered with (text, params, binding, report
+        policy), as stored: what a stream replay registers again on its scratch engines."""
+        out = []
+        for name in self._served.names():
+            served = self._served.get(name)
+            if served is None or served[0] is None:
+                continue
+            try:
+                payload = self.catalog.load(QUERY, name, served[0]).payload
+            except VersionMissing:
+                continue
+            out.append(QueryDefinition(name, payload["text"], _params_from(payload.get("params")),
+                                       _binding(payload.get("binding")), payload.get("report")))
+        return out
 
     def _check(self, text: str, params: list[ParamSpec] | None, binding: RuleBinding | None,
                report: str | None = None) -> dict[str, Any]:

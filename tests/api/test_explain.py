@@ -170,6 +170,74 @@ def test_decision_table_rules_point_at_their_row(client):
     assert family["reason"].startswith('kind is "pair", the rule wants "family"')
 
 
+OR_FORALL = """package org.printeps.explaintest2;
+
+declare Guest
+    id : String
+    age : int
+    language : String
+end
+
+declare Ticket
+    owner : String
+end
+
+rule "Senior or English child"
+when
+    Guest( age >= 65 ) or Guest( age < 12, language == "en" )
+then
+end
+
+rule "Every guest has a ticket"
+when
+    forall( $g : Guest( ) Ticket( owner == $g.id ) )
+then
+end
+
+rule "Every guest is an English-speaking adult"
+when
+    forall( Guest( age >= 18, language == "en" ) )
+then
+end
+"""
+
+
+def test_or_and_forall_say_which_alternative_came_closest_and_which_element_breaks(client):
+    facts = [{"type": "Guest", "id": "g1", "age": 30, "language": "en"},
+             {"type": "Guest", "id": "g2", "age": 10, "language": "fr"},
+             {"type": "Ticket", "owner": "g1"}]
+    answer = client.post("/api/rulesets/explain-drl/explain", json={"files": {"o.drl": OR_FORALL}, "facts": facts})
+    assert answer.status_code == 200, answer.text
+    rules = by_rule(answer.json())
+    either = rules["Senior or English child"]
+    assert either["fired"] is False and either["condition"]["kind"] == "or"
+    assert either["closest_alternative"] == 2 and either["constraint"] == 'language == "en"'
+    assert [a["index"] for a in either["alternatives"]] == [1, 2]
+    assert either["alternatives"][0]["reason"].startswith("there is no Guest") is False  # g1/g2 exist: age fails
+    assert either["reason"].startswith("none of its 2 alternatives holds; the closest is alternative 2")
+    assert 'language is "fr", the rule wants "en"' in either["reason"] and 'Guest "g2"' in either["reason"]
+    tickets = rules["Every guest has a ticket"]
+    assert tickets["condition"]["kind"] == "forall" and [f["id"] for f in tickets["violating"]] == ["g2"]
+    assert tickets["reason"].startswith('Guest "g2" matches $g : Guest( ) but has no Ticket( owner == $g.id )')
+    adults = rules["Every guest is an English-speaking adult"]
+    assert adults["constraint"] == "age >= 18" and [f["id"] for f in adults["violating"]] == ["g2"]
+    assert adults["reason"] == 'Guest "g2" breaks the forall: age is 10, the rule wants age >= 18 for every Guest'
+    # once g2 has a ticket and speaks English as an adult, the foralls hold and those rules fire
+    grown = [facts[0], {"type": "Guest", "id": "g2", "age": 40, "language": "en"}, facts[2],
+             {"type": "Ticket", "owner": "g2"}]
+    rules = by_rule(client.post("/api/rulesets/explain-drl/explain",
+                                json={"files": {"o.drl": OR_FORALL}, "facts": grown}).json())
+    assert rules["Every guest has a ticket"]["fired"] and rules["Every guest is an English-speaking adult"]["fired"]
+
+
+def test_decision_table_conditions_are_shown_in_the_cells_words(client):
+    files = files_with("greetings.csv", csv_text())
+    answer = client.post("/api/rulesets/explain-table/explain", json={"files": files, "facts": [group("pair", 1)]})
+    family = by_rule(answer.json())["Greet a family"]
+    assert family["condition"]["written"].split("\n") == ["$g: Group", "Kind: family", "At least: 3"]
+    assert family["condition"]["cell"] == "C8"
+
+
 def test_a_recorded_decision_is_explained_on_its_version(client, drl_set):
     facts = [{"type": "Guest", "id": "g3", "age": 8, "language": "en"}]
     fired = client.post(f"/api/rulesets/{drl_set}/fire", json={"facts": facts}).json()
@@ -206,3 +274,38 @@ def test_a_rest_fire_is_traced_by_its_request_id(client, api_gateway, drl_set):
     assert body["items"][0]["at"][:10] == body["items"][0]["record"]["at"][:10]  # when it was written: that day
     missing = client.get("/api/traces/never-seen")
     assert missing.status_code == 404 and "never-seen" in missing.json()["error"]
+
+
+def test_an_explanation_after_a_deploy_compiles_nothing(client, api_gateway):
+    """With ``engine.explain_prebuild`` the deploy builds the version's explain queries on the
+    explain thread; the explanation afterwards finds them: no explainer built, no compile."""
+    from gateway.engine import compiler
+    from gw_testing import wait_for
+
+    engine = api_gateway.engine
+    files = {"r.drl": DRL.replace('"Hello"', '"Hello again"')}  # a text no other test built
+    engine.settings.engine.explain_prebuild = True
+    try:
+        assert client.put("/api/rulesets/explain-prebuilt", json={"files": files}).status_code == 201
+        assert wait_for(lambda: engine.explain_ready(files), timeout_s=120), "the explain queries were not built"
+    finally:
+        engine.settings.engine.explain_prebuild = False
+    builds, compiles = engine.explain_builds(), compiler.stats["compiles"]
+    answer = client.post("/api/rulesets/explain-prebuilt/explain",
+                         json={"facts": [{"type": "Guest", "id": "g9", "age": 30, "language": "fr"}]})
+    assert answer.status_code == 200, answer.text
+    assert by_rule(answer.json())["Greet in English"]["fired"] is False
+    assert engine.explain_builds() == builds and compiler.stats["compiles"] == compiles
+
+
+def test_without_prebuild_the_first_explanation_builds(client, api_gateway):
+    """The counter the test above relies on does count: an explanation of a text nobody built
+    builds its explainer (and compiles)."""
+    from gateway.engine import compiler
+
+    engine = api_gateway.engine
+    files = {"r.drl": DRL.replace('"Hello"', '"Hello there"')}
+    builds, compiles = engine.explain_builds(), compiler.stats["compiles"]
+    answer = client.post("/api/rulesets/explain-drl/explain", json={"facts": [], "files": files})
+    assert answer.status_code == 200, answer.text
+    assert engine.explain_builds() == builds + 1 and compiler.stats["compiles"] > compiles

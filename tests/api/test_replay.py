@@ -234,7 +234,7 @@ def test_too_many_synchronous_replays_at_once_are_refused_with_retry_after(clien
 
     name, _facts = recorded
     for _ in range(route.MAX_SYNC_REPLAYS):  # as if that many replays were running now
-        assert route._running.acquire(blocking=False)
+        assert route.running.acquire(blocking=False)
     try:
         refused = client.post(f"/api/rulesets/{name}/replay", json={"version": 1})
         assert refused.status_code == 429 and refused.headers["retry-after"] == "5"
@@ -244,5 +244,5 @@ def test_too_many_synchronous_replays_at_once_are_refused_with_retry_after(clien
         assert follow(client, queued.headers["location"])["status"] == "succeeded"
     finally:
         for _ in range(route.MAX_SYNC_REPLAYS):
-            route._running.release()
+            route.running.release()
     assert client.post(f"/api/rulesets/{name}/replay", json={"version": 1}).status_code == 200

@@ -213,9 +213,10 @@ def test_a_document_the_database_refuses_is_set_aside_and_holds_up_nothing(store
     assert "DocumentTooLarge" in refused or "too large" in refused.lower()
 
 
-def test_decisions_keep_one_secondary_index_and_retire_the_old_ones(store: InformationState) -> None:
-    """Every index is a write per recorded fire: decisions keep (ruleset, _id) only; indexes an
-    earlier version made are dropped at start, and filters still answer without them."""
+def test_decisions_keep_two_secondary_indexes_and_retire_the_old_ones(store: InformationState) -> None:
+    """Every index is a write per recorded fire: decisions keep (ruleset, _id) and (correlation_id,
+    _id) only; indexes an earlier version made are dropped at start, and filters still answer
+    without them."""
     from gateway.store.decisions import DecisionRecord
 
     coll = store.db["decisions"]
@@ -226,7 +227,30 @@ def test_decisions_keep_one_secondary_index_and_retire_the_old_ones(store: Infor
         record.on_engine_event("fire", {"decision_id": str(__import__("bson").ObjectId()), "ruleset": f"r{i % 2}",
                                         "version": 1, "origin": "rest" if i else "kie", "fired": [f"rule {i}"]})
     assert store.flush(10)
-    assert sorted(coll.index_information()) == ["_id_", "ruleset_1__id_-1"]
+    assert sorted(coll.index_information()) == ["_id_", "correlation_id_1__id_1", "ruleset_1__id_-1"]
     assert [d["ruleset"] for d in record.find(origin="rest")[0]] == ["r0", "r1"]
     assert [d["origin"] for d in record.find(rule="rule 0")[0]] == ["kie"]
     assert len(record.find(ruleset="r0")[0]) == 2
+
+
+def test_a_trace_reads_its_decisions_through_the_correlation_index(store: InformationState) -> None:
+    """The decisions of one correlation id are found by the index, not by scanning: the server's
+    own plan (SecantusDB answers ``explain`` with the plan and what it examined) reads the index
+    and examines only the matching documents, however many others are recorded."""
+    from bson import ObjectId
+
+    from gateway.store.decisions import CORRELATION_INDEX, DecisionRecord
+
+    record = DecisionRecord(store)
+    for i in range(300):
+        record.on_engine_event("fire", {"decision_id": str(ObjectId()), "ruleset": "r", "version": 1,
+                                        "origin": "rest", "correlation_id": f"req-{i % 30}" if i % 3 else None})
+    assert store.flush(10)
+    keys = {name: info["key"] for name, info in store.db["decisions"].index_information().items()}
+    assert list(CORRELATION_INDEX) in [list(k) for k in keys.values()]
+    expected = [i for i in range(300) if i % 3 and i % 30 == 7]
+    assert len(record.by_correlation("req-7")) == len(expected) == 10
+    plan = store.db["decisions"].find({"correlation_id": "req-7"}).sort("_id", 1).explain()
+    stats = plan["executionStats"]
+    assert stats["totalKeysExamined"] == stats["totalDocsExamined"] == len(expected), plan["queryPlanner"]
+    assert "COLLSCAN" not in str(plan["queryPlanner"]["winningPlan"])

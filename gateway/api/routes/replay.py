@@ -22,7 +22,7 @@ from gateway.store.store import StoreUnavailable
 
 router = APIRouter(tags=["replay"], route_class=JsonRoute)
 MAX_SYNC_REPLAYS = 2  # synchronous replays at once per process (each holds a worker thread); more: 429
-_running = threading.BoundedSemaphore(MAX_SYNC_REPLAYS)
+running = threading.BoundedSemaphore(MAX_SYNC_REPLAYS)  # shared with the stream replay
 
 
 class ReplayBody(BaseModel):
@@ -71,7 +71,7 @@ def replay_decisions(name: RuleSetName, body: ReplayBody, request: Request, engi
 
     if wants_async(request):
         return accepted(jobs.submit("replay", name, {}, author=who.name, task=task))
-    if not _running.acquire(blocking=False):
+    if not running.acquire(blocking=False):
         raise ApiError(429, f"{MAX_SYNC_REPLAYS} replays are already running on this gateway process; try again "
                             "shortly, or send Prefer: respond-async to queue it as a job",
                        headers={"Retry-After": "5"})
@@ -80,4 +80,4 @@ def replay_decisions(name: RuleSetName, body: ReplayBody, request: Request, engi
     except StoreUnavailable as exc:
         raise ApiError(503, str(exc)) from None
     finally:
-        _running.release()
+        running.release()

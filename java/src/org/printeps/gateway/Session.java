@@ -300,10 +300,50 @@ public final class Session {
         StringBuilder b = new StringBuilder("{\"ok\":true,\"identifiers\":");
         Json.write(b, java.util.Arrays.asList(ids), null);
         b.append(",\"rows\":[");
+        writeRows(b, results, Integer.MAX_VALUE);
+        return b.append("]}").toString();
+    }
+
+    /**
+     * Runs several queries without arguments in one call, at most {@code maxRows} rows each:
+     * {"ok":true,"results":{name:[rows]}}. Why: an explanation asks dozens of diagnostic queries,
+     * and one call each cost more than the queries themselves.
+     */
+    public synchronized String queries(String namesJson, int maxRows) {
+        Object parsed;
+        try {
+            parsed = Json.parse(namesJson);
+        } catch (Json.ParseException e) {
+            return Runner.factError(-1, null, "queries", null, "query names are not valid JSON: " + e.getMessage());
+        }
+        if (!(parsed instanceof List)) return Runner.factError(-1, null, "queries", null, "query names must be a JSON list");
+        StringBuilder b = new StringBuilder("{\"ok\":true,\"results\":{");
         boolean first = true;
-        for (org.kie.api.runtime.rule.QueryResultsRow row : results) {
+        for (Object item : (List<?>) parsed) {
+            String name = String.valueOf(item);
+            org.kie.api.runtime.rule.QueryResults results;
+            try {
+                results = session.getQueryResults(name);
+            } catch (RuntimeException e) {
+                return Runner.factError(-1, null, "query", name, "query '" + name + "' failed: " + Runner.rootMessage(e));
+            }
             if (!first) b.append(',');
             first = false;
+            Json.quote(b, name);
+            b.append(":[");
+            writeRows(b, results, maxRows);
+            b.append(']');
+        }
+        return b.append("}}").toString();
+    }
+
+    private void writeRows(StringBuilder b, org.kie.api.runtime.rule.QueryResults results, int maxRows) {
+        String[] ids = results.getIdentifiers();
+        int n = 0;
+        for (org.kie.api.runtime.rule.QueryResultsRow row : results) {
+            if (n >= maxRows) break;
+            if (n > 0) b.append(',');
+            n++;
             b.append('{');
             for (int k = 0; k < ids.length; k++) {
                 if (k > 0) b.append(',');
@@ -313,7 +353,6 @@ public final class Session {
             }
             b.append('}');
         }
-        return b.append("]}").toString();
     }
 
     /** " (its queries: a, b)" or " (it has none)", for messages. */
