@@ -70,7 +70,7 @@ def test_a_changed_table_cell_updates_its_scenario(client):
     draft = dict(files, **{"greetings.xlsx": table_files(E11="Hi!")["greetings.xlsx"]})
     body = client.post("/api/rulesets/dt-upd/tests/update", json={"files": draft}).json()
     assert body["changes"] == [{"scenario": "a pair is welcomed", "file": "tests/greetings.yaml", "line": 7,
-                                "old": "Welcome. Two seats?", "new": "Hi!", "rule": "Greet a pair"}]
+                                "old": "Welcome. Two seats?", "new": "Hi!", "rule": "Greet a pair", "what": "action"}]
     assert 'params: {text: "Hi!"}' in body["files"]["tests/greetings.yaml"]
     deployed = client.put("/api/rulesets/dt-upd", json={"files": {**draft, **body["files"]}, "comment": "new words"})
     assert deployed.status_code == 201, deployed.text
@@ -94,3 +94,24 @@ def test_a_draft_that_does_not_compile_is_422(client):
     files["broken.drl"] = "rule \"x\" when then end end"
     r = client.post("/api/rulesets/dt-upd/tests/update", json={"files": files})
     assert r.status_code == 422 and r.json()["errors"][0]["file"] == "broken.drl"
+
+
+def test_a_renamed_rule_and_a_changed_fact_value_are_followed(client):
+    """The author renames rule "Infant" to "Baby" and its category "infant" to "baby": the scenario
+    that pins both follows, at its two lines; no other line of the file changes."""
+    files = read_folder(RECEPTION)
+    draft = dict(files)
+    draft["reception.dslr"] = files["reception.dslr"].replace('rule "Infant"', 'rule "Baby"').replace('"infant"', '"baby"')
+    assert client.put("/api/rulesets/rec-rename", json={"files": files, "comment": "start"}).status_code == 201
+    before = client.post("/api/rulesets/rec-rename/test", json={"files": draft}).json()
+    assert [r["name"] for r in before["results"] if r["status"] != "passed"] == ["age 2 is an infant"]
+
+    body = client.post("/api/rulesets/rec-rename/tests/update", json={"files": draft}).json()
+    assert [(c["line"], c["old"], c["new"], c["what"]) for c in body["changes"]] == [
+        (16, "Infant", "Baby", "rule"), (18, "infant", "baby", "fact")]
+    assert body["kept"] == []
+    old_lines, new_lines = files[TESTS].split("\n"), body["files"][TESTS].split("\n")
+    assert [n + 1 for n, (a, b) in enumerate(zip(old_lines, new_lines)) if a != b] == [16, 18]
+    assert new_lines[15] == "    fired: {Baby: 1}" and new_lines[17] == "      - {type: Customer, id: c1, category: baby}"
+    after = client.post("/api/rulesets/rec-rename/test", json={"files": {**draft, **body["files"]}}).json()
+    assert after["summary"].startswith("✓") or all(r["status"] == "passed" for r in after["results"])

@@ -59,11 +59,13 @@ class Gateway:
 
 @pytest.fixture(scope="session")
 def gateway(tmp_path_factory: pytest.TempPathFactory, mongo) -> Iterator[Gateway]:
-    """The gateway as `printeps serve` builds it (no ROS), seeded with a copy of the reception rules."""
+    """The gateway as `printeps serve` builds it (no ROS), seeded with a copy of the reception rules
+    and of the dialogue rules (the take_order workflow's ask_order step converses through them)."""
     from gateway.serve import serve_in_thread
 
     root = tmp_path_factory.mktemp("workbench")
     shutil.copytree(RECEPTION, root / "rules" / "reception")
+    shutil.copytree(PROJECT_ROOT / "rules" / "drl" / "dialogue", root / "rules" / "dialogue")
     settings = Settings.model_validate({
         "data_dir": str(root / "var"),
         "engine": {"rules_dir": str(root / "rules")},

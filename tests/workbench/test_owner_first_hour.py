@@ -179,6 +179,41 @@ def test_layout_at_desktop_and_tablet_width(browser, gateway, screenshots):
             page.context.close()
 
 
+def page_height(page) -> int:
+    return page.evaluate("document.documentElement.scrollHeight")
+
+
+def test_the_rules_page_is_the_window_at_1280x800_and_its_panels_scroll_inside(author_page, screenshots):
+    page = author_page
+    page.set_viewport_size({"width": 1280, "height": 800})
+    open_ruleset(page, "reception")
+    expect(page.get_by_test_id("rule-list").locator(".rule-item")).to_have_count(32)
+    assert page_height(page) == 800  # the page does not scroll as a whole
+    editor = page.locator(".editor-host:not([hidden])")
+    for panel in (editor, page.get_by_test_id("rule-list"), page.locator(".card.try"), page.get_by_test_id("deploy"),
+                  page.locator("header.top")):
+        expect(panel).to_be_in_viewport()
+    box = editor.bounding_box()
+    assert box["height"] >= 200 and box["y"] + box["height"] <= 800, box  # a usable editor, inside the window
+    # the editor scrolls its 400 lines itself; the window does not move
+    scroller = editor.locator(".cm-scroller")
+    assert scroller.evaluate("s => s.scrollHeight > s.clientHeight")
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.wheel(0, 2000)
+    page.wait_for_function("document.querySelector('.editor-host:not([hidden]) .cm-scroller').scrollTop > 0")
+    assert page.evaluate("window.scrollY") == 0
+
+    # The tests' results open in the side column, which scrolls inside; the page still fits.
+    page.get_by_test_id("run-tests").click()
+    expect(page.get_by_test_id("tests-summary")).to_have_text("✓ All 24 scenarios pass")
+    expect(page.get_by_test_id("tests-summary")).to_be_in_viewport()
+    right = page.locator(".columns > .right")
+    assert right.evaluate("r => r.scrollHeight > r.clientHeight")  # more than fits: it scrolls, not the page
+    assert page_height(page) == 800
+    expect(page.locator("header.top")).to_be_in_viewport()
+    page.screenshot(path=str(screenshots / "workbench-rules-1280x800.png"))
+
+
 def test_a_value_shows_its_unit_and_limits_and_a_negative_distance_is_refused(author_page, gateway, screenshots):
     page = author_page
     page.goto("/workbench#/knowledge/kinect1")

@@ -84,6 +84,8 @@ export function mountRuleList(host, { name, files, goTo = () => {}, onSearch = (
     refresh: later,
     /** The rules currently listed (after the search). */
     visible: () => rules.filter((r) => matches(r, search.value)),
+    /** Every rule of the last outline (whatever the search). */
+    all: () => rules,
     dispose() {
       seq++;
       later.cancel();

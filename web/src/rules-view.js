@@ -12,6 +12,7 @@ import { mountTests } from "./tests-view.js";
 import { offerTestUpdate } from "./tests-update.js";
 import { mountRuleList } from "./rule-list.js";
 import { findHighlight, setFind } from "./find-highlight.js";
+import { mountRuleTools } from "./rule-tools.js";
 import { reachBar } from "./reach-bar.js";
 import { mountTableEditor } from "./table-editor.js";
 import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
@@ -174,6 +175,7 @@ class RulesView {
       h("div", { class: "columns" },
         h("div", { class: "left" },
           this.buildRuleList(),
+          this.editable ? this.buildRuleTools() : null,
           h("div", { class: "toolbar" }, this.tabsEl, this.buildAddFile(),
             h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
             this.statusEl),
@@ -598,6 +600,25 @@ class RulesView {
       files: () => this.files(),
       goTo: (rule) => this.goTo(rule.row ? { file: rule.file, line: rule.row, column: 1, sheet: rule.sheet } : { file: rule.file, line: rule.line, column: 1 }),
       onSearch: (text) => this.searchEditors(text),
+    });
+    return host;
+  }
+
+  /** Replace… and + New rule: change words in every rule, or write a rule from chosen sentences. */
+  buildRuleTools() {
+    const host = h("div", { class: "rule-tools-host" });
+    mountRuleTools(host, {
+      files: () => this.files(),
+      rules: () => this.ruleList.all(),
+      replace: (file, changes) => this.views[file]?.dispatch({ changes }),
+      append: (file, text) => {
+        const view = this.views[file];
+        const end = view.state.doc.length;
+        const gap = end && view.state.doc.sliceString(end - 1) !== "\n" ? "\n" : "";
+        view.dispatch({ changes: { from: end, insert: gap + text } });
+        return view.state.doc.lineAt(end + gap.length + text.indexOf("rule ")).number;
+      },
+      goTo: (file, line) => this.goTo({ file, line, column: 1 }),
     });
     return host;
   }

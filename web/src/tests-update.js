@@ -1,5 +1,5 @@
 // "Update the tests too": when a deploy is refused only because scenarios still expect a sentence
-// or value the draft has changed, show each change (old → new) and offer to rewrite those
+// or value the draft has changed (in an action or a fact) or name a rule it renamed, show each change (old → new) and offer to rewrite those
 // expectations in the test files (POST /api/rulesets/{name}/tests/update; the gateway edits the
 // YAML at its lines, comments kept, and stores nothing). Scenarios red for another reason are named
 // and never rewritten. Self-contained: offerTestUpdate(host, options) -> Promise.
@@ -10,6 +10,9 @@ import { api, rulesetPath } from "./api.js";
 function quoted(value) {
   return typeof value === "string" ? `“${value}”` : String(value);
 }
+
+/** What kind of thing changed, in the owner's words (a renamed rule, a value the rules set). */
+const KIND = { rule: "rule renamed: ", fact: "value set by the rules: " };
 
 /**
  * Ask the gateway which scenarios only expect changed words, and offer the update in `host`.
@@ -41,7 +44,7 @@ export async function offerTestUpdate(host, { name, files, apply }) {
       ? "These tests only expect the words you changed:"
       : "Some tests only expect the words you changed:"),
     h("ul", { class: "changes" }, changes.map((c) => h("li", {},
-      h("b", {}, c.scenario), ` (${c.file}, line ${c.line}): `,
+      h("b", {}, c.scenario), ` (${c.file}, line ${c.line}): ${KIND[c.what] || ""}`,
       h("del", {}, quoted(c.old)), " → ", h("ins", {}, quoted(c.new))))),
     kept.length ? h("p", { "data-testid": "tests-kept" }, `Still failing for another reason (not changed): ${kept.join(", ")}.`) : null,
     h("p", { class: "hint" }, allFixed
