@@ -55,6 +55,7 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     # each rule set's fire threads and queue (gateway.engine.bulkhead): no fire runs on the event loop
     app.state.bulkheads = Bulkheads(settings.api.fire_workers, settings.api.max_queue, settings.api.max_wait_s)
+    app.state.metrics.watch_bulkheads(app.state.bulkheads.stats, settings.api.max_queue)
     app.state.stream_posts = threading.BoundedSemaphore(settings.streams.max_pending_posts)
     app.state.rejected_stream_posts = 0
     gateway.engine.add_listener(app.state.metrics.on_engine_event)

@@ -7,6 +7,7 @@ listener, so rule sets loaded from the filesystem or deployed by other modules a
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from prometheus_client import (
@@ -17,6 +18,8 @@ from prometheus_client import (
     disable_created_metrics,
     generate_latest,
 )
+from prometheus_client.core import GaugeMetricFamily
+from prometheus_client.registry import Collector
 
 from gateway.engine.errors import FireTimeout, Overloaded
 
@@ -61,6 +64,10 @@ class Metrics:
         )
         self.rulesets = Gauge("printeps_rulesets", "Rule sets currently deployed.", registry=self.registry)
 
+    def watch_bulkheads(self, stats: Callable[[], dict[str, dict[str, Any]]], max_queue: int) -> None:
+        """Export each rule set's bulkhead queue (:mod:`gateway.engine.bulkhead`), read at scrape time."""
+        self.registry.register(BulkheadCollector(stats, max_queue))
+
     def observe_fire(self, ruleset: str, seconds: float, fired: int) -> None:
         self.fires.labels(ruleset, "ok").inc()
         self.fire_seconds.labels(ruleset).observe(seconds)
@@ -86,3 +93,29 @@ class Metrics:
 
     def render(self) -> bytes:
         return generate_latest(self.registry)
+
+
+class BulkheadCollector(Collector):
+    """The queue depth of each rule set's bulkhead, read when ``/metrics`` is scraped.
+
+    Why gauges read at scrape time rather than updated by the routes: the depth changes on the
+    workers' threads at every hand-off; reading the bulkheads' own counters when asked costs the hot
+    path nothing and is never stale. ``printeps_fire_queue_depth`` is what an operator alerts on
+    (near ``printeps_fire_queue_limit``, fires start being refused with 429)."""
+
+    def __init__(self, stats: Callable[[], dict[str, dict[str, Any]]], max_queue: int) -> None:
+        self._stats = stats
+        self._max_queue = max_queue
+
+    def collect(self) -> Iterator[GaugeMetricFamily]:
+        depth = GaugeMetricFamily("printeps_fire_queue_depth", "Fires waiting in the rule set's bulkhead queue "
+                                  "(refused with 429 at printeps_fire_queue_limit, api.max_queue).", labels=["ruleset"])
+        running = GaugeMetricFamily("printeps_fires_running", "Fires of the rule set running on its bulkhead's "
+                                    "threads (at most api.fire_workers).", labels=["ruleset"])
+        for name, stats in sorted(self._stats().items()):
+            depth.add_metric([name], stats["waiting"])
+            running.add_metric([name], stats["running"])
+        yield depth
+        yield running
+        yield GaugeMetricFamily("printeps_fire_queue_limit", "The most fires a rule set's queue holds (api.max_queue).",
+                                value=self._max_queue)

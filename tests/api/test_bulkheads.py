@@ -168,11 +168,19 @@ def test_a_full_queue_is_refused_at_once_with_429_and_counted(api_gateway, api_s
         assert _fire(server.url, FAST, FACTS, timeout=30).status_code == 200
         metrics = httpx.get(f"{server.url}/metrics").text
         assert f'printeps_fires_refused_total{{reason="queue_full",ruleset="{SLOW}"}} 2.0' in metrics
+        # the queue-depth gauge: two waiting (the limit), one running; the fast set's queue is empty
+        assert f'printeps_fire_queue_depth{{ruleset="{SLOW}"}} 2.0' in metrics
+        assert f'printeps_fires_running{{ruleset="{SLOW}"}} 1.0' in metrics
+        assert f'printeps_fire_queue_depth{{ruleset="{FAST}"}} 0.0' in metrics
+        assert "printeps_fire_queue_limit 2.0" in metrics
         for gate in gates:
             gate.open()
         for thread, out in running:
             thread.join(60)
             assert out and out[0].status_code == 200, out
+        drained = httpx.get(f"{server.url}/metrics").text
+        assert f'printeps_fire_queue_depth{{ruleset="{SLOW}"}} 0.0' in drained
+        assert f'printeps_fires_running{{ruleset="{SLOW}"}} 0.0' in drained
     finally:
         for gate in gates:
             gate.open()

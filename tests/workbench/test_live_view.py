@@ -13,6 +13,7 @@ from playwright.sync_api import expect
 from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, new_page
 
 ENTRANCE = "http://printeps.org/cafe/entrance"
+RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 _parties = itertools.count(1)
 
 
@@ -114,3 +115,96 @@ def test_a_page_without_an_accepted_token_is_not_connected(browser, gateway) -> 
         expect(page.get_by_role("button", name="Reconnect")).to_be_visible()
     finally:
         page.context.close()
+
+
+SLOW_STREAM = "http://example.org/wb-live-slow"
+SLOW_DRL = """package org.printeps.slowlive;
+
+declare Thing
+    id : String
+end
+
+rule "Hold until the test opens the gate"
+when
+    $t : Thing()
+then
+    // only the test's things (a deploy's warm-up fires made-up facts): mark started, wait for the gate
+    if ($t.getId() != null && $t.getId().startsWith("PREFIX")) {
+        try { new java.io.File("STARTED").createNewFile(); } catch (Exception e) { }
+        long deadline = System.currentTimeMillis() + 120000;
+        while (!new java.io.File("GATE").exists() && System.currentTimeMillis() < deadline) {
+            try { Thread.sleep(5); } catch (InterruptedException e) { }
+        }
+    }
+end
+"""
+
+
+def _slow_rule_set(gateway, tmp_path, name: str, prefix: str):
+    """A rule set whose fires of the test's things hold until the gate file exists (a developer's
+    rules: the file calls are not an author's, so it is deployed in-process, not over REST)."""
+    started, gate = tmp_path / "started", tmp_path / "gate"
+    drl = SLOW_DRL.replace("PREFIX", prefix).replace("STARTED", str(started)).replace("GATE", str(gate))
+    gateway.engine.deploy(name, {"slow.drl": drl}, author="test", comment="a rule set the test holds")
+    return started, gate
+
+
+def test_skipped_windows_and_the_fire_queue_gauge_are_shown(author_page, gateway, tmp_path) -> None:
+    """A query bound to a held rule set: the windows after the first coalesce, and each replaced one
+    is listed as skipped; three REST fires of the held set fill its two threads and queue one, and
+    the fire queues gauge shows it waiting, then drained once the gate opens."""
+    import threading
+
+    n = next(_parties)
+    name, query, prefix = f"held{os.getpid()}x{n}", f"HeldQuery{os.getpid()}x{n}", f"held{os.getpid()}x{n}t"
+    started, gate = _slow_rule_set(gateway, tmp_path, name, prefix)
+    text = (f"REGISTER QUERY {query} AS\nPREFIX ex: <http://example.org/>\nSELECT ?s\n"
+            f"FROM STREAM <{SLOW_STREAM}/{query}> [RANGE 1s STEP 1s]\nWHERE {{ ?s a ex:Thing . }}\n")
+    fires: list[threading.Thread] = []
+    answers: list[int] = []
+    try:
+        with gateway.rest() as client:
+            r = client.post("/api/queries", json={"query": text, "comment": "held binding (test)", "rules": {
+                "ruleset": name, "fact_type": "Thing", "fields": {"id": "s"}}})
+            assert r.status_code == 201, r.text
+        page = author_page
+        open_live(page)
+        with gateway.rest(CALLER_TOKEN) as client:
+            for k in range(6):  # one new thing a second: the first window's fire holds, the rest coalesce
+                r = client.post("/api/streams", json={"stream": f"{SLOW_STREAM}/{query}", "timestamp": 500 + 1000 * k,
+                                                      "triples": [[f"http://example.org/{prefix}{k}", RDF_TYPE,
+                                                                   "<http://example.org/Thing>"]]})
+                assert r.status_code == 200, r.text
+        assert started.exists()
+        skipped = page.get_by_test_id("live-decisions").locator(f"li.skipped[data-query='{query}']")
+        expect(skipped.first).to_contain_text(name)
+        expect(skipped.first).to_contain_text("skipped")
+        expect(skipped.first).to_contain_text(f"of {query} was not decided")
+        expect(skipped.nth(1)).to_be_visible()  # each replaced window is said, not only the first
+
+        def fire(k: int) -> None:
+            with gateway.rest(CALLER_TOKEN) as http:
+                answers.append(http.post(f"/api/rulesets/{name}/fire", timeout=120, json={
+                    "facts": [{"type": "Thing", "id": f"{prefix}rest{k}"}]}).status_code)
+
+        fires = [threading.Thread(target=fire, args=(k,), daemon=True) for k in range(3)]
+        for thread in fires:
+            thread.start()
+        queue = page.get_by_test_id("fire-queues").locator(f"li[data-ruleset='{name}']")
+        expect(queue).to_have_attribute("data-waiting", "1")  # two run on the set's two threads, one waits
+        expect(queue).to_contain_text("1 waiting of 64, 2 running")
+        expect(queue.locator("meter")).to_have_attribute("value", "1")
+        gate.touch()
+        for thread in fires:
+            thread.join(60)
+        # the two running fires answer; the queued one too, or 503 if it waited past api.max_wait_s
+        # (the bulkhead's own rule) while the test read the gauge on a loaded machine
+        assert len(answers) == 3 and answers.count(200) >= 2 and set(answers) <= {200, 503}, answers
+        expect(queue).to_contain_text("0 waiting of 64, 0 running")
+        assert page.js_errors == []
+    finally:
+        gate.touch()
+        for thread in fires:
+            thread.join(60)
+        with gateway.rest() as client:
+            client.delete(f"/api/queries/{query}")

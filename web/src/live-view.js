@@ -1,8 +1,12 @@
 // The Live section: the teahouse as it happens, from the gateway's live feed (GET /api/live,
 // Server-Sent Events). A plot of each person's distance to the entrance over the last minute
 // (sensor time), what the stream queries detected, which rules fired (each linked to its
-// decision) and what the robots were asked to do with how it went. Pause freezes the picture
-// (events keep arriving and are shown on resume); leaving the view closes the connection.
+// decision) and what the robots were asked to do with how it went. A window a stream binding
+// skipped (its rules still firing an earlier one: gateway/stream/binding_fire.py) is listed with
+// the rules and marked on the plot. The fire queues card is a gauge of each rule set's bulkhead
+// queue (read from /metrics every few seconds): a queue near its limit means fires are about to be
+// refused. Pause freezes the picture (events keep arriving and are shown on resume); leaving the
+// view closes the connection.
 
 import "./live-view.css";
 import { ORIGIN_WORDS, robotStatusNote } from "./owner-words.js";
@@ -14,10 +18,11 @@ const WINDOW_MS = 60_000; // the plot shows the last minute of readings
 const KEEP_MS = 70_000; // readings kept a little longer, so lines enter from the left edge
 const LIST_MAX = 60; // items per event list
 const PENDING_MAX = 5000; // events held while paused
-const KINDS = ["reading", "detection", "decision", "action"];
+const KINDS = ["reading", "detection", "decision", "action", "skipped"];
 const COLORS = ["#1f6feb", "#cf222e", "#1a7f37", "#9a6700", "#8250df", "#bf3989", "#0a7ea4", "#57606a"];
 const DASHES = ["", "6 3", "2 3", "8 3 2 3"];
 const THRESHOLD_REFRESH_MS = 30_000; // the entrance distance is knowledge the owner may change live
+const QUEUES_REFRESH_MS = 2_000; // the fire queues gauge: a queue fills and drains in seconds
 const STATUS_WORDS = { ok: "done", failed: "failed", timeout: "timed out", no_service: "robot not reachable", unsupported: "not supported here" };
 
 // Plot geometry (SVG user units; the SVG scales to the card's width).
@@ -52,13 +57,14 @@ export async function showLive(main, ctx) {
     series: new Map(), // person -> [{t, d}]
     colors: new Map(), // person -> index in COLORS/DASHES (kept for the whole visit)
     marks: [], // detections on the plot: {t, query}
+    skips: [], // windows a binding skipped, on the plot: {t, query, ruleset}
     latest: null, // the newest reading's sensor time (ms): the plot's right edge
     latestAt: null, // when the gateway received it (wall clock, ms): says how current the picture is
     paused: false,
     pending: [],
     skipped: 0,
     lastSeq: new Map(), // feed -> last seq applied (no event is shown twice after a reconnect)
-    counts: { reading: 0, detection: 0, decision: 0, action: 0 },
+    counts: { reading: 0, detection: 0, decision: 0, action: 0, skipped: 0 },
     process: null,
     drawQueued: false,
     threshold: null, // {name, value}: the ontology's distance to the entrance (the detection threshold)
@@ -78,6 +84,8 @@ export async function showLive(main, ctx) {
   empty(detectionsEl, "Nothing detected yet.");
   empty(decisionsEl, "No rules fired yet.");
   empty(actionsEl, "No robot actions yet.");
+  const queuesEl = h("ul", { class: "fire-queues", "data-testid": "fire-queues", "aria-label": "Fires waiting, by rule set" });
+  empty(queuesEl, "No rule set has fired yet.");
   const robotStatusEl = h("div", { class: "robot-status-host" });
 
   const card = (title, id, ...body) => h("section", { class: "card live-card", "aria-labelledby": id }, h("h2", { id }, title), ...body);
@@ -89,7 +97,10 @@ export async function showLive(main, ctx) {
       card("Detected", "live-detections-title", detectionsEl)),
     h("div", { class: "live-bottom" },
       card("Rules fired", "live-decisions-title", decisionsEl),
-      card("What the robots did", "live-actions-title", robotStatusEl, actionsEl))));
+      card("What the robots did", "live-actions-title", robotStatusEl, actionsEl)),
+    card("Fire queues", "live-queues-title",
+      h("p", { class: "hint" }, "Fires waiting for each rule set's threads. A full queue refuses new fires (429) until it drains."),
+      queuesEl)));
   robotStatusNote().then((note) => { if (note) robotStatusEl.replaceChildren(note); });
   draw();
 
@@ -171,6 +182,14 @@ export async function showLive(main, ctx) {
     else if (event.kind === "detection") addDetection(event);
     else if (event.kind === "decision") prepend(decisionsEl, decisionItem(event, ctx));
     else if (event.kind === "action") prepend(actionsEl, actionItem(event, ctx));
+    else if (event.kind === "skipped") addSkipped(event);
+  }
+
+  function addSkipped(event) {
+    const end = event.window && event.window.end;
+    if (end !== undefined && end !== null) state.skips.push({ t: Number(end), query: event.query, ruleset: event.ruleset });
+    prepend(decisionsEl, skippedItem(event));
+    scheduleDraw();
   }
 
   function addReading(event) {
@@ -229,6 +248,7 @@ export async function showLive(main, ctx) {
         if (!points.length) state.series.delete(person);
       }
       state.marks = state.marks.filter((m) => m.t >= right - KEEP_MS);
+      state.skips = state.skips.filter((m) => m.t >= right - KEEP_MS);
     }
     const people = [...state.series.keys()];
     let maxD = Math.max(5, state.threshold ? state.threshold.value : 0);
@@ -256,6 +276,10 @@ export async function showLive(main, ctx) {
       s("g", { class: "mark" },
         s("line", { x1: x(m.t), x2: x(m.t), y1: M.top, y2: H - M.bottom }),
         s("title", {}, `${m.query} detected something (window ending ${m.t})`)));
+    const skips = right === null ? [] : state.skips.filter((m) => m.t >= right - WINDOW_MS).map((m) =>
+      s("g", { class: "skip-mark", "data-query": m.query || "" },
+        s("line", { x1: x(m.t), x2: x(m.t), y1: M.top, y2: H - M.bottom }),
+        s("title", {}, `${m.ruleset} skipped the window of ${m.query} ending ${m.t}: its rules were still firing an earlier one`)));
     const lines = right === null ? [] : people.map((person) => {
       const i = state.colors.get(person);
       const points = state.series.get(person).map((p) => `${x(p.t).toFixed(1)},${y(p.d).toFixed(1)}`).join(" ");
@@ -274,7 +298,7 @@ export async function showLive(main, ctx) {
         s("line", { x1: M.left, x2: W - M.right, y1: y(state.threshold.value), y2: y(state.threshold.value) }),
         s("text", { x: M.left + 6, y: y(state.threshold.value) - 5, "text-anchor": "start" },
           `entrance: ${state.threshold.value} m (${state.threshold.name})`)) : null,
-      s("g", { "clip-path": "url(#live-clip)" }, ...marks, ...lines),
+      s("g", { "clip-path": "url(#live-clip)" }, ...marks, ...skips, ...lines),
       s("text", { x: (M.left + W - M.right) / 2, y: H - 8, class: "label", "text-anchor": "middle" }, "seconds before the latest reading (sensor time)"),
       s("text", { x: 14, y: (M.top + H - M.bottom) / 2, class: "label", "text-anchor": "middle",
         transform: `rotate(-90 14 ${(M.top + H - M.bottom) / 2})` }, "distance to the entrance (m)"),
@@ -290,8 +314,23 @@ export async function showLive(main, ctx) {
           "stroke-dasharray": DASHES[Math.floor(i / COLORS.length) % DASHES.length] }));
       return h("li", { "data-person": person }, swatch, " ", h("b", {}, person), ` ${last(state.series.get(person)).d.toFixed(2)} m`);
     }), people.length ? null : h("li", { class: "muted" }, "Nobody near the entrance in the last minute."),
-    state.marks.length ? h("li", { class: "mark-key" }, h("span", { class: "mark-swatch", "aria-hidden": "true" }), " a query detected something") : null);
+    state.marks.length ? h("li", { class: "mark-key" }, h("span", { class: "mark-swatch", "aria-hidden": "true" }), " a query detected something") : null,
+    state.skips.length ? h("li", { class: "mark-key" }, h("span", { class: "skip-swatch", "aria-hidden": "true" }), " a window skipped by busy rules") : null);
   }
+
+  // ---- the fire queues gauge -------------------------------------------------------------------
+  const loadQueues = async () => {
+    let text;
+    try {
+      text = await api("GET", "/metrics");
+    } catch {
+      return; // the gateway is away: the connection status already says so
+    }
+    if (typeof text !== "string") return;
+    const queues = parseQueues(text);
+    if (!queues.rulesets.length) return;
+    fill(queuesEl, queues.rulesets.map((q) => queueItem(q, queues.limit)));
+  };
 
   const loadThreshold = async () => {
     try {
@@ -309,10 +348,13 @@ export async function showLive(main, ctx) {
   };
   connect();
   loadThreshold();
+  loadQueues();
   const thresholdTimer = setInterval(loadThreshold, THRESHOLD_REFRESH_MS);
+  const queuesTimer = setInterval(loadQueues, QUEUES_REFRESH_MS);
   return {
     dispose() {
       clearInterval(thresholdTimer);
+      clearInterval(queuesTimer);
       if (source) source.close();
       source = null;
     },
@@ -368,4 +410,49 @@ function actionItem(event, ctx) {
     event.source === "workflow"
       ? h("div", { class: "muted small" }, `workflow ${event.workflow || "?"}, step ${event.step || "?"}`)
       : event.decision_id ? h("div", { class: "small" }, "for ", h("a", { href: ctx.href("decisions", event.decision_id) }, "this decision")) : null);
+}
+
+function skippedItem(event) {
+  const w = event.window || {};
+  const span = w.start !== undefined && w.end !== undefined ? `${clock(Number(w.start))}–${clock(Number(w.end))}` : "a window";
+  return h("li", { class: "skipped", "data-query": event.query || "", "data-ruleset": event.ruleset || "" },
+    h("div", { class: "when-row" }, timeCell(event), " ", h("b", {}, event.ruleset || "?"),
+      " skipped ", h("span", { class: "badge status warning" }, "skipped")),
+    h("div", {}, `The window ${span} of ${event.query || "a query"} was not decided: its rules were still busy with an earlier window, and a newer window took its place.`),
+    event.reason ? h("div", { class: "muted small" }, event.reason) : null);
+}
+
+/** The bulkhead gauges of a Prometheus text page: {limit, rulesets: [{name, waiting, running}]},
+ * busiest first. Only the lines this view needs are read; label values are unescaped. */
+export function parseQueues(text) {
+  const byName = new Map();
+  let limit = null;
+  const line = /^(printeps_fire_queue_depth|printeps_fires_running|printeps_fire_queue_limit)(?:\{ruleset="((?:[^"\\]|\\.)*)"\})?\s+(\S+)/;
+  for (const raw of text.split("\n")) {
+    const m = line.exec(raw);
+    if (!m) continue;
+    const value = Number(m[3]);
+    if (m[1] === "printeps_fire_queue_limit") {
+      limit = value;
+      continue;
+    }
+    const name = (m[2] || "").replace(/\\(.)/g, (_, c) => (c === "n" ? "\n" : c));
+    const entry = byName.get(name) || { name, waiting: 0, running: 0 };
+    if (m[1] === "printeps_fire_queue_depth") entry.waiting = value;
+    else entry.running = value;
+    byName.set(name, entry);
+  }
+  const rulesets = [...byName.values()].sort((a, b) => b.waiting - a.waiting || b.running - a.running || a.name.localeCompare(b.name));
+  return { limit, rulesets };
+}
+
+function queueItem(q, limit) {
+  const full = limit !== null && q.waiting >= limit;
+  const kind = full ? "error" : q.waiting > 0 ? "warning" : "ok";
+  return h("li", { class: `queue ${kind}`, "data-ruleset": q.name, "data-waiting": String(q.waiting) },
+    h("b", {}, q.name), " ",
+    h("meter", { min: "0", max: String(limit || Math.max(1, q.waiting)), low: String((limit || 1) / 2), high: String(limit || 1),
+      value: String(q.waiting), "aria-label": `${q.name}: fires waiting` }),
+    " ", h("span", { class: "queue-words" }, `${q.waiting} waiting${limit !== null ? ` of ${limit}` : ""}, ${q.running} running`),
+    full ? h("span", { class: "badge status error" }, "full: new fires are refused") : null);
 }
