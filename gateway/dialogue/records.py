@@ -22,8 +22,9 @@ One document per conversation::
 - ``facts`` are the session's facts after the turn, re-inserted when a process that has no
   session of that ``rev`` continues it.
 - ``order``/``order_kept``: the order the rules sent to the kitchen is written with the turn that
-  confirmed it, then kept in ``orders``; an order still not kept a while later (its process died
-  in between) is kept by whichever process's watcher finds it.
+  confirmed it (``order_kept: false``), claimed by one keeper (``"keeping"``), kept in ``orders``
+  (``true``); an order still not kept a while later (its process died in between) is claimed and
+  kept by whichever process's watcher finds it first.
 
 Written straight to MongoDB, not the journal: a turn must know at once that it won. While the
 database is away a turn is refused (:class:`RecordsUnavailable`, 503) rather than answered from
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import copy
 import threading
+import time
 from typing import Any, Protocol
 
 from pymongo import ASCENDING
@@ -64,6 +66,10 @@ class ConversationRecords(Protocol):
              decision: str | None = None) -> None:
         """Sets ``changes`` (and appends ``decision``) on that generation, whatever its ``rev``."""
 
+    def claim_order(self, conversation: str, generation: str, stale_before: float) -> bool:
+        """Marks that generation's order as being kept by the caller (``order_kept: "keeping"``)
+        unless it is kept, or being kept by a claim made after ``stale_before``: one keeper."""
+
     def count_going_on(self) -> int: ...
 
     def going_on(self, limit: int) -> list[dict[str, Any]]: ...
@@ -77,7 +83,7 @@ class ConversationRecords(Protocol):
         """Conversations going on with no turn since ``before``."""
 
     def unkept_orders(self, before: float) -> list[dict[str, Any]]:
-        """Conversations whose order was written before ``before`` but not kept."""
+        """Conversations whose order was written (or claimed) before ``before`` but not kept."""
 
 
 class MongoConversations:
@@ -124,6 +130,13 @@ class MongoConversations:
             self._do("writing", lambda: self.collection.update_one({"_id": conversation, "generation": generation},
                                                                    update))
 
+    def claim_order(self, conversation: str, generation: str, stale_before: float) -> bool:
+        where = {"_id": conversation, "generation": generation, "$or": [
+            {"order_kept": False}, {"order_kept": "keeping", "order_claimed_at": {"$lte": stale_before}}]}
+        done = self._do("writing", lambda: self.collection.update_one(
+            where, {"$set": {"order_kept": "keeping", "order_claimed_at": time.time()}}))
+        return done.modified_count == 1
+
     def count_going_on(self) -> int:
         return int(self._do("counting", lambda: self.collection.count_documents({"going_on": True})))
 
@@ -145,7 +158,8 @@ class MongoConversations:
 
     def unkept_orders(self, before: float) -> list[dict[str, Any]]:
         return self._do("reading", lambda: list(self.collection.find(
-            {"order_kept": False, "order_at": {"$lte": before}})))
+            {"$or": [{"order_kept": False, "order_at": {"$lte": before}},
+                     {"order_kept": "keeping", "order_claimed_at": {"$lte": before}}]})))
 
 
 class MemoryConversations:
@@ -190,6 +204,14 @@ class MemoryConversations:
         with self._lock:
             return [copy.deepcopy(d) for d in self._docs.values() if test(d)]
 
+    def claim_order(self, conversation: str, generation: str, stale_before: float) -> bool:
+        with self._lock:
+            doc = self._docs.get(conversation)
+            if doc is None or doc.get("generation") != generation or not _claimable(doc, stale_before):
+                return False
+            doc.update(order_kept="keeping", order_claimed_at=time.time())
+            return True
+
     def count_going_on(self) -> int:
         return len(self._where(lambda d: d["going_on"]))
 
@@ -206,4 +228,10 @@ class MemoryConversations:
         return self._where(lambda d: d["going_on"] and d["last_turn_at"] <= before)
 
     def unkept_orders(self, before: float) -> list[dict[str, Any]]:
-        return self._where(lambda d: d.get("order_kept") is False and (d.get("order_at") or 0) <= before)
+        return self._where(lambda d: (d.get("order_kept") is False and (d.get("order_at") or 0) <= before)
+                           or (d.get("order_kept") == "keeping" and (d.get("order_claimed_at") or 0) <= before))
+
+
+def _claimable(doc: dict[str, Any], stale_before: float) -> bool:
+    kept = doc.get("order_kept")
+    return kept is False or (kept == "keeping" and (doc.get("order_claimed_at") or 0) <= stale_before)

@@ -202,6 +202,8 @@ class DialogueService:
                 if fresh:
                     if not spoken:
                         return None
+                    if doc is not None and doc.get("order_kept") is False:
+                        self._rescue_order(doc)  # its process died before keeping it: the new one replaces it
                     doc = self._fresh(conversation, table, doc)
                 elif still is not None and not still(doc):
                     return None
@@ -340,7 +342,7 @@ class DialogueService:
         doc["decisions"] = [*doc["decisions"], decision_id]
         doc["last_decision_id"] = decision_id
         self._note(doc, {"last_decision_id": decision_id}, decision_id)
-        if "order" in done.changes:
+        if "order" in done.changes and self._claim_order(doc, time.time() - ORPHAN_ORDER_S):
             self._keep_order(doc, menu)
         robot = [a for a in actions if a.get("module") in ROBOT_MODULES]
         if robot and self.dispatch is not None:
@@ -508,9 +510,22 @@ class DialogueService:
 
     def _keep_orphaned_orders(self, now: float) -> None:
         for doc in self.records.unkept_orders(now - ORPHAN_ORDER_S):
+            self._rescue_order(doc, now)
+
+    def _rescue_order(self, doc: dict[str, Any], now: float | None = None) -> None:
+        """Keeps an order its process wrote but did not keep (it died in between), unless
+        another process claims it first."""
+        if self._claim_order(doc, (now or time.time()) - ORPHAN_ORDER_S):
             log.warning("conversation %s: the order confirmed by process %s was not kept; kept now",
                         doc["_id"], doc.get("process"))
             self._keep_order(doc, self.menu())
+
+    def _claim_order(self, doc: dict[str, Any], stale_before: float) -> bool:
+        try:
+            return self.records.claim_order(doc["_id"], doc["generation"], stale_before)
+        except RecordsUnavailable:
+            log.warning("conversation %s: the order is kept later (the Information State is away)", doc["_id"])
+            return False
 
     def _forget_idle_sessions(self) -> None:
         """Sessions of conversations not continued here for a while (they may go on elsewhere)."""

@@ -89,7 +89,10 @@ def test_an_utterance_continues_a_conversation_another_process_began(domain_id, 
                 customer = rt.make(Customer)
                 assert wait_for(lambda: customer.publisher.get_subscription_count() >= 1, 20)
                 customer.say("table4", "two")
-                said = lambda: [c["text"] for c in pepper.calls if c["service"] == "speak"]  # noqa: E731
+
+                def said() -> list[str]:
+                    return [c["text"] for c in pepper.calls if c["service"] == "speak"]
+
                 assert wait_for(lambda: "2 coffees, certainly. Is that right?" in said(), 30), said()
                 going = TestClient(second.app).get("/api/dialogue/conversations").json()["going_on"]
                 assert [(c["turns"], c["state"]) for c in going if c["conversation"] == "table4"] == [(2, "confirming")]
