@@ -40,6 +40,7 @@ from gateway.dialogue.menu import Menu, read_menu
 from gateway.dialogue.records import ConversationRecords, MemoryConversations, MongoConversations, RecordsUnavailable
 from gateway.dialogue.speech import Recogniser, read_wav
 from gateway.dialogue.words import hear
+from gateway.engine.errors import EngineError
 from gateway.engine.sessions import ID_PATTERN
 
 log = logging.getLogger(__name__)
@@ -60,6 +61,10 @@ class DialogueRefused(ValueError):
         self.field, self.message = field_name, message
 
 
+class StateUnfit(RuntimeError):
+    """A conversation's kept facts cannot be inserted into a session of the live rules."""
+
+
 class DialogueBusy(RuntimeError):
     """Too many turns at once (``status`` 503) or conversations going on (429): try again later."""
 
@@ -73,6 +78,7 @@ class Local:
     """This process's session of a conversation: valid while the record's ``rev`` is ``rev``
     (another process may have taken a turn since; then the session is made again from the record)."""
 
+    conversation: str
     session: Any
     rev: int
     used_at: float = field(default_factory=time.monotonic)
@@ -194,7 +200,7 @@ class DialogueService:
         got there first. A spoken turn starts a conversation when none is going on; a silence
         (``spoken`` False) changes only one going on for which ``still(record)`` holds. None:
         nothing to change."""
-        with self._stripes[hash(conversation) % len(self._stripes)]:
+        with self._stripe(conversation):
             for _attempt in range(WRITE_ATTEMPTS):
                 doc = self._read(conversation)
                 expected = doc["rev"] if doc is not None else None
@@ -207,13 +213,32 @@ class DialogueService:
                     doc = self._fresh(conversation, table, doc)
                 elif still is not None and not still(doc):
                     return None
-                done = self._run(doc, make_fact(doc), spoken)
+                try:
+                    done = self._run(doc, make_fact(doc), spoken)
+                except StateUnfit as exc:
+                    if fresh:
+                        raise
+                    self._end_unfit(doc, exc)  # and start anew on the next attempt
+                    continue
                 if self._write(done.doc, expected, None if fresh else done.changes):
                     self._keep_local(conversation, done)
                     return done
                 self._drop_local(conversation)  # another process took a turn: run again on its state
         raise DialogueBusy(f"conversation {conversation} was changed by {WRITE_ATTEMPTS} other turns at once: "
                            "say it again", 503)
+
+    def _stripe(self, conversation: str) -> threading.Lock:
+        """The lock one conversation's changes in this process take (64 shared by all)."""
+        return self._stripes[hash(conversation) % len(self._stripes)]
+
+    def _end_unfit(self, doc: dict[str, Any], exc: Exception) -> None:
+        """A conversation whose kept facts the live rules no longer accept (an owner changed
+        the types): ended, so the turn starts a new one rather than failing for ever."""
+        log.warning("conversation %s ended: its facts do not fit the live %s rules (%s)", doc["_id"],
+                    self.settings.ruleset, exc)
+        changes = {"rev": doc["rev"] + 1, "going_on": False, "state": "ended", "ended_at": time.time(),
+                   "process": self.process}
+        self._write({**doc, **changes}, doc["rev"], changes)
 
     def _read(self, conversation: str) -> dict[str, Any] | None:
         try:
@@ -295,6 +320,9 @@ class DialogueService:
         try:
             if doc["facts"]:
                 session.insert(doc["facts"])
+        except EngineError as exc:
+            session.close()
+            raise StateUnfit(str(exc)) from exc
         except Exception:
             session.close()
             raise
@@ -305,13 +333,17 @@ class DialogueService:
             self._drop_local(conversation)
             return
         with self._lock:
-            self._local[conversation] = Local(done.session, done.doc["rev"])
+            self._local[conversation] = Local(conversation, done.session, done.doc["rev"])
             self._local.move_to_end(conversation)
             evicted = []
             while len(self._local) > self.settings.max_conversations:
                 evicted.append(self._local.popitem(last=False)[1])
-        for old in evicted:
-            old.session.close()
+        for old in evicted:  # a session in a turn right now is closed as a leftover at its next turn
+            if self._stripe(old.conversation).acquire(blocking=False):
+                try:
+                    old.session.close()
+                finally:
+                    self._stripe(old.conversation).release()
 
     def _session_of(self, conversation: str) -> Any:
         return self.engine.session_manager.find(self.settings.ruleset, f"dialogue.{conversation}")
@@ -504,9 +536,11 @@ class DialogueService:
             changes = {"rev": doc["rev"] + 1, "going_on": False, "state": "ended", "ended_at": time.time(),
                        "process": self.process}
             closed = {**doc, **changes}
-            if self.records.save(closed, doc["rev"], changes):
+            with self._stripe(doc["_id"]):
+                if not self.records.save(closed, doc["rev"], changes):
+                    continue  # a turn came after all
                 self._drop_local(doc["_id"])
-                self._announce(doc["_id"], "ended", _summary(closed))
+            self._announce(doc["_id"], "ended", _summary(closed))
 
     def _keep_orphaned_orders(self, now: float) -> None:
         for doc in self.records.unkept_orders(now - ORPHAN_ORDER_S):
@@ -533,7 +567,11 @@ class DialogueService:
         with self._lock:
             idle = [c for c, local in self._local.items() if local.used_at < limit]
         for conversation in idle:
-            self._drop_local(conversation)
+            with self._stripe(conversation):  # not while a turn uses it
+                with self._lock:
+                    local = self._local.get(conversation)
+                if local is not None and local.used_at < limit:
+                    self._drop_local(conversation)
 
     # ------------------------------------------------------------------ reading
 

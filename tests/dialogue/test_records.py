@@ -119,3 +119,15 @@ def test_one_keeper_claims_an_order(records):
     assert records.claim_order("t1", "g1", later)  # so another takes it over
     records.note("t1", "g1", {"order_kept": True})
     assert not records.claim_order("t1", "g1", later) and records.unkept_orders(later) == []
+
+
+def test_a_conversation_whose_kept_facts_the_live_rules_refuse_starts_anew(gateway):
+    d = gateway.dialogue
+    d.turn("unfit1", text="coffee")
+    doc = d.records.load("unfit1")
+    # as if an owner's deploy had removed a type the conversation kept (written by another process)
+    unfit = {"rev": doc["rev"] + 1, "facts": [{"type": "Reservation", "id": "r1", "table": "t1"}]}
+    assert d.records.save({**doc, **unfit}, doc["rev"], unfit)
+    answer = d.turn("unfit1", text="two coffees")
+    assert answer["turn"] == 1 and answer["slots"] == {"drink": "coffee", "cups": 2}
+    assert d.records.load("unfit1")["generation"] != doc["generation"]
