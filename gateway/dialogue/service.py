@@ -24,6 +24,7 @@ ROS topic ``/teahouse/orders``). A conversation silent for ``dialogue.silence_ch
 from __future__ import annotations
 
 import collections
+import copy
 import logging
 import os
 import socket
@@ -81,6 +82,7 @@ class Local:
     conversation: str
     session: Any
     rev: int
+    doc: dict[str, Any]  # the record as this process last wrote it
     used_at: float = field(default_factory=time.monotonic)
 
 
@@ -201,8 +203,9 @@ class DialogueService:
         (``spoken`` False) changes only one going on for which ``still(record)`` holds. None:
         nothing to change."""
         with self._stripe(conversation):
-            for _attempt in range(WRITE_ATTEMPTS):
-                doc = self._read(conversation)
+            for attempt in range(WRITE_ATTEMPTS):
+                # first as this process last wrote it (no read: the write fails if another wrote since)
+                doc = (self._cached(conversation) if attempt == 0 else None) or self._read(conversation)
                 expected = doc["rev"] if doc is not None else None
                 fresh = doc is None or not doc["going_on"]
                 if fresh:
@@ -239,6 +242,11 @@ class DialogueService:
         changes = {"rev": doc["rev"] + 1, "going_on": False, "state": "ended", "ended_at": time.time(),
                    "process": self.process}
         self._write({**doc, **changes}, doc["rev"], changes)
+
+    def _cached(self, conversation: str) -> dict[str, Any] | None:
+        with self._lock:
+            local = self._local.get(conversation)
+            return copy.deepcopy(local.doc) if local is not None and not local.session.closed else None
 
     def _read(self, conversation: str) -> dict[str, Any] | None:
         try:
@@ -333,7 +341,7 @@ class DialogueService:
             self._drop_local(conversation)
             return
         with self._lock:
-            self._local[conversation] = Local(conversation, done.session, done.doc["rev"])
+            self._local[conversation] = Local(conversation, done.session, done.doc["rev"], done.doc)
             self._local.move_to_end(conversation)
             evicted = []
             while len(self._local) > self.settings.max_conversations:
