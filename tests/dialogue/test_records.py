@@ -10,7 +10,7 @@ import time
 import pytest
 from pymongo import MongoClient
 
-from gateway.dialogue.records import MemoryConversations, MongoConversations
+from gateway.dialogue.records import MemoryConversations, MongoConversations, RecordsUnavailable
 from gateway.dialogue.service import DialogueBusy, DialogueService
 from gateway.store.shipper import mongo_client
 from gw_testing import wait_for
@@ -88,6 +88,8 @@ def test_a_turn_while_the_information_state_is_away_is_refused_and_changes_nothi
             away.turn("away1", text="two coffees")
         assert refused.value.status == 503 and "unreachable" in str(refused.value)
         assert gateway.engine.session_manager.find("dialogue", "dialogue.away1") is None
+        with pytest.raises(RecordsUnavailable):  # the route answers 503 + Retry-After
+            away.conversations()
     finally:
         away.close()
         client.close()
