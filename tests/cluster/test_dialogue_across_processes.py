@@ -95,3 +95,21 @@ def test_one_conversation_whichever_process_takes_the_turn_and_after_its_process
     finally:
         a.stop()
         b.stop()
+
+
+def test_workers_carry_one_conversation_on_the_shared_port(home):
+    folder, config, env = home
+    served = Process("DW", config, env, folder, "--workers", "2").start()
+    try:
+        served.ready()
+        writers = set()
+        for k in range(24):  # new connections: the kernel spreads them over both workers
+            text = ("coffee", "two", "no")[k % 3]
+            answer = turn(served.url, "table9", text)
+            assert answer["turn"] == k + 1, answer  # one conversation, whichever worker took the turn
+            assert answer["state"] == ("ordering", "confirming", "ordering")[k % 3]
+            going = httpx.get(f"{served.url}/api/dialogue/conversations", timeout=30).json()["going_on"]
+            writers.add(next(c["process"] for c in going if c["conversation"] == "table9"))
+        assert len(writers) == 2, writers  # both workers took turns of it
+    finally:
+        served.stop()
