@@ -91,13 +91,13 @@ class MongoConversations:
 
     def __init__(self, db: Any) -> None:
         self.collection = db[CONVERSATIONS]
-        try:
-            self.collection.create_index([("going_on", ASCENDING), ("last_turn_at", ASCENDING)])
-        except PyMongoError:  # an index is a speed-up: the records work without it
-            pass
+        self._indexed = False  # made at the first use, not at start-up (the database may be away then)
 
     def _do(self, what: str, call: Any) -> Any:
         try:
+            if not self._indexed:
+                self.collection.create_index([("going_on", ASCENDING), ("last_turn_at", ASCENDING)])
+                self._indexed = True
             return call()
         except DuplicateKeyError:
             raise
