@@ -98,26 +98,43 @@ def _score(acc: list, text: str, ms: float, sentence: str, drink: str, cups: int
     acc[2].append(ms)
 
 
-def turn_latency(turns: int) -> dict:
-    """Text turns through a real gateway (engine, session per conversation; no database)."""
+def turn_latency(turns: int, with_store: bool = False) -> dict:
+    """Text turns through a real gateway (engine, session per conversation); the conversations
+    in memory, or ``with_store`` in the Information State (an embedded SecantusDB), as several
+    processes share them (read, run, write over the rev read, the decision noted)."""
+    import tempfile
+
     from gateway.app import build_gateway
     from gateway.config import Settings
 
     settings = Settings.model_validate({"data_dir": "/tmp/printeps-dialogue-bench", "streams": {"queries_dir": None}})
-    gateway = build_gateway(settings, rest=False, ros=False, use_store=False, warm_up=False)
-    try:
-        d = gateway.dialogue
-        for i in range(20):  # warm-up
-            d.turn(f"w{i}", text="two green teas please")
-        times = []
-        for i in range(turns):
-            started = time.perf_counter()
-            d.turn(f"b{i % 50}", text=["two green teas please", "no make that coffee", "yes"][i % 3])
-            times.append((time.perf_counter() - started) * 1000)
-        return {"n": turns, "p50": statistics.median(times), "p95": sorted(times)[int(len(times) * 0.95) - 1],
-                "mean": statistics.fmean(times)}
-    finally:
-        gateway.close()
+    with tempfile.TemporaryDirectory(prefix="bench-dialogue-") as tmpdir:
+        db = store = None
+        if with_store:
+            from gateway.store.embedded import EmbeddedMongo
+            from gateway.store.store import InformationState
+
+            db = EmbeddedMongo(Path(tmpdir) / "mongo")
+            store = InformationState(db.start(), "dialogue_bench", Path(tmpdir) / "journal", backend="embedded")
+        gateway = build_gateway(settings, rest=False, ros=False, warm_up=False,
+                                **({"store": store} if with_store else {"use_store": False}))
+        try:
+            d = gateway.dialogue
+            for i in range(20):  # warm-up
+                d.turn(f"w{i}", text="two green teas please")
+            times = []
+            for i in range(turns):
+                started = time.perf_counter()
+                d.turn(f"b{i % 50}", text=["two green teas please", "no make that coffee", "yes"][i % 3])
+                times.append((time.perf_counter() - started) * 1000)
+            return {"n": turns, "p50": statistics.median(times), "p95": sorted(times)[int(len(times) * 0.95) - 1],
+                    "mean": statistics.fmean(times)}
+        finally:
+            gateway.close()
+            if store is not None:
+                store.close()
+            if db is not None:
+                db.stop()
 
 
 def main() -> int:
@@ -139,6 +156,7 @@ def main() -> int:
     rows = recognition(menu, gram, sample, args.voices.split(","), [int(s) for s in args.speeds.split(",")],
                        args.open_orders)
     turn = turn_latency(args.turns) if args.turns else None
+    shared = turn_latency(args.turns, with_store=True) if args.turns else None
     lines = ["## Spoken dialogue", "",
              f"`bench/dialogue_bench.py --orders {args.orders} --voices {args.voices} --speeds {args.speeds} "
              f"--open-orders {args.open_orders} --turns {args.turns}` ({note}). Orders drawn from the menu in customers' phrasings, spoken by "
@@ -152,8 +170,12 @@ def main() -> int:
                      f"| {r['p50']:.0f} | {r['p95']:.0f} |")
     if turn:
         lines += ["", f"Text turn (words → Utterance → dialogue rules in the conversation's session → Pepper's "
-                      f"answer, decision announced; no database): p50 {turn['p50']:.1f} ms, p95 {turn['p95']:.1f} ms, "
+                      f"answer, decision announced; conversations in memory): p50 {turn['p50']:.1f} ms, p95 {turn['p95']:.1f} ms, "
                       f"mean {turn['mean']:.1f} ms over {turn['n']} turns."]
+    if shared:
+        lines += ["", f"The same turns with the conversations in the Information State (embedded SecantusDB; "
+                      f"what lets any gateway process continue a conversation): p50 {shared['p50']:.1f} ms, "
+                      f"p95 {shared['p95']:.1f} ms, mean {shared['mean']:.1f} ms over {shared['n']} turns."]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.write_docs:

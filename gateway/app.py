@@ -250,6 +250,8 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
     dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
     closers.append(("the conversations", dialogue.close))
+    if store is not None:  # every process watches the shared conversations (their process may be gone)
+        dialogue.start_watching()
     if ros_gateway is not None:
         ros_gateway.attach_dialogue(dialogue)
 

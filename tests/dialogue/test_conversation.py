@@ -96,14 +96,14 @@ def test_silence_ends_the_conversation_and_the_next_turn_starts_anew(gateway, co
 def test_the_watcher_tells_a_quiet_conversation(gateway, conv):
     d = gateway.dialogue
     d.turn(conv, text="coffee")
-    answers = d.check_silences(now=time.monotonic() + 61)
+    answers = d.check_silences(now=time.time() + 61)
     assert any(a["conversation"] == conv and a["state"] == "ended" for a in answers)
 
 
 def test_a_conversation_idle_too_long_is_closed_even_if_the_rules_keep_it(gateway, conv):
     d = gateway.dialogue
     d.turn(conv, text="coffee")
-    d.check_silences(now=time.monotonic() + d.settings.max_idle_s + 1)
+    d.check_silences(now=time.time() + d.settings.max_idle_s + 1)
     assert all(c["conversation"] != conv for c in d.conversations())
     assert d.finished[conv]["state"] == "ended"
 

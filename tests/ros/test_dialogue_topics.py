@@ -63,3 +63,40 @@ def test_an_order_taken_over_ros_reaches_pepper_the_topic_and_the_information_st
         assert gateway.store.flush()
         stored = gateway.store.query("orders", filters={"conversation": "table1"})
         assert stored and stored[0]["decision_ids"] == order["decision_ids"]
+
+
+def test_an_utterance_continues_a_conversation_another_process_began(domain_id, settings, mongo, tmp_path) -> None:
+    """The conversation is in the Information State: a gateway that never saw its first turn
+    (another worker, another host, or this one restarted) continues it from the ROS topic."""
+    from fastapi.testclient import TestClient
+
+    from gateway.app import build_gateway
+    from gw_testing import open_test_store
+
+    settings.ros.domain_id = domain_id
+    store = open_test_store(mongo, tmp_path)
+    try:
+        first = build_gateway(settings, store=store, ros=False, warm_up=False)
+        try:
+            asked = TestClient(first.app).post("/api/dialogue/turns", json={"conversation": "table4", "text": "coffee please"})
+            assert asked.status_code == 200 and asked.json()["says"] == ["How many cups of coffee?"], asked.text
+        finally:
+            first.close()
+        with RosRuntime(domain_id=domain_id) as rt:
+            second = build_gateway(settings, store=store, ros=True, warm_up=False)
+            try:
+                pepper = rt.make(RobotSim, "pepper", speech_dir=tmp_path / "speech")
+                customer = rt.make(Customer)
+                assert wait_for(lambda: customer.publisher.get_subscription_count() >= 1, 20)
+                customer.say("table4", "two")
+
+                def said() -> list[str]:
+                    return [c["text"] for c in pepper.calls if c["service"] == "speak"]
+
+                assert wait_for(lambda: "2 coffees, certainly. Is that right?" in said(), 30), said()
+                going = TestClient(second.app).get("/api/dialogue/conversations").json()["going_on"]
+                assert [(c["turns"], c["state"]) for c in going if c["conversation"] == "table4"] == [(2, "confirming")]
+            finally:
+                second.close()
+    finally:
+        store.close()

@@ -3,9 +3,10 @@ conversations going on, the completed orders, the menu and grammar the recognise
 and the simulated Pepper's voice.
 
 Why a thin route: the conversation lives in :class:`gateway.dialogue.service.DialogueService`
-(one stateful session of the dialogue rules per conversation); this only checks the body, decodes
-the audio and maps refusals: bad input -> 422 naming the field, too many turns at once -> 503 with
-``Retry-After``, too many conversations -> 429.
+(one stateful session of the dialogue rules per conversation, its state in the Information State);
+this only checks the body, decodes the audio and maps refusals: bad input -> 422 naming the field,
+too many turns at once or the Information State away -> 503 with ``Retry-After``, too many
+conversations -> 429.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from gateway.api.deps import Caller, GatewayDep, StoreDep
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute, run_blocking
+from gateway.dialogue.records import RecordsUnavailable
 from gateway.dialogue.service import ORDERS, DialogueBusy, DialogueRefused
 from gateway.dialogue.speech import SpeechUnavailable, VoiceUnknown, synthesise
 
@@ -83,7 +85,10 @@ async def turn(body: TurnBody, gateway: GatewayDep, _: Caller) -> JSON:
 def conversations(gateway: GatewayDep, _: Caller) -> JSON:
     """The conversations going on (state, turns, idle time) and the last state of finished ones."""
     service = _service(gateway)
-    return JSON({"going_on": service.conversations(), "finished": list(service.finished.values())})
+    try:
+        return JSON({"going_on": service.conversations(), "finished": list(service.finished.values())})
+    except RecordsUnavailable as exc:
+        raise ApiError(503, str(exc), headers={"Retry-After": "1"}) from None
 
 
 @router.get("/api/dialogue/orders")
