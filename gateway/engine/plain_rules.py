@@ -65,6 +65,8 @@ def tokens(text: str) -> list[tuple[str, str]]:
     while pos < len(text):
         m = _TOKEN.match(text, pos)
         if m is None:
+            if text[pos].isdigit():
+                raise NotPlain("a number with a suffix, exponent or radix (1L, 1e3, 0x1)")
             raise NotPlain(f"character {text[pos]!r}")
         kind = m.lastgroup or ""
         if kind not in ("space", "comment"):
@@ -173,6 +175,7 @@ class _Parser:
     def __init__(self, toks: list[tuple[str, str]]):
         self.toks = toks
         self.k = 0
+        self.fields: set[str] = set()  # variables bound to a field ($id : id) by the patterns read so far
 
     # ---- token helpers
     def peek(self, ahead: int = 0) -> tuple[str, str]:
@@ -247,7 +250,7 @@ class _Parser:
             return {"accumulate": self.accumulate()}
         if word in ("not", "exists"):
             self.take(word)
-            parens = self.peek()[1] == "(" and self.peek(1)[0] == "name" and self.peek(2)[1] != "("
+            parens = self.peek()[1] == "("
             if parens:  # not( Type( … ) )
                 self.take("(")
             pattern = self.pattern()
@@ -282,6 +285,7 @@ class _Parser:
             else:
                 constraints.append(self.constraint())
         self.take(")")
+        self.fields.update(b["var"] for b in binds)
         return {"type": type_name, "var": var, "constraints": constraints, "binds": binds}
 
     def type_name(self) -> str:
@@ -323,6 +327,8 @@ class _Parser:
         if self.peek()[1].startswith("$"):
             ref = self.take(kind="name")
             if self.peek()[1] != ".":  # a bound field: applicant == $id
+                if ref not in self.fields:
+                    raise NotPlain(f"a comparison with {ref}, not a field bound before")
                 return {"field": field, "op": op, "ref": ref, "text": f"{field} {op} {ref}"}
             self.take(".")
             ref_field = self.name()
