@@ -370,6 +370,7 @@ def business(args: argparse.Namespace) -> None:
               f"{stats.get('rules_compiled')}), redeploy median {r['redeploy']['median_s']:.2f} s, first fire after it "
               f"{r['redeploy']['first_fire_median_ms']:.2f} ms, fire p50/p99 {r['fire']['p50_ms']:.2f}/{r['fire']['p99_ms']:.2f} ms, "
               f"correct {r['fire']['correct']}, peak RSS {r.get('peak_rss_mb')} MB, load {r['load_before']:.1f}")
+        print(f"   plain split: {r.get('plain_split')}")
 
 
 def main() -> None:

@@ -28,11 +28,11 @@ import itertools
 import logging
 import re
 import threading
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from typing import Any
 
 from gateway.base import jvm
-from gateway.engine import decision_table, drl_items, incremental, scenario_files
+from gateway.engine import decision_table, drl_items, incremental, plain_rules, scenario_files
 from gateway.engine.build import (
     DEFAULT_OPTIONS,
     CompiledRuleSet,
@@ -265,6 +265,15 @@ def rule_sources(files: dict[str, str]) -> list[tuple[Source, drl_items.SourceIt
             out.append((source, drl_items.parse_items(source.file, source.drl, described) if described else None))
         return out
 
+
+
+def plain_split(files: dict[str, str]) -> Counter[str]:
+    """How many rules of ``files`` are of the plain shapes (key ``"plain"``: built without
+    generating Java) and, for the others, why each goes to Drools' compiler
+    (:func:`plain_rules.why_not`). Why: a rule base's cold build time is decided by this split; the
+    growth bench reports it for each generator. (The Java side may still refuse a described rule,
+    e.g. a literal of another type than its field: the build's stats count those.)"""
+    return plain_rules.reasons([items for _, items in rule_sources(files) if items is not None])
 
 def _parser_position(err: Any, message: str) -> tuple[int, int]:
     match = _LINE_COL.search(message)

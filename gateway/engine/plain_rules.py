@@ -3,27 +3,33 @@
 Why: Drools' executable model generates and compiles Java for every rule (~11 ms of CPU a rule:
 two minutes for 10,000), while the model objects it would build take microseconds. Most rules of a
 large table are of a few plain shapes: patterns on declared or imported types whose constraints
-compare a field with a literal or with a field of an earlier pattern, a ``sum`` accumulate, and a
-then-part of calls on a global whose arguments are literals, bound variables, their getters, or
-texts joined from those with ``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This
-module recognises exactly those, strictly, and describes them as JSON for the Java side
-(``org.printeps.gateway.PlainRules``), which builds the same ``Rule`` objects the generated code
-would (same indexes, property reactivity and accumulate functions). Anything else — another
-operator, a method call in a constraint, ``not``/``exists``/``from``, an attribute other than
-``salience``, a then-part with Java beyond such calls, a string with escapes — is left to Drools'
-compiler, which also reports its errors with file, line and column. So is any rule the Java side
-cannot build exactly (an unknown field, a literal of another type, an ambiguous method).
+compare a field with a literal, with a field of an earlier pattern or with a bound field
+(``$id : id`` … ``applicant == $id``), ``in``/``not in`` lists, ``matches``/``not matches``,
+``not``/``exists`` over one pattern, accumulates (``accumulate( …; $t : sum( $a ); … )`` and
+``Number( … ) from accumulate( …, count( 1 ) | sum | min | max( $v ) )``), the attributes
+``salience``, ``agenda-group``, ``activation-group``, ``auto-focus``, ``no-loop``,
+``lock-on-active``, ``date-effective`` and ``date-expires``, and a then-part of calls on a global
+whose arguments are literals, bound variables, their getters, or texts joined from those with
+``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This module recognises exactly those,
+strictly, and describes them as JSON for the Java side (``org.printeps.gateway.PlainRules``), which
+builds the same ``Rule`` objects the generated code would (same indexes, constraint ids, property
+reactivity, operators and accumulate functions). Anything else — another operator, a method call
+in a constraint, ``from`` a collection, ``eval``, another attribute, a then-part with Java beyond
+such calls, a string with escapes — is left to Drools' compiler, which also reports its errors with
+file, line and column. So is any rule the Java side cannot build exactly (an unknown field, a
+literal of another type, an ambiguous method). :func:`why_not` says why a rule is not plain.
 """
 
 from __future__ import annotations
 
 import json
 import re
+from collections import Counter
 from typing import Any
 
 from gateway.engine.drl_items import Item, SourceItems
 
-FORMAT = 1  # org.printeps.gateway.PlainRules.FORMAT
+FORMAT = 2  # org.printeps.gateway.PlainRules.FORMAT (2: not/exists, in, matches, from accumulate, attributes)
 
 _TOKEN = re.compile(
     r"""
@@ -44,6 +50,10 @@ KEYWORDS = {
 }
 
 
+TEXT_ATTRIBUTES = ("agenda-group", "activation-group", "date-effective", "date-expires")
+FLAG_ATTRIBUTES = ("auto-focus", "no-loop", "lock-on-active")
+
+
 class NotPlain(Exception):
     """The text is not of a plain shape (the rule goes to Drools' compiler)."""
 
@@ -55,6 +65,8 @@ def tokens(text: str) -> list[tuple[str, str]]:
     while pos < len(text):
         m = _TOKEN.match(text, pos)
         if m is None:
+            if text[pos].isdigit():
+                raise NotPlain("a number with a suffix, exponent or radix (1L, 1e3, 0x1)")
             raise NotPlain(f"character {text[pos]!r}")
         kind = m.lastgroup or ""
         if kind not in ("space", "comment"):
@@ -119,9 +131,37 @@ def _dotted(toks: list[tuple[str, str]], k: int, star: bool = False) -> tuple[st
 def describe(src: SourceItems, item: Item, imports: list[str]) -> dict[str, Any] | None:
     """The description of rule ``item`` for PlainRules, or None if it is not of a plain shape."""
     try:
-        return _Parser(tokens(src.item_text(item))).rule(src.package, item.name, imports)
+        return _describe(src, item, imports)
     except NotPlain:
         return None
+
+
+def why_not(src: SourceItems, item: Item, imports: list[str] | None) -> str | None:
+    """Why rule ``item`` is not of a plain shape (the first thing the reader met that it does not
+    take), or None if it is. Why: which shapes of a rule base go to the slow compiler is what decides
+    its cold build time; this is the diagnostic that shows it (:func:`reasons`)."""
+    if imports is None:
+        return "a package header with more than package, import and global statements"
+    try:
+        _describe(src, item, imports)
+    except NotPlain as e:
+        return str(e)
+    return None
+
+
+def reasons(sources: list[SourceItems]) -> Counter[str]:
+    """How many rules of ``sources`` are plain (key ``"plain"``) and, for the others, how many
+    stop at each reason (:func:`why_not`): the split a benchmark reports next to its build times."""
+    imports = package_imports(sources)
+    out: Counter[str] = Counter()
+    for src in sources:
+        for item in src.rules:
+            out[why_not(src, item, imports.get(src.package)) or "plain"] += 1
+    return out
+
+
+def _describe(src: SourceItems, item: Item, imports: list[str]) -> dict[str, Any]:
+    return _Parser(tokens(src.item_text(item))).rule(src.package, item.name, imports)
 
 
 def spec_json(rules: list[dict[str, Any]]) -> bytes:
@@ -135,6 +175,7 @@ class _Parser:
     def __init__(self, toks: list[tuple[str, str]]):
         self.toks = toks
         self.k = 0
+        self.fields: set[str] = set()  # variables bound to a field ($id : id) by the patterns read so far
 
     # ---- token helpers
     def peek(self, ahead: int = 0) -> tuple[str, str]:
@@ -159,11 +200,19 @@ class _Parser:
         self.take("rule")
         self.take(kind="string" if self.peek()[0] == "string" else "name")
         salience = None
+        attributes: dict[str, Any] = {}
         while self.peek()[1] != "when":
-            self.take("salience")
-            if salience is not None:
-                raise NotPlain("two saliences")
-            salience = self.integer()
+            attribute = self.attribute_name()
+            if attribute in attributes or (attribute == "salience" and salience is not None):
+                raise NotPlain(f"two {attribute} attributes")
+            if attribute == "salience":
+                salience = self.integer()
+            elif attribute in TEXT_ATTRIBUTES:
+                attributes[attribute] = self.take(kind="string")[1:-1]
+            elif attribute in FLAG_ATTRIBUTES:
+                attributes[attribute] = self.take() == "true" if self.peek()[1] in ("true", "false") else True
+            else:
+                raise NotPlain(f"attribute {attribute}")
         self.take("when")
         lhs = []
         while self.peek()[1] != "then":
@@ -175,7 +224,18 @@ class _Parser:
         self.take("end")
         if not lhs:
             raise NotPlain("no condition")
-        return {"package": package, "name": name, "salience": salience, "imports": imports, "lhs": lhs, "rhs": rhs}
+        out = {"package": package, "name": name, "salience": salience, "imports": imports, "lhs": lhs, "rhs": rhs}
+        if attributes:
+            out["attributes"] = attributes
+        return out
+
+    def attribute_name(self) -> str:
+        """An attribute's name, with its dashes (``no-loop`` is three tokens)."""
+        word = self.take(kind="name")
+        while self.peek()[1] == "-" and self.peek(1)[0] == "name":
+            self.k += 1
+            word += "-" + self.take(kind="name")
+        return word
 
     def integer(self) -> int:
         sign = -1 if self.peek()[1] == "-" and self.take("-") else 1
@@ -185,9 +245,24 @@ class _Parser:
         return sign * int(digits)
 
     def condition(self) -> dict[str, Any]:
-        if self.peek()[1] == "accumulate":
+        word = self.peek()[1]
+        if word == "accumulate":
             return {"accumulate": self.accumulate()}
-        return {"pattern": self.pattern()}
+        if word in ("not", "exists"):
+            self.take(word)
+            parens = self.peek()[1] == "("
+            if parens:  # not( Type( … ) )
+                self.take("(")
+            pattern = self.pattern()
+            if parens:
+                self.take(")")
+            if pattern["var"] is not None or pattern["binds"]:
+                raise NotPlain(f"a variable bound inside {word}")
+            return {word: pattern}
+        pattern = self.pattern()
+        if self.peek()[1] == "from":
+            return {"fromAccumulate": self.from_accumulate(pattern)}
+        return {"pattern": pattern}
 
     def pattern(self) -> dict[str, Any]:
         var = None
@@ -205,9 +280,12 @@ class _Parser:
                 bound = self.take(kind="name")
                 self.take(":")
                 binds.append({"var": bound, "field": self.name()})
+                if self.peek()[1] not in (",", ")"):
+                    raise NotPlain("a binding with a constraint")
             else:
                 constraints.append(self.constraint())
         self.take(")")
+        self.fields.update(b["var"] for b in binds)
         return {"type": type_name, "var": var, "constraints": constraints, "binds": binds}
 
     def type_name(self) -> str:
@@ -219,11 +297,39 @@ class _Parser:
 
     def constraint(self) -> dict[str, Any]:
         field = self.name()
+        negated = self.peek()[1] == "not" and self.peek(1)[1] in ("in", "matches")
+        if negated:
+            self.take("not")
+        if self.peek()[1] == "in":
+            self.take("in")
+            self.take("(")
+            literals, texts = [], []
+            while True:
+                literal, text = self.literal()
+                literals.append(literal)
+                texts.append(text)
+                if self.peek()[1] != ",":
+                    break
+                self.take(",")
+            self.take(")")
+            op = "not in" if negated else "in"
+            return {"field": field, "op": op, "literals": literals, "text": f"{field} {op} ( {', '.join(texts)} )"}
+        if self.peek()[1] == "matches":
+            self.take("matches")
+            if self.peek()[0] != "string":
+                raise NotPlain("matches with something other than a text")
+            literal, text = self.literal()
+            op = "not matches" if negated else "matches"
+            return {"field": field, "op": op, "literal": literal, "text": f"{field} {op} {text}"}
         op = self.take(kind="punct")
         if op not in OPERATORS:
             raise NotPlain(f"operator {op}")
         if self.peek()[1].startswith("$"):
             ref = self.take(kind="name")
+            if self.peek()[1] != ".":  # a bound field: applicant == $id
+                if ref not in self.fields:
+                    raise NotPlain(f"a comparison with {ref}, not a field bound before")
+                return {"field": field, "op": op, "ref": ref, "text": f"{field} {op} {ref}"}
             self.take(".")
             ref_field = self.name()
             if self.peek()[1] == ".":
@@ -280,6 +386,27 @@ class _Parser:
                 self.take(",")
         self.take(")")
         return {"source": source, "function": function, "arg": arg, "var": var, "constraints": constraints}
+
+    def from_accumulate(self, result: dict[str, Any]) -> dict[str, Any]:
+        """``Number( intValue >= 2 ) from accumulate( Loan( … ), count( 1 ) )``: the result pattern
+        (its type and constraints on ``intValue``/``longValue``/``doubleValue``), the source pattern
+        and one function over a bound variable or a number."""
+        self.take("from")
+        self.take("accumulate")
+        self.take("(")
+        source = self.pattern()
+        self.take(",")
+        function = self.name()
+        self.take("(")
+        if self.peek()[1].startswith("$"):
+            arg: dict[str, Any] = {"var": self.take(kind="name")}
+        else:
+            arg = self.literal()[0]
+        self.take(")")
+        self.take(")")
+        if result["binds"] or any("literal" not in c or c["op"] not in OPERATORS for c in result["constraints"]):
+            raise NotPlain("a result pattern with more than comparisons with numbers")
+        return {"result": result, "source": source, "function": function, "arg": arg}
 
     def call(self) -> dict[str, Any]:
         target = self.name()

@@ -65,16 +65,22 @@ def test_then_part_arguments_may_read_bound_facts():
 
 
 @pytest.mark.parametrize("when, then", [
-    ("not Order()", 'actions.say("a", "b");'),
-    ("exists Order()", 'actions.say("a", "b");'),
     ("Order() from $orders", 'actions.say("a", "b");'),
     ("eval(true)", 'actions.say("a", "b");'),
     ("Order(total > 1 && total < 5)", 'actions.say("a", "b");'),
     ("Order(total > 1 || total < 5)", 'actions.say("a", "b");'),
-    ("Order(total in (1, 2))", 'actions.say("a", "b");'),
-    ("Order(code matches \"a.*\")", 'actions.say("a", "b");'),
     ("Order(getTotal() > 1)", 'actions.say("a", "b");'),
-    ("$o: Order()\n Line(order == $o)", 'actions.say("a", "b");'),
+    ("$o: Order()\n Line(order == $o)", 'actions.say("a", "b");'),  # a fact, not a bound field
+    ("$o: Order($t: total > 1)", 'actions.say("a", "b");'),
+    ("not $o: Order()", 'actions.say("a", "b");'),
+    ("exists Order($t: total)", 'actions.say("a", "b");'),
+    ("not (Order() or Line())", 'actions.say("a", "b");'),
+    ("Order(code matches $pattern)", 'actions.say("a", "b");'),
+    ("Order(code in ($a, $b))", 'actions.say("a", "b");'),
+    ("Number() from accumulate(Order($v: total), sum($v * 2))", 'actions.say("a", "b");'),
+    ("Number(intValue > $x) from accumulate(Order(), count(1))", 'actions.say("a", "b");'),
+    ("$n: Number() from accumulate(Order($v: total), init(int x = 0;), action(x++;), result(x))", 'actions.say("a", "b");'),
+    ("Order() from $orders", 'actions.say("a", "b");'),
     ("$o: Order()\n Line(order == $o.customer.id)", 'actions.say("a", "b");'),
     ("Order(total > 010)", 'actions.say("a", "b");'),
     ("Order(code == \"a\\\"b\")", 'actions.say("a", "b");'),
@@ -93,7 +99,6 @@ def test_then_part_arguments_may_read_bound_facts():
     ("$o: Order()", '$o.setTotal(3);'),
     ("$o: Order()", 'actions.say("a", "b")'),
     ("Order() over window:time(1m)", 'actions.say("a", "b");'),
-    ("$t: Number() from accumulate(Order($v: total), sum($v))", 'actions.say("a", "b");'),
     ("accumulate(Order($v: total); $t: sum($v); $t > 1 && $t < 3)", 'actions.say("a", "b");'),
     ("@watch(*) Order()", 'actions.say("a", "b");'),
     ("Order(総額 > 1)", 'actions.say("a", "b");'),
@@ -102,11 +107,56 @@ def test_other_shapes_are_left_to_the_compiler(when, then):
     assert describe(f'rule "x"\nwhen\n    {when}\nthen\n    {then}\nend') is None
 
 
-@pytest.mark.parametrize("attribute", ["no-loop", "no-loop true", "agenda-group \"g\"", "enabled false",
-                                       "salience 1 salience 2",
-                                       "@Author(me)", "extends base"])
-def test_attributes_other_than_salience_are_left_to_the_compiler(attribute):
+@pytest.mark.parametrize("attribute", ["enabled false", "salience 1 salience 2", "no-loop no-loop",
+                                       "ruleflow-group \"f\"", "duration(100)", "timer(int: 1s)", "dialect \"mvel\"",
+                                       "agenda-group g", "@Author(me)", "extends base"])
+def test_other_attributes_are_left_to_the_compiler(attribute):
     assert describe(f'rule "x" {attribute}\nwhen\n    Order()\nthen\n    actions.say("a", "b");\nend') is None
+
+
+def test_the_usual_attributes_are_described():
+    spec = describe('rule "x"\nagenda-group "g1" activation-group "one"\nauto-focus true no-loop lock-on-active false\n'
+                    'date-effective "01-Jan-2020" date-expires "01-JAN-2099" salience -2\n'
+                    'when\n    Order()\nthen\n    actions.say("a", "b");\nend')
+    assert spec["salience"] == -2
+    assert spec["attributes"] == {"agenda-group": "g1", "activation-group": "one", "auto-focus": True, "no-loop": True,
+                                  "lock-on-active": False, "date-effective": "01-Jan-2020", "date-expires": "01-JAN-2099"}
+
+
+def test_bound_fields_in_matches_negations_and_from_accumulate_are_described():
+    spec = describe("""rule "x"
+    when
+        $a: Applicant(region in ("r1", "r2"), age not in (1, 2), email matches ".*@d[.]com", id not matches "x", $id: id)
+        $l: Loan(applicant == $id, amount > 5.0)
+        not Loan(applicant == $id, purpose == "p")
+        exists( Loan(applicant == $id) )
+        $n: Number(intValue >= 2) from accumulate(Loan(applicant == $id, $m: amount), count(1))
+        Number(doubleValue < 9.5) from accumulate(Loan(applicant == $id, $m: amount), min($m))
+    then
+        actions.say("a", "b " + $id + $n);
+    end""")
+    applicant, loan, no, some, count, least = spec["lhs"]
+    assert [c["op"] for c in applicant["pattern"]["constraints"]] == ["in", "not in", "matches", "not matches"]
+    assert applicant["pattern"]["constraints"][0]["literals"] == [{"s": "r1"}, {"s": "r2"}]
+    assert applicant["pattern"]["constraints"][1]["text"] == "age not in ( 1, 2 )"
+    assert applicant["pattern"]["binds"] == [{"var": "$id", "field": "id"}]
+    assert loan["pattern"]["constraints"][0] == {"field": "applicant", "op": "==", "ref": "$id", "text": "applicant == $id"}
+    assert no["not"]["type"] == "Loan" and some["exists"]["constraints"][0]["ref"] == "$id"
+    acc = count["fromAccumulate"]
+    assert (acc["function"], acc["arg"], acc["result"]["var"], acc["result"]["type"]) == ("count", {"n": "1"}, "$n", "Number")
+    assert acc["result"]["constraints"][0]["field"] == "intValue" and acc["source"]["binds"] == [{"var": "$m", "field": "amount"}]
+    assert least["fromAccumulate"]["arg"] == {"var": "$m"} and least["fromAccumulate"]["result"]["var"] is None
+
+
+def test_why_not_names_the_first_thing_the_reader_does_not_take():
+    text = 'rule "x"\nwhen\n    Order(total > 1e3)\nthen\nend'
+    src = SourceItems("a.drl", "p", text, [Item("rule", "x", 0, len(text), 1)])
+    assert plain_rules.why_not(src, src.items[0], []) .startswith("a number with a suffix")
+    assert plain_rules.why_not(src, src.items[0], None).startswith("a package header")
+    text = 'rule "y"\nwhen\n    Order()\nthen\nend'
+    ok = SourceItems("b.drl", "p", text, [Item("rule", "y", 0, len(text), 1)])
+    assert plain_rules.why_not(ok, ok.items[0], []) is None
+    assert plain_rules.reasons([src, ok]) == {"plain": 1, "a number with a suffix, exponent or radix (1L, 1e3, 0x1)": 1}
 
 
 def test_a_package_header_with_more_than_imports_and_globals_is_all_compiled():

@@ -56,7 +56,7 @@ public final class PlainRules {
     private PlainRules() {}
 
     /** The description format this class reads (the Python side writes the same number). */
-    public static final int FORMAT = 1;
+    public static final int FORMAT = 2;
 
     /** What {@link #build} made: one model per package, and the rules it refused ("index\treason"). */
     public static final class Built {
@@ -383,6 +383,9 @@ public final class PlainRules {
 
     static final Object[] NO_ARGS = new Object[0];
 
+    /** The right side of a beta index on a bound field: the variable's value itself. */
+    static final Function1<Object, Object> IDENTITY = v -> v;
+
     static Object invoke(Method method, Object target, Object[] values) throws Exception {
         try {
             return method.invoke(target, values);
@@ -422,6 +425,10 @@ public final class PlainRules {
                     items.add(pattern((Map<String, Object>) e.get("pattern"), null));
                 } else if (e.containsKey("accumulate")) {
                     accumulate((Map<String, Object>) e.get("accumulate"), items);
+                } else if (e.containsKey("not") || e.containsKey("exists")) {
+                    items.add(negation(e));
+                } else if (e.containsKey("fromAccumulate")) {
+                    fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), items);
                 } else {
                     throw new Reject("unknown condition " + e.keySet());
                 }
@@ -430,6 +437,7 @@ public final class PlainRules {
             RuleBuilder rule = PatternDSL.rule(pkg, (String) spec.get("name"));
             Object salience = spec.get("salience");
             if (salience != null) rule = rule.attribute(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
+            rule = attributes(rule, (Map<String, Object>) spec.get("attributes"));
             return rule.build(items.toArray(new RuleItemBuilder<?>[0]));
         }
 
@@ -471,8 +479,8 @@ public final class PlainRules {
             varTypes.put(name, type);
             if (binds != null) {
                 for (Object b : (List<Object>) p.get("binds")) binds.add(b);
-            } else if (!((List<Object>) p.get("binds")).isEmpty()) {
-                throw new Reject("field bindings outside an accumulate are left to the compiler");
+            } else {
+                for (Object b : (List<Object>) p.get("binds")) def = bindField(def, type, (Map<String, Object>) b);
             }
             return def;
         }
@@ -480,6 +488,9 @@ public final class PlainRules {
         @SuppressWarnings({"unchecked", "rawtypes"})
         PatternDSL.PatternDef<Object> constraint(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> c) {
             Property field = context.property(type, (String) c.get("field"));
+            String operator = (String) c.get("op");
+            if (operator.endsWith("in") || operator.endsWith("matches")) return operatorConstraint(def, type, field, c);
+            if (c.containsKey("ref") && !c.containsKey("refField")) return boundFieldConstraint(def, type, field, c);
             Index.ConstraintType ct = constraintType((String) c.get("op"));
             Kind kind = comparable(kindOf(field.type), ct);
             if (c.containsKey("literal")) {
@@ -550,6 +561,218 @@ public final class PlainRules {
                 }
                 items.add(on);
             }
+        }
+
+        // ---- shapes of format 2: bound fields, in/matches, not/exists, from accumulate, attributes
+
+        /** The field each variable bound to a field ({@code $id : id}) reads, and its declared type. */
+        final Map<String, Property> boundFields = new HashMap<String, Property>();
+
+        /** {@code $id : id}: a variable of the field's boxed type, as the executable model declares it. */
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        PatternDSL.PatternDef<Object> bindField(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> b) {
+            String name = (String) b.get("var");
+            if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
+            Property field = context.property(type, (String) b.get("field"));
+            Class<?> box = boxed(field.type);
+            Declaration<Object> decl = (Declaration<Object>) (Declaration) DSL.declarationOf(box, context.metadata(box), name);
+            vars.put(name, decl);
+            varTypes.put(name, box);
+            boundFields.put(name, field);
+            return def.bind(decl, (Function1) field, PatternDSL.reactOn(field.name));
+        }
+
+        /**
+         * {@code applicant == $id} with {@code $id} bound to a field: a beta constraint indexed as the
+         * executable model indexes it. Its generated code also reacts to a property of this pattern's
+         * class that has the bound field's name ({@code $id : id} makes {@code Loan( applicant == $id )}
+         * react to {@code Loan.id} too); the same mask is given here.
+         */
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        PatternDSL.PatternDef<Object> boundFieldConstraint(PatternDSL.PatternDef<Object> def, Class<?> type, Property field,
+                                                           Map<String, Object> c) {
+            String ref = (String) c.get("ref");
+            Property source = boundFields.get(ref);
+            Declaration<Object> bound = vars.get(ref);
+            if (bound == null || source == null) throw new Reject("variable " + ref + " is not a field bound before");
+            Index.ConstraintType ct = constraintType((String) c.get("op"));
+            Kind kind = comparable(kindOf(field.type), ct);
+            if (kindOf(source.type) != kind) {
+                throw new Reject("comparing " + field.type.getName() + " with " + source.type.getName());
+            }
+            Predicate2<Object, Object> test = (fact, value) -> compare(kind, ct, field.apply(fact), value);
+            String exprId = exprId(type, field, kind, ct, ref);
+            BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
+                                                       (Function1) IDENTITY, source.type);
+            List<String> react = new ArrayList<String>();
+            if (!source.name.equals(field.name) && isProperty(type, source.name)) react.add(source.name);
+            react.add(field.name);
+            return def.expr(exprId, bound, test, index, PatternDSL.reactOn(react.toArray(new String[0])));
+        }
+
+        boolean isProperty(Class<?> type, String name) {
+            try {
+                context.metadata(type).getPropertyIndex(name);
+                return true;
+            } catch (RuntimeException e) {
+                return false;
+            }
+        }
+
+        /**
+         * {@code region in ( "a", "b" )}, {@code not in}, {@code matches "re"}, {@code not matches}:
+         * the executable model's operator objects, with its constraint id, and no index (so never a
+         * hashed alpha node). {@code in} only on text and int fields with literals of their type: the
+         * operator compares with {@code equals}, so other pairings depend on the compiler's boxing.
+         */
+        @SuppressWarnings("unchecked")
+        PatternDSL.PatternDef<Object> operatorConstraint(PatternDSL.PatternDef<Object> def, Class<?> type, Property field,
+                                                         Map<String, Object> c) {
+            String op = (String) c.get("op");
+            boolean negated = op.startsWith("not ");
+            Kind kind = kindOf(field.type);
+            org.drools.model.functions.Operator<Object, Object> operator;
+            String operatorName;
+            List<Object> literals;
+            if (op.endsWith("matches")) {
+                if (kind != Kind.TEXT) throw new Reject("matches on a " + field.type.getName() + " field");
+                operator = (org.drools.model.functions.Operator<Object, Object>) (Object) org.drools.model.operators.MatchesOperator.INSTANCE;
+                operatorName = "MatchesOperator";
+                literals = Collections.singletonList(c.get("literal"));
+            } else if (op.endsWith("in")) {
+                if (kind != Kind.TEXT && kind != Kind.INTEGRAL) throw new Reject("in on a " + field.type.getName() + " field");
+                operator = (org.drools.model.functions.Operator<Object, Object>) (Object) org.drools.model.operators.InOperator.INSTANCE;
+                operatorName = "InOperator";
+                literals = (List<Object>) c.get("literals");
+            } else {
+                throw new Reject("operator " + op);
+            }
+            Object[] values = new Object[literals.size()];
+            StringBuilder java = new StringBuilder(negated ? "!" : "").append("D.eval(org.drools.model.operators.")
+                    .append(operatorName).append(".INSTANCE, _this.").append(field.getter.getName()).append("()");
+            for (int i = 0; i < values.length; i++) {
+                values[i] = literal(literals.get(i), field.type);
+                java.append(", ").append(javaText(literals.get(i), field.type));
+            }
+            java.append(")");
+            String exprId = "GENERATED_" + org.drools.util.StringUtils.md5Hash(String.valueOf(type) + java);
+            Predicate1<Object> test = negated
+                    ? fact -> !DSL.eval(operator, field.apply(fact), values)
+                    : fact -> DSL.eval(operator, field.apply(fact), values);
+            return def.expr(exprId, test, PatternDSL.reactOn(field.name));
+        }
+
+        /** {@code not Type( … )} / {@code exists Type( … )}: nothing bound inside is visible after it. */
+        @SuppressWarnings("unchecked")
+        RuleItemBuilder<?> negation(Map<String, Object> e) {
+            boolean not = e.containsKey("not");
+            java.util.Set<String> before = new java.util.HashSet<String>(vars.keySet());
+            PatternDSL.PatternDef<Object> def = pattern((Map<String, Object>) e.get(not ? "not" : "exists"), null);
+            vars.keySet().retainAll(before);
+            varTypes.keySet().retainAll(before);
+            return (RuleItemBuilder<?>) (not ? DSL.not(def) : DSL.exists(def));
+        }
+
+        /**
+         * {@code Number( intValue >= 2 ) from accumulate( Loan( applicant == $id, $m : amount ), count( 1 ) )}:
+         * the accumulate function and result type the executable model chooses
+         * ({@link PlainRulesInternals#accumulateFunction}), every binding of the source pattern made
+         * (used or not, as the generated code does), and the result pattern's comparisons of
+         * {@code intValue}/{@code longValue}/{@code doubleValue} with numbers.
+         */
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        void fromAccumulate(Map<String, Object> a, List<RuleItemBuilder<?>> items) {
+            Map<String, Object> resultSpec = (Map<String, Object>) a.get("result");
+            String resultTypeName = (String) resultSpec.get("type");
+            if (!resultTypeName.equals("Number") && !resultTypeName.equals("java.lang.Number")) {
+                throw new Reject("an accumulate result of type " + resultTypeName);
+            }
+            java.util.Set<String> before = new java.util.HashSet<String>(vars.keySet());
+            List<Object> binds = new ArrayList<Object>();
+            PatternDSL.PatternDef<Object> source = pattern((Map<String, Object>) a.get("source"), binds);
+            Class<?> type = varTypes.get(source.getFirstVariable().getName());
+            vars.keySet().retainAll(before);  // bound inside the accumulate: not visible after it
+            varTypes.keySet().retainAll(before);
+            String function = (String) a.get("function");
+            Map<String, Object> arg = (Map<String, Object>) a.get("arg");
+            String argVar = (String) arg.get("var");
+            Variable<Object> input = null;
+            Class<?> inputType = Integer.class;
+            for (Object b : binds) {
+                Map<String, Object> bind = (Map<String, Object>) b;
+                Property field = context.property(type, (String) bind.get("field"));
+                Class<?> box = boxed(field.type);
+                Variable<Object> v = (Variable<Object>) (Variable) DSL.declarationOf(box, (String) bind.get("var"));
+                source = source.bind(v, (Function1) field, PatternDSL.reactOn(field.name));
+                if (bind.get("var").equals(argVar)) {
+                    input = v;
+                    inputType = box;
+                }
+            }
+            org.drools.model.Argument<?> argument;
+            if (argVar != null) {
+                if (input == null) throw new Reject("an accumulate over " + argVar + ", not bound in its pattern");
+                argument = input;
+            } else if (function.equals("count")) {
+                argument = DSL.valueOf(literal(arg, int.class));  // count( 1 )
+            } else {
+                throw new Reject(function + " of a constant");
+            }
+            java.util.function.Supplier<?> fn = PlainRulesInternals.accumulateFunction(function, inputType);
+            if (fn == null) throw new Reject("accumulate function " + function + " over " + inputType.getName() + " is left to the compiler");
+            Class<?> resultType = PlainRulesInternals.accumulateResultType(function);
+            String resultVar = (String) resultSpec.get("var");
+            String resultName = resultVar != null ? resultVar : "$pattern_Number$" + (++unnamed) + "$";
+            if (vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
+            Declaration<Object> result = (Declaration<Object>) (Declaration) DSL.declarationOf(resultType, context.metadata(resultType), resultName);
+            items.add((RuleItemBuilder<?>) DSL.accumulate(source, DSL.accFunction(fn, argument).as(result)));
+            vars.put(resultName, result);
+            varTypes.put(resultName, resultType);
+            List<Object> tests = (List<Object>) resultSpec.get("constraints");
+            if (tests.isEmpty()) return;
+            PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
+            for (Object t : tests) {
+                Map<String, Object> c = (Map<String, Object>) t;
+                String field = (String) c.get("field");
+                Index.ConstraintType op = constraintType((String) c.get("op"));
+                Predicate1<Object> test;
+                if (field.equals("doubleValue")) {
+                    Object value = literal(c.get("literal"), double.class);
+                    test = r -> compare(Kind.DECIMAL, op, r == null ? null : ((Number) r).doubleValue(), value);
+                } else if (field.equals("intValue")) {
+                    Object value = literal(c.get("literal"), int.class);
+                    test = r -> compare(Kind.INTEGRAL, op, r == null ? null : ((Number) r).intValue(), value);
+                } else if (field.equals("longValue")) {
+                    Object value = literal(c.get("literal"), int.class);
+                    test = r -> compare(Kind.INTEGRAL, op, r == null ? null : ((Number) r).longValue(), value);
+                } else {
+                    throw new Reject("an accumulate result's " + field);
+                }
+                on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
+            }
+            items.add(on);
+        }
+
+        /** The attributes besides salience, as the executable model sets them. */
+        @SuppressWarnings({"unchecked", "rawtypes"})
+        RuleBuilder attributes(RuleBuilder rule, Map<String, Object> attributes) {
+            if (attributes == null) return rule;
+            for (Map.Entry<String, Object> a : attributes.entrySet()) {
+                Object v = a.getValue();
+                Rule.Attribute attribute;
+                switch (a.getKey()) {
+                    case "agenda-group": attribute = Rule.Attribute.AGENDA_GROUP; break;
+                    case "activation-group": attribute = Rule.Attribute.ACTIVATION_GROUP; break;
+                    case "auto-focus": attribute = Rule.Attribute.AUTO_FOCUS; break;
+                    case "no-loop": attribute = Rule.Attribute.NO_LOOP; break;
+                    case "lock-on-active": attribute = Rule.Attribute.LOCK_ON_ACTIVE; break;
+                    case "date-effective": attribute = Rule.Attribute.DATE_EFFECTIVE; v = PlainRulesInternals.ruleDate((String) v); break;
+                    case "date-expires": attribute = Rule.Attribute.DATE_EXPIRES; v = PlainRulesInternals.ruleDate((String) v); break;
+                    default: throw new Reject("attribute " + a.getKey());
+                }
+                rule = rule.attribute(attribute, v);
+            }
+            return rule;
         }
 
         @SuppressWarnings({"unchecked", "rawtypes"})
