@@ -397,6 +397,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_JVM_HEAP": ("jvm", "max_heap"),
     "PRINTEPS_COMPILE_TIMEOUT": ("engine", "compile_timeout_s"),
     "PRINTEPS_COMPILE_WORKERS": ("engine", "compile_workers"),
+    "PRINTEPS_EXPLAIN_PREBUILD": ("engine", "explain_prebuild"),
     "PRINTEPS_RULE_CACHE_DIR": ("engine", "compile_cache_dir"),
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),

@@ -16,6 +16,10 @@ from ci_skips import (  # noqa: F401
 
 # Keep the test runs' caches (compiled Java helpers) in one place across runs.
 os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printeps"))
+# Gateways the tests start as processes (printeps serve, the cluster) build no explain queries in
+# advance: each would spend seconds of a core per rule set it loads (tests/gw_testing.py does the
+# same for the gateways built in-process; the tests of the prebuild turn it on).
+os.environ.setdefault("PRINTEPS_EXPLAIN_PREBUILD", "0")
 
 
 CHROMIUM = "/usr/bin/chromium"

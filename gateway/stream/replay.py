@@ -23,7 +23,6 @@ its binding is reported as not replayable.
 
 from __future__ import annotations
 
-import logging
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -41,8 +40,6 @@ from gateway.store.store import RDF_EVENTS, SENSOR_MESSAGES, StoreUnavailable
 from gateway.stream.engine import StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.rules import BindingError, RuleBinding
-
-log = logging.getLogger(__name__)
 
 DEFAULT_LIMIT = 10_000  # recorded messages
 MAX_LIMIT = 100_000
@@ -222,7 +219,6 @@ class ReplayRules:
     the run: their types, and fires that only record what the then-parts ask (never a decision)."""
 
     def __init__(self, engine: Any, compiled: dict[str, tuple[Any, Any]]) -> None:
-        self._engine = engine
         self._compiled = compiled  # name -> (label, CompiledRuleSet)
         self._fires = {name: engine.replay_fire(c) for name, (_label, c) in compiled.items()}
 
