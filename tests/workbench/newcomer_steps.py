@@ -36,7 +36,7 @@ from pathlib import Path
 
 from playwright.sync_api import Locator, Page, expect
 
-from gateway.workflow.agile import Observation, OwnerClient, scenarios
+from agile_harness import Observation, OwnerClient, scenarios
 from table2_steps import Setup, verified
 
 WORDS_PER_MINUTE = 200  # reading on screen (adults read 200-260 wpm; the lower end for a newcomer)

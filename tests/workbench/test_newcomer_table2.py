@@ -20,7 +20,7 @@ import pytest
 from playwright.sync_api import Page
 
 from gateway.config import PROJECT_ROOT
-from gateway.workflow.agile import OwnerClient
+from agile_harness import OwnerClient
 from newcomer_steps import ONE_MINUTE, OVER_A_MINUTE, OVER_BOUND_S, make_all, markdown, steps_markdown
 from table2_steps import Setup, prepare, restore, snapshot
 from test_table2_browser import teahouse_behaviour
