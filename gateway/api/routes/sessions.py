@@ -53,6 +53,8 @@ class CreateBody(BaseModel):
     on_deploy: Literal["follow", "pin"] | None = Field(
         default=None, description="On a new deploy: move with the facts (follow) or stay (pin); default: sessions.on_deploy")
     facts: list[Fact] = Field(default_factory=list, max_length=100_000, description="Facts to insert at once")
+    durable: bool | None = Field(default=None, description="Outlive this process: journalled, rebuilt elsewhere after "
+                                 "a crash (default: sessions.durable)")
 
 
 class InsertBody(BaseModel):
@@ -109,18 +111,29 @@ async def _on_ruleset_threads(request: Request, fn: Callable[..., Any], *args: A
 
 
 async def _at_owner(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
-    """Runs ``fn`` here, or forwards the request to the process that owns the session."""
+    """Runs ``fn`` here, or forwards the request to the process that owns the session. An owner
+    found gone while forwarding (its record released) leaves a durable session to be rebuilt here:
+    the call is run again, once."""
     try:
         return await _on_ruleset_threads(request, fn, *args)
     except SessionElsewhere as elsewhere:
         try:
             return await forward(request, elsewhere)
         except SessionGone as gone:
+            if request.app.state.engine.session_manager.log is not None:
+                return await _here_after_owner_gone(request, fn, *args)
             raise ApiError(410, str(gone), session=elsewhere.session_id, owner=elsewhere.owner.get("process")) from None
         except OwnerUnreachable as exc:
             raise ApiError(503, str(exc), headers={"Retry-After": "1"}) from None
         except Misdirected as exc:
             raise ApiError(421, str(exc)) from None
+
+
+async def _here_after_owner_gone(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
+    try:
+        return await _on_ruleset_threads(request, fn, *args)
+    except SessionElsewhere as elsewhere:  # another process took it over first: it answers
+        return await forward(request, elsewhere)
 
 
 def _info(engine: Any, session: Any) -> dict[str, Any]:
@@ -173,7 +186,8 @@ async def create_session(name: RuleSetName, body: CreateBody, request: Request, 
                 owner = manager.directory.owner(name, body.id)
                 if owner is not None and owner.get("process") != manager.directory.process:
                     raise SessionElsewhere(name, body.id, owner)
-        session = manager.open(name, session_id=body.id, kind="rest", clock=body.clock, on_deploy=body.on_deploy)
+        session = manager.open(name, session_id=body.id, kind="rest", clock=body.clock, on_deploy=body.on_deploy,
+                               durable_=body.durable)
         return _created(engine, session, body, 201)
 
     return await _at_owner(request, work)

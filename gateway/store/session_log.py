@@ -1,0 +1,171 @@
+"""Durable sessions' logs and snapshots in the Information State (``session_log``,
+``session_snapshots``), written through the same local journal as decisions.
+
+Why the journal: an entry must be kept before its command is acknowledged, and the journal's
+append (a ``write()`` into the page cache) survives a killed process at no database round trip; the
+shipper then brings it to MongoDB, where any process of the cluster reads it. A rebuild first has
+this process's journal shipped and adopts the segments a dead process on the same data dir left
+(:meth:`Journal.catch_up`), so every acknowledged entry is read. On another host, entries the dead
+process had not yet shipped are on its disk: see docs/operations.md ("Durable sessions").
+
+Documents: ``{_id: "<ruleset>/<session>/<seq>", key: "<ruleset>/<session>", seq, kind, …}``:
+``kind`` is ``open`` (seq 0: version, clock, policy, kind of session), ``batch``, ``move`` or
+``disposed``; a snapshot is ``{_id: "<key>/s<seq>", key, seq, version, state, digest, at}``. Two
+snapshots are kept, with the entries since the older one; a disposed session's documents are
+deleted (off the caller's thread, once the journal has shipped them).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from typing import Any
+
+import pymongo
+from pymongo.errors import PyMongoError
+
+from gateway.engine.durable import History, Rebuilding, Snapshot
+
+log = logging.getLogger(__name__)
+
+LOG = "session_log"
+SNAPSHOTS = "session_snapshots"
+KEEP_SNAPSHOTS = 2
+
+
+def _key(ruleset: str, session_id: str, epoch: str) -> str:
+    return f"{ruleset}/{session_id}/{epoch}"
+
+
+class StoredSessionLog:
+    """The :class:`gateway.engine.durable.SessionLog` of one Information State."""
+
+    def __init__(self, store: Any, catch_up_s: float = 30.0) -> None:
+        self.store = store  # gateway.store.store.InformationState
+        self.catch_up_s = catch_up_s
+        self._indexed = False
+        self._deletions: queue.Queue[str | None] = queue.Queue(maxsize=10_000)
+        self._deleter = threading.Thread(target=self._delete_loop, name="session-log-cleanup", daemon=True)
+        self._deleter.start()
+        store.keeps_own_indexes(LOG)
+        store.keeps_own_indexes(SNAPSHOTS)
+
+    # ---- writing ------------------------------------------------------------------------------
+    def append(self, ruleset: str, session_id: str, epoch: str, entry: dict[str, Any]) -> None:
+        key = _key(ruleset, session_id, epoch)
+        doc = {"_id": f"{key}/{entry['seq']}", "key": key, "ruleset": ruleset, "session": session_id, "epoch": epoch,
+               **entry}
+        self.store.record_strict(LOG, [doc], stored_type="session_entry")
+
+    def save_snapshot(self, ruleset: str, session_id: str, epoch: str, snapshot: Snapshot) -> None:
+        key = _key(ruleset, session_id, epoch)
+        doc = {"_id": f"{key}/s{snapshot.seq}", "key": key, "seq": snapshot.seq, "version": snapshot.version,
+               "state": snapshot.state, "digest": snapshot.digest, "at": snapshot.at}
+        self.store.record_strict(SNAPSHOTS, [doc], stored_type="session_snapshot")
+        self._prune(key)
+
+    def _prune(self, key: str) -> None:
+        """Drop what the kept snapshots make useless: older snapshots and the entries before the
+        oldest kept one (those already in the database; a later prune catches the rest)."""
+        try:
+            kept = [d["seq"] for d in self.store.db[SNAPSHOTS].find({"key": key}, {"seq": 1})
+                    .sort("seq", pymongo.DESCENDING).limit(KEEP_SNAPSHOTS)]
+            if len(kept) < KEEP_SNAPSHOTS:
+                return
+            oldest = min(kept)
+            self.store.db[SNAPSHOTS].delete_many({"key": key, "seq": {"$lt": oldest}})
+            self.store.db[LOG].delete_many({"key": key, "seq": {"$lte": oldest, "$gt": 0}})
+        except PyMongoError as exc:  # pruning is an optimisation: the next snapshot tries again
+            log.info("session log %s not pruned: %s", key, exc)
+
+    def delete(self, ruleset: str, session_id: str, epoch: str) -> None:
+        """Forget a disposed session: a tombstone now (a rebuild racing the cleanup finds it
+        disposed), its documents deleted in the background once the journal shipped them."""
+        key = _key(ruleset, session_id, epoch)
+        try:
+            self.store.record_strict(LOG, [{"_id": f"{key}/disposed", "key": key, "ruleset": ruleset, "session": session_id,
+                                            "epoch": epoch, "seq": -1, "kind": "disposed"}],
+                                     stored_type="session_entry")
+        except Exception as exc:  # the documents are still deleted below
+            log.warning("session %s: no tombstone journalled: %s", key, exc)
+        try:
+            self._deletions.put_nowait(key)
+        except queue.Full:
+            log.warning("session %s: cleanup queue full; its log stays until the next dispose", key)
+
+    def _delete_loop(self) -> None:
+        while True:
+            key = self._deletions.get()
+            if key is None:
+                return
+            try:
+                self.store.flush(self.catch_up_s)
+                self.store.db[LOG].delete_many({"key": key})
+                self.store.db[SNAPSHOTS].delete_many({"key": key})
+            except Exception as exc:
+                log.warning("session %s: log not deleted (%s); retried later", key, exc)
+                threading.Timer(5.0, self._requeue, args=(key,)).start()
+
+    def _requeue(self, key: str) -> None:
+        try:
+            self._deletions.put_nowait(key)
+        except queue.Full:
+            pass
+
+    def close(self) -> None:
+        self._deletions.put(None)
+
+    # ---- reading ------------------------------------------------------------------------------
+    def _index(self) -> None:
+        if not self._indexed:
+            self.store.db[LOG].create_index([("key", pymongo.ASCENDING), ("seq", pymongo.ASCENDING)])
+            self.store.db[LOG].create_index([("ruleset", pymongo.ASCENDING), ("session", pymongo.ASCENDING),
+                                             ("kind", pymongo.ASCENDING)])
+            self.store.db[SNAPSHOTS].create_index([("key", pymongo.ASCENDING), ("seq", pymongo.DESCENDING)])
+            self._indexed = True
+
+    def _caught_up(self) -> None:
+        if not self.store.journal.catch_up(self.catch_up_s):
+            raise Rebuilding("the journal has not yet reached the Information State (it is away, or slow): "
+                             "the session is rebuilt once it has", retry_after_s=2)
+
+    def history(self, ruleset: str, session_id: str) -> History | None:
+        self._caught_up()
+        try:
+            self._index()
+            openings = list(self.store.db[LOG].find({"ruleset": ruleset, "session": session_id, "kind": "open"},
+                                                    {"key": 1, "at": 1}).sort("at", pymongo.DESCENDING).limit(1))
+            if not openings:
+                return None
+            key = openings[0]["key"]
+            docs = list(self.store.db[LOG].find({"key": key}).sort("seq", pymongo.ASCENDING))
+            snaps = list(self.store.db[SNAPSHOTS].find({"key": key}).sort("seq", pymongo.DESCENDING).limit(KEEP_SNAPSHOTS))
+        except PyMongoError as exc:
+            raise Rebuilding(f"the Information State is away ({type(exc).__name__}): retry", retry_after_s=2) from None
+        opening = next((d for d in docs if d.get("kind") == "open"), None)
+        if opening is None:
+            return None
+        disposed = any(d.get("kind") == "disposed" for d in docs)
+        snapshots = [Snapshot(int(d["seq"]), int(d["version"]), str(d.get("state", "")), str(d.get("digest", "")),
+                              float(d.get("at", 0.0))) for d in snaps]
+        entries = [_plain(d) for d in docs if d.get("kind") in ("batch", "move")]
+        return History(_plain(opening), snapshots, entries, disposed)
+
+    def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
+        spec: dict[str, Any] = {"kind": {"$in": ["open", "disposed"]}}
+        if ruleset:
+            spec["ruleset"] = ruleset
+        try:
+            docs = list(self.store.db[LOG].find(spec, {"commands": 0}))
+        except PyMongoError as exc:
+            log.warning("listing durable sessions failed: %s", exc)
+            return []
+        gone = {d["key"] for d in docs if d.get("kind") == "disposed"}
+        return [_plain(d) for d in docs if d.get("kind") == "open" and d["key"] not in gone]
+
+
+def _plain(doc: dict[str, Any]) -> dict[str, Any]:
+    out = dict(doc)
+    out.pop("_meta", None)
+    return out
