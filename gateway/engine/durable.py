@@ -118,9 +118,10 @@ class SessionLog(Protocol):
 
     def save_snapshot(self, ruleset: str, session_id: str, epoch: str, snapshot: Snapshot) -> None: ...
 
-    def history(self, ruleset: str, session_id: str) -> History | None:
+    def history(self, ruleset: str, session_id: str, gone: str | None = None) -> History | None:
         """Everything kept for the session (None: no durable session by that id), once every
-        journalled entry (a dead process's too) is readable; raises :class:`Rebuilding` if not yet."""
+        journalled entry (those of ``gone``, the dead owner process, too) is readable; raises
+        :class:`Rebuilding` if not yet."""
 
     def delete(self, ruleset: str, session_id: str, epoch: str) -> None: ...
 

@@ -204,10 +204,10 @@ class SessionManager:
         session.durability = state
         session.rebuilder = lambda r=session.ruleset, s=session.id: self._rebuild(r, s)[1]
 
-    def _rebuild(self, ruleset: str, session_id: str) -> tuple[durable.History, durable.Rebuilt]:
+    def _rebuild(self, ruleset: str, session_id: str, gone: str | None = None) -> tuple[durable.History, durable.Rebuilt]:
         """The session as its log says (see :func:`durable.rebuild`); SessionNotFound if none is kept."""
         assert self.log is not None
-        history = self.log.history(ruleset, session_id)
+        history = self.log.history(ruleset, session_id, gone)
         if history is None or history.disposed:
             raise SessionNotFound(f"no session '{session_id}' on rule set {ruleset} (disposed, idle longer than "
                                   f"{self.settings.idle_ttl_s:g} s, or never opened)")
@@ -218,6 +218,9 @@ class SessionManager:
         """A session not in this process: :class:`SessionElsewhere` while its owner lives; else
         rebuilt here from its log (claimed first: one process wins, the others forward to it), or
         :class:`SessionGone` (its owner died and it was not durable), or None (no such session)."""
+        with self._lock:
+            if (ruleset, session_id) in self._rebuilding:  # claimed by us, being rebuilt: its record is ours
+                raise durable.Rebuilding(f"session {session_id} of {ruleset} is being rebuilt here: retry")
         owner = self.directory.owner(ruleset, session_id) if self.directory is not None else None
         if owner is not None and self.directory is not None and owner.get("process") != self.directory.process:
             if self.log is None or self.directory.alive(owner):
@@ -240,7 +243,8 @@ class SessionManager:
         claimed = False
         try:
             assert self.log is not None
-            history = self.log.history(ruleset, session_id)
+            gone = str(dead.get("process")) if dead is not None else None
+            history = self.log.history(ruleset, session_id, gone)
             if history is None or history.disposed:
                 if dead is not None and self.directory is not None:
                     self.directory.release(ruleset, session_id, process=dead.get("process"))
@@ -248,11 +252,11 @@ class SessionManager:
                                       "which is gone, and it was not durable: its facts are lost. Open a new session.")
                 return None
             claimed = self._claim(ruleset, session_id, dead, history.opening)
-            _, rebuilt = self._rebuild(ruleset, session_id)  # read again: the claim fences late writers' entries
+            _, rebuilt = self._rebuild(ruleset, session_id, gone)  # read again, now that it is ours
             session = self._wrap(ruleset, session_id, history.opening, rebuilt)
             with self._lock:
                 self._sessions[key] = session
-            log.info("session %s of %s rebuilt here at command %d (version %d, %d facts)%s", session_id, ruleset,
+            log.warning("session %s of %s rebuilt here at command %d (version %d, %d facts)%s", session_id, ruleset,
                      rebuilt.seq, rebuilt.version, session.fact_count,
                      f", taken over from {dead.get('process')}" if dead else "")
         except SessionElsewhere:

@@ -406,9 +406,11 @@ class Journal:
             fh.write(line)
 
     # ---- segments left by processes that are gone ---------------------------------------------
-    def catch_up(self, timeout_s: float = 10.0) -> bool:
+    def catch_up(self, timeout_s: float = 10.0, gone_pids: tuple[int, ...] = ()) -> bool:
         """Adopt every segment a gone process left here now (not at the next periodic look) and
         wait until they, and everything appended so far, are in the database; False on timeout.
+        ``gone_pids``: processes of this host known to be dead, whose segments must be gone (shipped
+        by us or by another process adopting them at the same time) before this returns.
         Why: a durable session rebuilt after its process died must read every entry that process
         acknowledged (``gateway.engine.durable``)."""
         deadline = time.monotonic() + timeout_s
@@ -416,8 +418,13 @@ class Journal:
             found = self._adopt_orphans()
             if not self.flush(max(0.0, deadline - time.monotonic())):
                 return False
-            if not found:
+            left = [p for pid in gone_pids for p in self.folder.glob(f"{pid}-*.jsonl")]
+            if not found and not left:
                 return True
+            if time.monotonic() >= deadline:
+                return False
+            if not found:
+                time.sleep(0.05)  # another process is shipping them
 
     def _adopt_orphans(self) -> bool:
         """Take over unlocked segments (their writer died) and queue their entries for shipping;

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import socket
 import threading
 from typing import Any
 
@@ -45,7 +46,7 @@ class StoredSessionLog:
         self.store = store  # gateway.store.store.InformationState
         self.catch_up_s = catch_up_s
         self._indexed = False
-        self._deletions: queue.Queue[str | None] = queue.Queue(maxsize=10_000)
+        self._deletions: queue.Queue[tuple[str, str] | None] = queue.Queue(maxsize=10_000)
         self._deleter = threading.Thread(target=self._delete_loop, name="session-log-cleanup", daemon=True)
         self._deleter.start()
         store.keeps_own_indexes(LOG)
@@ -63,21 +64,18 @@ class StoredSessionLog:
         doc = {"_id": f"{key}/s{snapshot.seq}", "key": key, "seq": snapshot.seq, "version": snapshot.version,
                "state": snapshot.state, "digest": snapshot.digest, "at": snapshot.at}
         self.store.record_strict(SNAPSHOTS, [doc], stored_type="session_snapshot")
-        self._prune(key)
+        self._queue(("prune", key))
 
     def _prune(self, key: str) -> None:
-        """Drop what the kept snapshots make useless: older snapshots and the entries before the
-        oldest kept one (those already in the database; a later prune catches the rest)."""
-        try:
-            kept = [d["seq"] for d in self.store.db[SNAPSHOTS].find({"key": key}, {"seq": 1})
-                    .sort("seq", pymongo.DESCENDING).limit(KEEP_SNAPSHOTS)]
-            if len(kept) < KEEP_SNAPSHOTS:
-                return
-            oldest = min(kept)
-            self.store.db[SNAPSHOTS].delete_many({"key": key, "seq": {"$lt": oldest}})
-            self.store.db[LOG].delete_many({"key": key, "seq": {"$lte": oldest, "$gt": 0}})
-        except PyMongoError as exc:  # pruning is an optimisation: the next snapshot tries again
-            log.info("session log %s not pruned: %s", key, exc)
+        """Drop what the kept snapshots make useless: older snapshots and the entries up to the
+        oldest kept one. Run after the journal shipped them (else a late shipment brings them back)."""
+        kept = [d["seq"] for d in self.store.db[SNAPSHOTS].find({"key": key}, {"seq": 1})
+                .sort("seq", pymongo.DESCENDING).limit(KEEP_SNAPSHOTS)]
+        if len(kept) < KEEP_SNAPSHOTS:
+            return
+        oldest = min(kept)
+        self.store.db[SNAPSHOTS].delete_many({"key": key, "seq": {"$lt": oldest}})
+        self.store.db[LOG].delete_many({"key": key, "seq": {"$lte": oldest, "$gt": 0}})
 
     def delete(self, ruleset: str, session_id: str, epoch: str) -> None:
         """Forget a disposed session: a tombstone now (a rebuild racing the cleanup finds it
@@ -89,29 +87,35 @@ class StoredSessionLog:
                                      stored_type="session_entry")
         except Exception as exc:  # the documents are still deleted below
             log.warning("session %s: no tombstone journalled: %s", key, exc)
+        self._queue(("delete", key))
+
+    def _queue(self, job: tuple[str, str]) -> None:
         try:
-            self._deletions.put_nowait(key)
-        except queue.Full:
-            log.warning("session %s: cleanup queue full; its log stays until the next dispose", key)
+            self._deletions.put_nowait(job)
+        except queue.Full:  # bounded: a prune is redone at the next snapshot; a deleted log waits
+            log.warning("session log cleanup queue full: %s of %s left for later", job[0], job[1])
 
     def _delete_loop(self) -> None:
+        """Cleanup, off the callers' threads: once the journal shipped a session's documents,
+        prune them (after a snapshot) or delete them all (disposed)."""
         while True:
-            key = self._deletions.get()
-            if key is None:
+            job = self._deletions.get()
+            if job is None:
                 return
+            what, key = job
             try:
-                self.store.flush(self.catch_up_s)
-                self.store.db[LOG].delete_many({"key": key})
-                self.store.db[SNAPSHOTS].delete_many({"key": key})
+                if not self.store.flush(self.catch_up_s):
+                    raise TimeoutError("the journal has not reached the Information State")
+                if what == "prune":
+                    self._prune(key)
+                else:
+                    self.store.db[LOG].delete_many({"key": key})
+                    self.store.db[SNAPSHOTS].delete_many({"key": key})
             except Exception as exc:
-                log.warning("session %s: log not deleted (%s); retried later", key, exc)
-                threading.Timer(5.0, self._requeue, args=(key,)).start()
-
-    def _requeue(self, key: str) -> None:
-        try:
-            self._deletions.put_nowait(key)
-        except queue.Full:
-            pass
+                log.warning("session log %s: %s not done (%s); retried later", key, what, exc)
+                timer = threading.Timer(5.0, self._queue, args=(job,))
+                timer.daemon = True
+                timer.start()
 
     def close(self) -> None:
         self._deletions.put(None)
@@ -125,13 +129,17 @@ class StoredSessionLog:
             self.store.db[SNAPSHOTS].create_index([("key", pymongo.ASCENDING), ("seq", pymongo.DESCENDING)])
             self._indexed = True
 
-    def _caught_up(self) -> None:
-        if not self.store.journal.catch_up(self.catch_up_s):
+    def _caught_up(self, gone: str | None) -> None:
+        pids: tuple[int, ...] = ()
+        host, _, pid = (gone or "").rpartition(":")
+        if host == socket.gethostname() and pid.isdigit():
+            pids = (int(pid),)
+        if not self.store.journal.catch_up(self.catch_up_s, pids):
             raise Rebuilding("the journal has not yet reached the Information State (it is away, or slow): "
                              "the session is rebuilt once it has", retry_after_s=2)
 
-    def history(self, ruleset: str, session_id: str) -> History | None:
-        self._caught_up()
+    def history(self, ruleset: str, session_id: str, gone: str | None = None) -> History | None:
+        self._caught_up(gone)
         try:
             self._index()
             openings = list(self.store.db[LOG].find({"ruleset": ruleset, "session": session_id, "kind": "open"},

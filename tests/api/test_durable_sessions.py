@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import pytest
 from api_helpers import files
+from gw_testing import wait_for
 
 from gateway.store.session_log import LOG, SNAPSHOTS
 
@@ -83,22 +84,25 @@ def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, ap
     sid = rs.post(f"{PREFIX}/sessions", json={}).json()["id"]
     manager = api_gateway.engine.session_manager
     manager.find("durable", sid).durability.every = 1
-    for name in ("p", "q"):
+    for name in ("p", "q", "r"):
         assert _texts(rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": name, "age": 20}],
                                                                       "fire": True})) == [f"Welcome {name} (D1)"]
     before = _facts(rs, sid)
     api_gateway.store.flush()
     db = api_gateway.store.db
-    assert db[SNAPSHOTS].count_documents({"key": {"$regex": f"^durable/{sid}/"}}) == 2
-    db[SNAPSHOTS].update_many({"key": {"$regex": f"^durable/{sid}/"}}, {"$set": {"state": '{"ok":true,"facts":[{'}})
+    mine = {"key": {"$regex": f"^durable/{sid}/"}}
+    assert wait_for(lambda: sorted(d["seq"] for d in db[SNAPSHOTS].find(mine)) == [2, 3])  # two kept
+    db[SNAPSHOTS].update_one({**mine, "seq": 3}, {"$set": {"state": '{"ok":true,"facts":[{'}})
     _crash(api_gateway, sid)
     listed = rs.get(f"{PREFIX}/sessions/{sid}")
-    assert listed.status_code == 200, listed.text  # both snapshots corrupt: the log from its start still has it all
+    assert listed.status_code == 200, listed.text  # the newest is corrupt: the one before and the log since
+    assert listed.json()["commands_since_snapshot"] == 1
     assert _facts(rs, sid) == before
     assert rs.post(f"{PREFIX}/sessions/{sid}/fire").json()["actions"] == []
-    # with the log's start gone too, the rebuild refuses, naming the session and why: never half built
+    # both corrupt, and the log's start pruned: the rebuild refuses, naming the session and why; never half built
     api_gateway.store.flush()
-    db[LOG].delete_many({"key": {"$regex": f"^durable/{sid}/"}, "seq": 1})
+    db[SNAPSHOTS].update_many(mine, {"$set": {"state": "{"}})
+    db[LOG].delete_many({**mine, "seq": {"$in": [1, 2]}})
     _crash(api_gateway, sid)
     failed = rs.get(f"{PREFIX}/sessions/{sid}")
     assert failed.status_code == 422, failed.text
@@ -107,8 +111,6 @@ def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, ap
 
 
 def test_dispose_deletes_the_log_and_non_durable_sessions_keep_none(rs, api_gateway):
-    from gw_testing import wait_for
-
     sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "x", "age": 3}]}).json()["id"]
     api_gateway.store.flush()
     db = api_gateway.store.db

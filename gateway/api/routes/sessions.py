@@ -145,8 +145,10 @@ def _info(engine: Any, session: Any) -> dict[str, Any]:
 
 @router.get("/api/rulesets/{name}/sessions")
 def list_sessions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
-    """The rule set's open sessions: this process's (with their clock and fact count) and those
-    other gateway processes hold (their owner), plus the ksessions the rule set declares."""
+    """The rule set's open sessions: this process's (with their clock and fact count, and for a
+    durable one ``durable``, ``last_snapshot``, ``commands_since_snapshot``), those other gateway
+    processes hold (their owner), durable ones no process holds now (``stored``: rebuilt on their
+    next call), plus the ksessions the rule set declares."""
     engine.live_compiled(name)  # 404 for an unknown rule set
     manager = engine.session_manager
     here = [_info(engine, s) for s in manager.list(name) if s.kind != "stream"]
@@ -160,7 +162,19 @@ def list_sessions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
             alive = members.alive(members.get(record["process"])) if members is not None else None
             elsewhere.append({"id": record["session"], "ruleset": name, "process": record["process"], "kind": record.get("kind"),
                               "clock": record.get("clock"), "on_deploy": record.get("on_deploy"), "owner_alive": alive})
-    return JSON({"sessions": here + elsewhere, "declared": engine.declared_sessions(name).to_list()})
+    return JSON({"sessions": here + elsewhere + _stored_only(manager, name, here + elsewhere),
+                 "declared": engine.declared_sessions(name).to_list()})
+
+
+def _stored_only(manager: Any, name: str, listed: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Durable sessions no process holds now (after a restart, or their owner died): rebuilt on
+    their next call."""
+    if manager.log is None:
+        return []
+    known = {s["id"] for s in listed}
+    return [{"id": o["session"], "ruleset": name, "process": None, "kind": o.get("session_kind"), "clock": o.get("clock"),
+             "on_deploy": o.get("on_deploy"), "durable": True, "stored": True}
+            for o in manager.log.sessions(name) if o["session"] not in known]
 
 
 @router.post("/api/rulesets/{name}/sessions", status_code=201)
