@@ -130,6 +130,9 @@ class SessionLog(Protocol):
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         """The openings of the durable sessions kept (for a restart that looks them up)."""
 
+    def last_activity(self, opening: dict[str, Any]) -> float:
+        """When the session last changed (epoch seconds)."""
+
 
 def changes(commands: list[dict[str, Any]]) -> bool:
     """Whether a batch changes the session (only those are journalled)."""

@@ -188,6 +188,12 @@ class SessionManager:
 
     # ------------------------------------------------------------------ durable sessions
 
+    def attach_log(self, session_log: durable.SessionLog) -> None:
+        """Makes conversation sessions durable in ``session_log``; the reaper starts now, to clean
+        up stored sessions nobody used since their process went."""
+        self.log = session_log
+        self._ensure_reaper()
+
     def _make_durable(self, session: StatefulSession, record_facts: bool) -> None:
         """Journals the opening of ``session`` (before its create is answered) and keeps it durable."""
         assert self.log is not None
@@ -456,8 +462,28 @@ class SessionManager:
         while not self._stop.wait(interval):
             try:
                 self.reap()
+                self.reap_stored()
             except Exception:
                 log.exception("reaping idle sessions failed")
+
+    def reap_stored(self) -> list[str]:
+        """Deletes the logs of durable sessions no live process holds that have been idle longer
+        than ``sessions.idle_ttl_s`` (their process died or stopped, and nobody used them since)."""
+        ttl = self.settings.idle_ttl_s
+        if self.log is None or ttl <= 0:
+            return []
+        gone = []
+        for opening in self.log.sessions():
+            key = (str(opening["ruleset"]), str(opening["session"]))
+            if key in self._sessions or time.time() - self.log.last_activity(opening) <= ttl:
+                continue
+            owner = self.directory.owner(*key) if self.directory is not None else None
+            if owner is not None and self.directory is not None and self.directory.alive(owner):
+                continue  # its owner holds it (and reaps it itself)
+            log.info("stored session %s of %s idle past %.0f s: its log is deleted", key[1], key[0], ttl)
+            self.log.delete(key[0], key[1], str(opening["epoch"]))
+            gone.append(key[1])
+        return gone
 
     def reap(self) -> list[str]:
         """Disposes conversation sessions idle longer than ``sessions.idle_ttl_s``."""

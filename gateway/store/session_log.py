@@ -21,6 +21,7 @@ import logging
 import queue
 import socket
 import threading
+import time
 from typing import Any
 
 import pymongo
@@ -159,6 +160,15 @@ class StoredSessionLog:
                               float(d.get("at", 0.0))) for d in snaps]
         entries = [_plain(d) for d in docs if d.get("kind") in ("batch", "move")]
         return History(_plain(opening), snapshots, entries, disposed)
+
+    def last_activity(self, opening: dict[str, Any]) -> float:
+        """When the session's newest entry was written (epoch seconds; its opening's if none)."""
+        try:
+            newest = self.store.db[LOG].find_one({"key": opening["key"], "seq": {"$gte": 0}}, {"at": 1},
+                                                 sort=[("seq", pymongo.DESCENDING)])
+        except PyMongoError:
+            return time.time()  # unknown: not idle
+        return float((newest or opening).get("at") or time.time())
 
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         spec: dict[str, Any] = {"kind": {"$in": ["open", "disposed"]}}

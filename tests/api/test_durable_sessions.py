@@ -124,3 +124,20 @@ def test_dispose_deletes_the_log_and_non_durable_sessions_keep_none(rs, api_gate
     assert db[LOG].count_documents({"session": plain.json()["id"]}) == 0
     _crash(api_gateway, plain.json()["id"])
     assert rs.get(f"{PREFIX}/sessions/{plain.json()['id']}").status_code == 404
+
+
+def test_a_stored_session_nobody_used_past_the_idle_ttl_is_deleted(rs, api_gateway):
+    manager = api_gateway.engine.session_manager
+    sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "idle", "age": 3}]}).json()["id"]
+    _crash(api_gateway, sid)
+    listed = {s["id"]: s for s in rs.get(f"{PREFIX}/sessions").json()["sessions"]}
+    assert listed[sid]["stored"] is True and listed[sid]["process"] is None  # no process holds it now
+    assert manager.reap_stored() == []  # not idle yet
+    settings = manager.settings
+    manager.settings = settings.model_copy(update={"idle_ttl_s": 0.2})
+    try:
+        assert wait_for(lambda: sid in manager.reap_stored(), 10)
+    finally:
+        manager.settings = settings
+    assert wait_for(lambda: api_gateway.store.db[LOG].count_documents({"session": sid}) == 0)
+    assert rs.get(f"{PREFIX}/sessions/{sid}").status_code == 404
