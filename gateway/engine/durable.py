@@ -59,6 +59,10 @@ class RebuildFailed(EngineError):
         super().__init__(f"session {session_id} of {ruleset} cannot be rebuilt: " + "; ".join(reasons))
         self.ruleset, self.session_id, self.reasons, self.status = ruleset, session_id, reasons, status
 
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "ruleset": self.ruleset, "session": self.session_id,
+                "reasons": self.reasons}
+
 
 class Rebuilding(EngineError):
     """The session is being rebuilt (here, or the Information State must first catch up): retry."""
@@ -68,6 +72,9 @@ class Rebuilding(EngineError):
     def __init__(self, message: str, retry_after_s: int = 1) -> None:
         super().__init__(message)
         self.retry_after_s = retry_after_s
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"error": str(self), "kind": self.kind, "retry_after_s": self.retry_after_s}
 
 
 class JournalRefused(EngineError):

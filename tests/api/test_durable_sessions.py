@@ -107,6 +107,7 @@ def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, ap
     failed = rs.get(f"{PREFIX}/sessions/{sid}")
     assert failed.status_code == 422, failed.text
     assert sid in failed.json()["error"] and "corrupt" in failed.json()["error"]
+    assert failed.json()["kind"] == "rebuild" and failed.json()["session"] == sid and len(failed.json()["reasons"]) == 2
     assert manager.find("durable", sid) is None
 
 
