@@ -131,6 +131,7 @@ def test_a_stored_session_nobody_used_past_the_idle_ttl_is_deleted(rs, api_gatew
     manager = api_gateway.engine.session_manager
     sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "idle", "age": 3}]}).json()["id"]
     _crash(api_gateway, sid)
+    api_gateway.store.flush()  # the list reads the Information State: what the journal has shipped
     listed = {s["id"]: s for s in rs.get(f"{PREFIX}/sessions").json()["sessions"]}
     assert listed[sid]["stored"] is True and listed[sid]["process"] is None  # no process holds it now
     assert manager.reap_stored() == []  # not idle yet

@@ -26,7 +26,7 @@ from gateway.api.jsonio import JSON, JsonRoute, run_blocking
 from gateway.api.routes.rulesets import NAME_PATTERN, check_facts
 from gateway.engine import EngineError, FireResult
 from gateway.engine.errors import Overloaded
-from gateway.engine.sessions import SessionElsewhere, SessionGone
+from gateway.engine.sessions import SessionElsewhere, SessionGone, SessionNotFound
 
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name")]
 SessionId = Annotated[str, PathParam(min_length=1, max_length=128, description="Session id (a declared ksession's name, or "
@@ -121,7 +121,10 @@ async def _at_owner(request: Request, fn: Callable[..., Any], *args: Any) -> Any
             return await forward(request, elsewhere)
         except SessionGone as gone:
             if request.app.state.engine.session_manager.log is not None:
-                return await _here_after_owner_gone(request, fn, *args)
+                try:
+                    return await _here_after_owner_gone(request, fn, *args)
+                except SessionNotFound:  # it was not durable: lost with its process
+                    pass
             raise ApiError(410, str(gone), session=elsewhere.session_id, owner=elsewhere.owner.get("process")) from None
         except OwnerUnreachable as exc:
             raise ApiError(503, str(exc), headers={"Retry-After": "1"}) from None
