@@ -20,6 +20,9 @@ what happens to it on a deploy, after idling, or at a limit must be the same who
   (:class:`gateway.store.session_records.SessionDirectory`), creating one claims it in the
   Information State, and asking for a session another process owns raises
   :class:`SessionElsewhere` — the REST layer forwards the call to that owner.
+- **Durable** (``sessions.durable``, with a ``log``: :mod:`gateway.engine.durable`): a conversation
+  session's commands are journalled; when its owner is gone (or after a restart) the next call
+  claims it (a compare-and-set on its record) and rebuilds it here from its snapshots and log.
 """
 
 from __future__ import annotations

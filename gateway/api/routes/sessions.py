@@ -5,8 +5,9 @@ A session keeps its facts between calls; facts are addressed by their fact handl
 external form, ``0:id:…``, returned by an insert); the session's clock is a pseudo clock moved by
 ``advance`` (or by an insert's ``timestamp``) unless it was opened with ``"clock": "realtime"``;
 every ``fire`` is a recorded decision (origin ``rest``). A session lives in the gateway process
-that created it: a call that reaches another process is forwarded to it, and answers 410 if that
-process is gone (see :mod:`gateway.api.forwarding`).
+that holds it: a call that reaches another process is forwarded to it (see
+:mod:`gateway.api.forwarding`); if that process is gone, a durable session (the default) is
+rebuilt where the call landed, one that is not durable answers 410.
 """
 
 from __future__ import annotations
