@@ -14,7 +14,8 @@ takes, and how many journal bytes a command writes.
 
     .venv/bin/python bench/durable_sessions.py [--calls 2000] [--facts 10000] [--since 1000] [--write-docs]
 
-``--calls 50 --facts 500 --since 50`` checks that it works in a minute.
+``--calls 50 --facts 500 --since 50`` checks that it works in a minute; ``--ack-after database``
+measures the several-hosts setting (a command answered once it is in the database).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Durable sessions"
 
 
-def serve(home: Path, port: int, snapshot_every: int) -> subprocess.Popen:
+def serve(home: Path, port: int, snapshot_every: int, ack_after: str = "journal") -> subprocess.Popen:
     """``printeps serve`` on ``home`` (its data dir kept across restarts), once it answers."""
     rules = home / "rules" / "visits"
     if not rules.exists():
@@ -52,7 +53,8 @@ def serve(home: Path, port: int, snapshot_every: int) -> subprocess.Popen:
     config.write_text(yaml.safe_dump({
         "data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "rules")}, "ros": {"enabled": False},
         "streams": {"queries_dir": None},
-        "sessions": {"max_facts": 10_000_000, "snapshot_every": snapshot_every, "snapshot_interval_s": 0}}))
+        "sessions": {"max_facts": 10_000_000, "snapshot_every": snapshot_every, "snapshot_interval_s": 0,
+                     "ack_after": ack_after}}))
     proc = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config", str(config)],
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 300
@@ -178,12 +180,14 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=2000)
     parser.add_argument("--facts", type=int, default=10_000)
     parser.add_argument("--since", type=int, default=1000)
+    parser.add_argument("--ack-after", choices=("journal", "database"), default="journal",
+                        help="sessions.ack_after of the cost-per-call server (database: the several-hosts guarantee)")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     note = machine_note()
     with tempfile.TemporaryDirectory() as tmp:
         port = free_port()
-        proc = serve(Path(tmp) / "cost", port, snapshot_every=1000)
+        proc = serve(Path(tmp) / "cost", port, snapshot_every=1000, ack_after=args.ack_after)
         try:
             with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as c:
                 cost = cost_per_call(c, args.calls)
@@ -192,7 +196,7 @@ def main() -> None:
             proc.wait(timeout=60)
         take = takeover(Path(tmp) / "takeover", args.facts, args.since)
     size = journal_bytes()
-    text = report(note, cost, take, size)
+    text = report(f"{note}; sessions.ack_after: {args.ack_after}", cost, take, size)
     print(text)
     print(json.dumps({"cost": cost, "takeover": take, "journal": size}, indent=1))
     if args.write_docs:

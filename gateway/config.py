@@ -116,6 +116,12 @@ class SessionSettings(BaseModel):
                                        "(0: by count only).")
     rebuild_timeout_s: float = Field(default=30.0, gt=0, description="How long a rebuild waits for the journal "
                                      "(a dead process's included) to reach the Information State.")
+    ack_after: Literal["journal", "database"] = Field(
+        default="journal",
+        description="When a durable session's command is answered: once in the local journal (survives a killed "
+        "process; a takeover on another host may miss the last unshipped commands), or once in the Information "
+        "State (several hosts without a shared data dir: nothing acknowledged is missed, at a database round trip "
+        "per command). A command not in the database within rebuild_timeout_s is answered 503 (kept; do not resend).")
     member_heartbeat_s: float = Field(default=5.0, description="How often a process renews its member record.")
 
 

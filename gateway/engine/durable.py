@@ -83,6 +83,14 @@ class JournalRefused(EngineError):
     kind = "journal"
 
 
+class NotYetShared(EngineError):
+    """(``sessions.ack_after: database``) The command is journalled here but did not reach the
+    Information State in time: it is kept and will be shipped; the caller must not resend it."""
+
+    kind = "journal"
+    retry_after_s = 1
+
+
 @dataclass
 class Snapshot:
     """One stored snapshot: the state after entry ``seq``, on ``version``."""
@@ -134,6 +142,9 @@ class SessionLog(Protocol):
 
     def close(self) -> None: ...
 
+    def wait_shipped(self, timeout_s: float) -> bool:
+        """Wait until everything journalled so far is in the shared database; False on timeout."""
+
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         """The openings of the durable sessions kept (for a restart that looks them up)."""
 
@@ -182,8 +193,10 @@ class Durability:
     """A durable session's place in its log (used under the session's lock)."""
 
     def __init__(self, log: SessionLog, ruleset: str, session_id: str, epoch: str, *, every: int, interval_s: float,
-                 seq: int = 0, snapshot_seq: int = 0, last_snapshot: float | None = None) -> None:
+                 seq: int = 0, snapshot_seq: int = 0, last_snapshot: float | None = None,
+                 shared_within_s: float | None = None) -> None:
         self.log = log
+        self.shared_within_s = shared_within_s  # ack_after: database (None: once journalled)
         self.ruleset, self.session_id, self.epoch = ruleset, session_id, epoch
         self.every, self.interval_s = every, interval_s
         self.seq = seq
@@ -205,6 +218,10 @@ class Durability:
         entry = batch_entry(self.seq + 1, commands, results, clock_ms, current)
         self.log.append(self.ruleset, self.session_id, self.epoch, entry)
         self.seq += 1
+        if self.shared_within_s is not None and not self.log.wait_shipped(self.shared_within_s):
+            raise NotYetShared(f"session {self.session_id} of {self.ruleset}: command {self.seq} is journalled here but "
+                               f"not yet in the Information State (sessions.ack_after: database); it is kept and will be "
+                               "shipped: do not resend it")
 
     def record_move(self, old: int, new: int, unchanged: list[str]) -> None:
         self.log.append(self.ruleset, self.session_id, self.epoch,
@@ -350,5 +367,5 @@ def _replay_move(java: Any, entry: dict[str, Any], builder: Builder) -> Any:
     return new
 
 
-__all__ = ["CHANGE_OPS", "Builder", "Durability", "History", "JournalRefused", "RebuildFailed", "Rebuilding", "Rebuilt",
+__all__ = ["CHANGE_OPS", "Builder", "Durability", "History", "JournalRefused", "NotYetShared", "RebuildFailed", "Rebuilding", "Rebuilt",
            "SessionLog", "Snapshot", "batch_entry", "changes", "quiescent", "rebuild"]

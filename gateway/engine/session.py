@@ -296,6 +296,8 @@ class StatefulSession:
         java = self._java
         try:
             state.record(commands, answer["results"], answer.get("time"), lambda text: _text(java.currentHandle(text)))
+        except durable.NotYetShared:
+            raise  # journalled and applied: not undone
         except Exception as exc:
             self._roll_back(f"not journalled: {exc}")
             raise durable.JournalRefused(f"session {self.id} of {self.ruleset}: the command was not kept ({exc}) and "

@@ -202,7 +202,7 @@ class SessionManager:
         assert self.log is not None
         epoch = f"{os.getpid():x}-{time.time_ns():x}-{next(_ids)}"
         state = durable.Durability(self.log, session.ruleset, session.id, epoch, every=self.settings.snapshot_every,
-                                   interval_s=self.settings.snapshot_interval_s)
+                                   interval_s=self.settings.snapshot_interval_s, shared_within_s=self._shared_within())
         try:
             state.open({"version": session.version, "clock": session.clock, "on_deploy": session.on_deploy,
                         "session_kind": session.kind, "record_facts": record_facts})
@@ -212,6 +212,10 @@ class SessionManager:
                                          f"({exc}): not opened; retry later") from None
         session.durability = state
         session.rebuilder = lambda r=session.ruleset, s=session.id: self._rebuild(r, s)[1]
+
+    def _shared_within(self) -> float | None:
+        """``sessions.ack_after: database``: how long a command may wait to reach the database."""
+        return self.settings.rebuild_timeout_s if self.settings.ack_after == "database" else None
 
     def _rebuild(self, ruleset: str, session_id: str, gone: str | None = None) -> tuple[durable.History, durable.Rebuilt]:
         """The session as its log says (see :func:`durable.rebuild`); SessionNotFound if none is kept."""
@@ -310,7 +314,8 @@ class SessionManager:
         session.durability = durable.Durability(self.log, ruleset, session_id, str(opening["epoch"]),
                                                 every=self.settings.snapshot_every,
                                                 interval_s=self.settings.snapshot_interval_s, seq=rebuilt.seq,
-                                                snapshot_seq=rebuilt.snapshot_seq, last_snapshot=rebuilt.last_snapshot)
+                                                snapshot_seq=rebuilt.snapshot_seq, last_snapshot=rebuilt.last_snapshot,
+                                                shared_within_s=self._shared_within())
         session.rebuilder = lambda: self._rebuild(ruleset, session_id)[1]
         return session
 

@@ -121,6 +121,9 @@ class StoredSessionLog:
     def close(self) -> None:
         self._deletions.put(None)
 
+    def wait_shipped(self, timeout_s: float) -> bool:
+        return bool(self.store.flush(timeout_s))
+
     # ---- reading ------------------------------------------------------------------------------
     def _index(self) -> None:
         if not self._indexed:

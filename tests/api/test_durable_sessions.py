@@ -143,3 +143,29 @@ def test_a_stored_session_nobody_used_past_the_idle_ttl_is_deleted(rs, api_gatew
         manager.settings = settings
     assert wait_for(lambda: api_gateway.store.db[LOG].count_documents({"session": sid}) == 0)
     assert rs.get(f"{PREFIX}/sessions/{sid}").status_code == 404
+
+
+def test_ack_after_database_answers_once_the_command_is_in_the_information_state(rs, api_gateway, monkeypatch):
+    import time
+
+    journal = api_gateway.store.journal
+    ship = journal.ship
+
+    def slow_ship(database, collection, lines):  # the real database, reached 0.3 s later
+        time.sleep(0.3)
+        ship(database, collection, lines)
+
+    monkeypatch.setattr(journal, "ship", slow_ship)
+    manager = api_gateway.engine.session_manager
+    settings = manager.settings
+    manager.settings = settings.model_copy(update={"ack_after": "database"})
+    try:
+        sid = rs.post(f"{PREFIX}/sessions", json={}).json()["id"]
+    finally:
+        manager.settings = settings
+    db = api_gateway.store.db
+    for k in range(5):
+        assert rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": f"s{k}", "age": 1}]}
+                       ).status_code == 201
+        assert db[LOG].count_documents({"session": sid, "kind": "batch"}) == k + 1  # there as soon as it is answered
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200

@@ -20,6 +20,8 @@ class MemoryLog:
         self.entries: list[dict[str, Any]] = []
         self.snapshots: list[Snapshot] = []
         self.refuse = False
+        self.shared = True
+        self.waits: list[float] = []
 
     def append(self, ruleset: str, session_id: str, epoch: str, entry: dict[str, Any]) -> None:
         if self.refuse:
@@ -28,6 +30,10 @@ class MemoryLog:
 
     def save_snapshot(self, ruleset: str, session_id: str, epoch: str, snapshot: Snapshot) -> None:
         self.snapshots.insert(0, snapshot)
+
+    def wait_shipped(self, timeout_s: float) -> bool:
+        self.waits.append(timeout_s)
+        return self.shared
 
 
 class Java:
@@ -187,3 +193,17 @@ def test_rebuild_fails_whole_naming_the_session_and_every_reason():
     with pytest.raises(RebuildFailed) as failed:
         durable.rebuild(corrupt, Builder(), 10, "rs", "s1")
     assert failed.value.status == 422 and "corrupt" in str(failed.value)
+
+
+def test_ack_after_database_waits_for_the_entry_to_be_shared_and_says_when_it_is_not():
+    log = MemoryLog()
+    local = Durability(log, "rs", "s1", "e1", every=10, interval_s=0)
+    local.record([{"op": "fire"}], [], 0, lambda t: t)
+    assert log.waits == []  # ack_after: journal: no wait
+    shared = Durability(log, "rs", "s2", "e2", every=10, interval_s=0, shared_within_s=3.0)
+    shared.record([{"op": "fire"}], [], 0, lambda t: t)
+    assert log.waits == [3.0]
+    log.shared = False
+    with pytest.raises(durable.NotYetShared, match="do not resend"):
+        shared.record([{"op": "fire"}], [], 0, lambda t: t)
+    assert shared.seq == 2 and len(log.entries) == 3  # journalled (kept), only not yet shared

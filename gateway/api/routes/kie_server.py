@@ -35,7 +35,7 @@ from gateway.api.auth import Principal, check_kie, kie_caller, require_kie
 from gateway.api.deps import correlation_id
 from gateway.api.errors import ApiError, command_failed_status, retry_after
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
-from gateway.engine.durable import JournalRefused, RebuildFailed, Rebuilding
+from gateway.engine.durable import JournalRefused, NotYetShared, RebuildFailed, Rebuilding
 from gateway.api.jsonio import JSON, BadBody, parse_json, run_blocking
 from gateway.api.lean_route import LeanRoute
 from gateway.api.kie.batch import (
@@ -373,7 +373,7 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         return failure(command_failed_status(exc), f"Error calling container {container_id}: {_failed(batch, exc)}")
     except SessionGone as gone:
         return failure(410, f"Error calling container {container_id}: {gone}")
-    except Rebuilding as exc:
+    except (Rebuilding, NotYetShared) as exc:
         return failure(503, f"Error calling container {container_id}: {exc}", retry_after(exc))
     except (RebuildFailed, JournalRefused) as exc:
         return failure(exc.status if isinstance(exc, RebuildFailed) else 503,
