@@ -30,6 +30,8 @@ def benches(quick: bool) -> dict[str, list[str]]:
         "ros": ["bench/ros_latency.py", "60" if quick else "200", "--write-docs"],
         "stream": ["bench/stream_bench.py", *(["--quick", "--rdflib-timeout", "0"] if quick else []), "--write-docs"],
         "sessions": ["bench/session_bench.py", "--seconds", seconds, "--write-docs"],
+        "durable": ["bench/durable_sessions.py", *(["--calls", "300", "--facts", "2000", "--since", "200"] if quick else []),
+                    "--write-docs"],
         "dialogue": ["bench/dialogue_bench.py", *(["--orders", "20", "--open-orders", "5", "--turns", "50"]
                                                   if quick else []), "--write-docs"],
         "agile": ["bench/agile_loop.py", "--repeat", "1" if quick else "3", "--write", "docs/agile-loop.md"],

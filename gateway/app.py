@@ -199,6 +199,10 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
         engine.session_manager.directory = SessionDirectory(store.db, name, members)
         closers.append(("the session records", engine.session_manager.directory.release_all))
+        from gateway.store.session_log import StoredSessionLog  # durable sessions (their log; see docs/operations.md)
+
+        engine.session_manager.attach_log(StoredSessionLog(store, catch_up_s=settings.sessions.rebuild_timeout_s))
+        closers.append(("the session log", engine.session_manager.log.close))
     closers.append(("the rules engine's sessions", engine.session_manager.close_all))
     closers.append(("explaining", engine.close_explain))
     jobs = JobService(engine, JobRecords(store.db if store is not None else None), name,

@@ -107,6 +107,24 @@ class SessionSettings(BaseModel):
         "(several hosts: this host's address; default: the local listening address, or a worker's private "
         "loopback port).")
     forward_timeout_s: float = Field(default=30.0, description="A call forwarded to the session's owner process.")
+    durable: bool = Field(
+        default=True,
+        description="Conversation sessions (REST, KIE lookup) outlive their process: every command that changes "
+        "one is journalled before it is answered, with periodic snapshots, and another process (or this one "
+        "after a restart) rebuilds it on its next call. false: a session dies with its process (410). Needs "
+        "the Information State. Per session: the REST create body's 'durable'.")
+    snapshot_every: int = Field(default=1000, ge=1, description="A durable session is snapshotted after this many "
+                                "journalled commands (at the next point where nothing is left to fire).")
+    snapshot_interval_s: float = Field(default=60.0, ge=0, description="... or when its last snapshot is this old "
+                                       "(0: by count only).")
+    rebuild_timeout_s: float = Field(default=30.0, gt=0, description="How long a rebuild waits for the journal "
+                                     "(a dead process's included) to reach the Information State.")
+    ack_after: Literal["journal", "database"] = Field(
+        default="journal",
+        description="When a durable session's command is answered: once in the local journal (survives a killed "
+        "process; a takeover on another host may miss the last unshipped commands), or once in the Information "
+        "State (several hosts without a shared data dir: nothing acknowledged is missed, at a database round trip "
+        "per command). A command not in the database within rebuild_timeout_s is answered 503 (kept; do not resend).")
     member_heartbeat_s: float = Field(default=5.0, description="How often a process renews its member record.")
 
 

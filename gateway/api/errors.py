@@ -27,6 +27,7 @@ from gateway.stream.rules import BindingError
 from gateway.base.versions import CatalogUnavailable
 from gateway.engine import EngineError, VersionConflict
 from gateway.engine.errors import FireTimeout, Overloaded
+from gateway.engine.durable import RebuildFailed
 from gateway.engine.session import CommandFailed
 from gateway.engine.sessions import SessionNotFound, SessionRefused
 
@@ -76,7 +77,7 @@ def engine_error_response(exc: EngineError) -> tuple[int, dict[str, Any]]:
 KIND_STATUS = {"conflict": 409, "not_found": 404, "resources": 503, "compile": 422, "policy": 422, "invalid": 422,
                "facts": 422,
                "runaway": 422, "runtime": 422, "scenarios": 422, "cancelled": 409, "lost": 503, "limit": 429,
-               "gone": 410, "timeout": 503, "overloaded": 503}
+               "gone": 410, "timeout": 503, "overloaded": 503, "rebuilding": 503, "journal": 503, "rebuild": 409}
 
 
 def engine_error_status(kind: str) -> int:
@@ -94,6 +95,8 @@ def _status_of(exc: EngineError) -> int:
         return exc.status  # 429 queue full, 503 would wait too long
     if isinstance(exc, CommandFailed):
         return command_failed_status(exc)
+    if isinstance(exc, RebuildFailed):
+        return exc.status
     return engine_error_status(getattr(exc, "kind", ""))
 
 

@@ -7,8 +7,9 @@ process looks the owner up (``gateway.store.session_records``), finds its member
 — method, path, query, body and the caller's credentials — then hands the owner's answer back
 unchanged. A forwarded request carries ``X-Printeps-Forwarded-By`` and is never forwarded again
 (a misdirected one is answered 421). If the owner is gone (no fresh member record, or its pid is
-dead on this host), its sessions are gone with their facts: the record is released and the
-answer is 410, saying so; an owner that is alive but does not answer gets 503 (retry).
+dead on this host), the record is released and :class:`SessionGone` raised: the caller then
+rebuilds a durable session here (``gateway.engine.sessions``), or answers 410 for one that was not
+durable (its facts are lost); an owner that is alive but does not answer gets 503 (retry).
 """
 
 from __future__ import annotations

@@ -579,6 +579,21 @@ class Engine:
                                on_close=on_close, session_id=session_id, clock=clock, on_deploy=on_deploy, kind=kind,
                                record_facts=record_facts)
 
+    def wrap_session(self, java: Any, name: str, version: int, session_id: str, *, clock: str, on_deploy: str, kind: str,
+                     record_facts: bool, on_close: Any) -> StatefulSession:
+        """A :class:`StatefulSession` around a Java session built elsewhere (a durable session's rebuild)."""
+        return StatefulSession(java, name, version, self.settings.engine.fire_limit, self.settings.engine.max_facts,
+                               on_close=on_close, session_id=session_id, clock=clock, on_deploy=on_deploy, kind=kind,
+                               record_facts=record_facts)
+
+    def compiled_version(self, name: str, version: int) -> CompiledRuleSet:
+        """Version ``version`` of ``name`` compiled (the live one as it is; another from the catalog,
+        through the unit cache): a durable session is rebuilt on the version its log names."""
+        info, compiled = self._live_entry(name)
+        if info.version == int(version):
+            return compiled
+        return self._compile(self.version(name, int(version)).files, name)
+
     def new_java_session(self, compiled: CompiledRuleSet, clock: str, kind: str, record_facts: bool) -> Any:
         """A Java ``Session`` of ``compiled``: conversations keep a fact handle registry; each fire
         of it is halted after ``engine.fire_timeout_s``."""

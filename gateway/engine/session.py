@@ -11,6 +11,7 @@ the same rules, or the wall clock for a session opened with ``clock="realtime"``
 from __future__ import annotations
 
 import itertools
+import logging
 import json
 import threading
 import time
@@ -20,11 +21,17 @@ from typing import Any, Callable
 import jpype.nio
 import orjson
 
+from gateway.engine import durable
 from gateway.engine.errors import EngineError, FactError
 from gateway.engine.feed import EventFeed
 from gateway.engine.results import BUFFER_BYTES, NO_TIMESTAMP, FireResult, decode_result, encode_facts, encode_facts_bytes
 
 _ids = itertools.count(1)
+log = logging.getLogger(__name__)
+
+
+def _text(value: Any) -> str | None:
+    return None if value is None else str(value)
 
 
 def _check(answer: Any) -> dict[str, Any]:
@@ -47,6 +54,7 @@ class CommandFailed(EngineError):
         self.index, self.op, self.kind, self.field, self.detail = index, op, kind, field, message
         self.applied = applied
         self.results = results or []
+        self.rolled_back = False  # a durable session was rebuilt without the batch (see StatefulSession._roll_back)
 
     def to_dict(self) -> dict[str, Any]:
         return {"error": str(self), "kind": "command", "index": self.index, "op": self.op, "problem": self.kind,
@@ -118,6 +126,10 @@ class StatefulSession:
         self.closed = False
         self._on_close = on_close
         self._feeds: list[Any] = []  # EventFeeds into this session, stopped when it closes
+        # A durable session's place in its log (see gateway.engine.durable), and how to rebuild it
+        # from that log (to roll back a batch that failed half-way); None: it dies with its process.
+        self.durability: durable.Durability | None = None
+        self.rebuilder: Callable[[], durable.Rebuilt] | None = None
         # One call at a time, and none while the session moves to a new version.
         self._lock = threading.RLock()
         # push() shares these with the Java session (see Session.attachBuffers): the facts go in
@@ -256,13 +268,72 @@ class StatefulSession:
             self._check_fact_limit(java, commands)
             answer = orjson.loads(str(java.execute(payload, self._fire_limit)))
             version = self.version
+            rolled_back = False
+            if self.durability is not None and not answer.get("disposed"):
+                if answer.get("ok"):
+                    self._journal(commands, answer)
+                elif "results" in answer:  # stopped while executing: back to the state before the batch
+                    rolled_back = self._roll_back(str(answer.get("message")))
         if answer.get("disposed"):
             self._closed_by_batch()
         if not answer.get("ok"):
-            raise CommandFailed(int(answer.get("index", -1)), answer.get("op"), str(answer.get("kind")), answer.get("field"),
-                                str(answer.get("message")), bool(answer.get("applied")), answer.get("results"))
+            failed = CommandFailed(int(answer.get("index", -1)), answer.get("op"), str(answer.get("kind")), answer.get("field"),
+                                   str(answer.get("message")), bool(answer.get("applied")) and not rolled_back,
+                                   answer.get("results"))
+            failed.rolled_back = rolled_back
+            raise failed
         return BatchAnswer(answer["results"], answer.get("time"), answer.get("factCount"), bool(answer.get("disposed")),
                            version, (time.perf_counter() - started) * 1000)
+
+    def _journal(self, commands: list[dict[str, Any]], answer: dict[str, Any]) -> None:
+        """(Under the lock) Journals an accepted batch of a durable session before it is answered,
+        and snapshots the session when one is due and nothing is left to fire. A batch the journal
+        refuses is rolled back and refused (:class:`durable.JournalRefused`)."""
+        state = self.durability
+        assert state is not None
+        if not durable.changes(commands):
+            return
+        java = self._java
+        try:
+            state.record(commands, answer["results"], answer.get("time"), lambda text: _text(java.currentHandle(text)))
+        except durable.NotYetShared:
+            raise  # journalled and applied: not undone
+        except Exception as exc:
+            self._roll_back(f"not journalled: {exc}")
+            raise durable.JournalRefused(f"session {self.id} of {self.ruleset}: the command was not kept ({exc}) and "
+                                         "was undone; retry later") from None
+        if state.due() and durable.quiescent(commands, answer["results"], self._fire_limit):
+            try:
+                state.snapshot(java, self.version)
+            except Exception:  # the log keeps everything meanwhile: a rebuild replays more
+                log.warning("session %s of %s: snapshot failed", self.id, self.ruleset, exc_info=True)
+
+    def _roll_back(self, why: str) -> bool:
+        """(Under the lock) Rebuilds the session from its log, without the batch that just failed
+        half-way; True if it did. A session that cannot be rebuilt keeps its state as it is."""
+        if self.rebuilder is None:
+            return False
+        try:
+            rebuilt = self.rebuilder()
+        except Exception:
+            log.exception("session %s of %s: could not roll back (%s); it keeps the half-applied batch",
+                          self.id, self.ruleset, why)
+            return False
+        old = self._java
+        self._install(rebuilt)
+        old.dispose()
+        log.info("session %s of %s rolled back to command %d (%s)", self.id, self.ruleset, rebuilt.seq, why)
+        return True
+
+    def _install(self, rebuilt: durable.Rebuilt) -> None:
+        """(Under the lock) Takes ``rebuilt`` as this session's Java session and log position."""
+        self._java = rebuilt.java
+        self._attach(rebuilt.java)
+        self.version = rebuilt.version
+        if self.durability is not None:
+            self.durability.seq = rebuilt.seq
+            self.durability.snapshot_seq = rebuilt.snapshot_seq
+            self.durability.last_snapshot = rebuilt.last_snapshot
 
     def _check_fact_limit(self, java: Any, commands: list[dict[str, Any]]) -> None:
         if self.fact_limit is None:
@@ -306,6 +377,13 @@ class StatefulSession:
                 new_java.dispose()
                 self._stay(version, str(answer.get("message")))
                 return False
+            if self.durability is not None:
+                try:
+                    self.durability.record_move(self.version, version, sorted(unchanged_rules))
+                except Exception as exc:  # not journalled: a rebuild could not follow it, so it does not move
+                    new_java.dispose()
+                    self._stay(version, f"the move could not be journalled: {exc}")
+                    return False
             old, old_version = self._java, self.version
             self._java = new_java
             self._attach(new_java)
@@ -348,6 +426,7 @@ class StatefulSession:
                     out["fact_count"] = int(self._java.factCount())
             except Exception:  # disposed under us: the fields are simply left out
                 pass
+        out.update(self.durability.info() if self.durability is not None else {"durable": False})
         if self.pinned_reason:
             out["pinned_reason"] = self.pinned_reason
         if self.moves:

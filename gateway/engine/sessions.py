@@ -20,6 +20,9 @@ what happens to it on a deploy, after idling, or at a limit must be the same who
   (:class:`gateway.store.session_records.SessionDirectory`), creating one claims it in the
   Information State, and asking for a session another process owns raises
   :class:`SessionElsewhere` — the REST layer forwards the call to that owner.
+- **Durable** (``sessions.durable``, with a ``log``: :mod:`gateway.engine.durable`): a conversation
+  session's commands are journalled; when its owner is gone (or after a restart) the next call
+  claims it (a compare-and-set on its record) and rebuilds it here from its snapshots and log.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import threading
 import time
 from typing import Any, Protocol
 
+from gateway.engine import durable
 from gateway.engine.errors import EngineError
 from gateway.engine.kmodule import Declarations, SessionDeclaration
 from gateway.engine.session import CommandFailed, StatefulSession
@@ -95,6 +99,12 @@ class Directory(Protocol):
 
     def records(self, ruleset: str | None = None) -> list[dict[str, Any]]: ...
 
+    def take(self, ruleset: str, session_id: str, dead: str, info: dict[str, Any]) -> bool:
+        """Compare-and-set: records this process as the owner if ``dead`` still is; True if it won."""
+
+    def alive(self, record: dict[str, Any]) -> bool:
+        """Whether the process an owner record names is alive."""
+
 
 class SessionManager:
     """The sessions of one engine (thread-safe). Built by :class:`gateway.engine.Engine`."""
@@ -103,6 +113,8 @@ class SessionManager:
         self.engine = engine
         self.settings = settings  # gateway.config.SessionSettings
         self.directory: Directory | None = None
+        self.log: durable.SessionLog | None = None  # durable sessions' log (gateway.store.session_log)
+        self._rebuilding: set[tuple[str, str]] = set()
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()
         self._creating: dict[tuple[str, str], threading.Lock] = {}
@@ -135,7 +147,7 @@ class SessionManager:
     # ------------------------------------------------------------------ opening
 
     def open(self, ruleset: str, *, session_id: str | None = None, kind: str = "rest", clock: str | None = None,
-             on_deploy: str | None = None, record_facts: bool = True) -> StatefulSession:
+             on_deploy: str | None = None, record_facts: bool = True, durable_: bool | None = None) -> StatefulSession:
         """Opens a session on the live version of ``ruleset``. ``session_id`` names a declared
         stateful ksession (its clock and policy come from the declaration) or, for REST, any
         free id; None generates one."""
@@ -169,9 +181,142 @@ class SessionManager:
             raise
         if kind in CONVERSATION_KINDS:
             session.fact_limit = self.settings.max_facts
+            keep = self.settings.durable if durable_ is None else durable_
+            if keep and self.log is not None:
+                self._make_durable(session, record_facts)
         with self._lock:
             self._sessions[(ruleset, sid)] = session
         self._ensure_reaper()
+        return session
+
+    # ------------------------------------------------------------------ durable sessions
+
+    def attach_log(self, session_log: durable.SessionLog) -> None:
+        """Makes conversation sessions durable in ``session_log``; the reaper starts now, to clean
+        up stored sessions nobody used since their process went."""
+        self.log = session_log
+        self._ensure_reaper()
+
+    def _make_durable(self, session: StatefulSession, record_facts: bool) -> None:
+        """Journals the opening of ``session`` (before its create is answered) and keeps it durable."""
+        assert self.log is not None
+        epoch = f"{os.getpid():x}-{time.time_ns():x}-{next(_ids)}"
+        state = durable.Durability(self.log, session.ruleset, session.id, epoch, every=self.settings.snapshot_every,
+                                   interval_s=self.settings.snapshot_interval_s, shared_within_s=self._shared_within())
+        try:
+            state.open({"version": session.version, "clock": session.clock, "on_deploy": session.on_deploy,
+                        "session_kind": session.kind, "record_facts": record_facts})
+        except Exception as exc:
+            session.close()
+            raise durable.JournalRefused(f"session {session.id} of {session.ruleset} could not be journalled "
+                                         f"({exc}): not opened; retry later") from None
+        session.durability = state
+        session.rebuilder = lambda r=session.ruleset, s=session.id: self._rebuild(r, s)[1]
+
+    def _shared_within(self) -> float | None:
+        """``sessions.ack_after: database``: how long a command may wait to reach the database."""
+        return self.settings.rebuild_timeout_s if self.settings.ack_after == "database" else None
+
+    def _rebuild(self, ruleset: str, session_id: str, gone: str | None = None) -> tuple[durable.History, durable.Rebuilt]:
+        """The session as its log says (see :func:`durable.rebuild`); SessionNotFound if none is kept."""
+        assert self.log is not None
+        history = self.log.history(ruleset, session_id, gone)
+        if history is None or history.disposed:
+            raise SessionNotFound(f"no session '{session_id}' on rule set {ruleset} (disposed, idle longer than "
+                                  f"{self.settings.idle_ttl_s:g} s, or never opened)")
+        builder = _Builder(self.engine, ruleset, history.opening)
+        return history, durable.rebuild(history, builder, self.engine.settings.engine.fire_limit, ruleset, session_id)
+
+    def _stored(self, ruleset: str, session_id: str) -> StatefulSession | None:
+        """A session not in this process: :class:`SessionElsewhere` while its owner lives; else
+        rebuilt here from its log (claimed first: one process wins, the others forward to it), or
+        :class:`SessionGone` (its owner died and it was not durable), or None (no such session)."""
+        with self._lock:
+            if (ruleset, session_id) in self._rebuilding:  # claimed by us, being rebuilt: its record is ours
+                raise durable.Rebuilding(f"session {session_id} of {ruleset} is being rebuilt here: retry")
+        owner = self.directory.owner(ruleset, session_id) if self.directory is not None else None
+        if owner is not None and self.directory is not None and owner.get("process") != self.directory.process:
+            if self.log is None or self.directory.alive(owner):
+                raise SessionElsewhere(ruleset, session_id, owner)
+            return self._recover(ruleset, session_id, owner)
+        if owner is not None and self.directory is not None:  # recorded as ours but not here: disposed under the record
+            self.directory.release(ruleset, session_id)
+        if self.log is None:
+            return None
+        return self._recover(ruleset, session_id, None)
+
+    def _recover(self, ruleset: str, session_id: str, dead: dict[str, Any] | None) -> StatefulSession | None:
+        """Claims the session (a compare-and-set on its owner record) and rebuilds it from its log;
+        callers meanwhile get :class:`durable.Rebuilding` (503, retry)."""
+        key = (ruleset, session_id)
+        with self._lock:
+            if key in self._rebuilding:
+                raise durable.Rebuilding(f"session {session_id} of {ruleset} is being rebuilt here: retry")
+            self._rebuilding.add(key)
+        claimed = False
+        try:
+            assert self.log is not None
+            gone = str(dead.get("process")) if dead is not None else None
+            history = self.log.history(ruleset, session_id, gone)
+            if history is None or history.disposed:
+                if dead is not None and self.directory is not None:
+                    self.directory.release(ruleset, session_id, process=dead.get("process"))
+                    raise SessionGone(f"session {session_id} of {ruleset} lived in gateway process {dead.get('process')}, "
+                                      "which is gone, and it was not durable: its facts are lost. Open a new session.")
+                return None
+            claimed = self._claim(ruleset, session_id, dead, history.opening)
+            _, rebuilt = self._rebuild(ruleset, session_id, gone)  # read again, now that it is ours
+            session = self._wrap(ruleset, session_id, history.opening, rebuilt)
+            with self._lock:
+                self._sessions[key] = session
+            log.warning("session %s of %s rebuilt here at command %d (version %d, %d facts)%s", session_id, ruleset,
+                     rebuilt.seq, rebuilt.version, session.fact_count,
+                     f", taken over from {dead.get('process')}" if dead else "")
+        except SessionElsewhere:
+            raise
+        except BaseException:
+            if claimed and self.directory is not None:
+                self.directory.release(ruleset, session_id)
+            raise
+        finally:
+            with self._lock:
+                self._rebuilding.discard(key)
+        self._ensure_reaper()
+        if session.on_deploy == "follow":
+            self.follow(ruleset)  # a version deployed while nobody held it
+        return session
+
+    def _claim(self, ruleset: str, session_id: str, dead: dict[str, Any] | None, opening: dict[str, Any]) -> bool:
+        """Records this process as the owner: exactly one process wins; :class:`SessionElsewhere`
+        (the winner) for the others. True if a record was written (released if the rebuild fails)."""
+        if self.directory is None:
+            return False
+        info = {"kind": opening.get("session_kind"), "clock": opening.get("clock"), "on_deploy": opening.get("on_deploy")}
+        if dead is not None:
+            if self.directory.take(ruleset, session_id, str(dead.get("process")), info):
+                return True
+        else:
+            owner = self.directory.claim(ruleset, session_id, info)
+            if owner.get("process") == self.directory.process:
+                return True
+        owner = self.directory.owner(ruleset, session_id)
+        if owner is None:
+            raise durable.Rebuilding(f"session {session_id} of {ruleset} is changing owner: retry")
+        raise SessionElsewhere(ruleset, session_id, owner)
+
+    def _wrap(self, ruleset: str, session_id: str, opening: dict[str, Any], rebuilt: durable.Rebuilt) -> StatefulSession:
+        assert self.log is not None
+        session = self.engine.wrap_session(rebuilt.java, ruleset, rebuilt.version, session_id, clock=str(opening["clock"]),
+                                           on_deploy=str(opening["on_deploy"]), kind=str(opening["session_kind"]),
+                                           record_facts=bool(opening.get("record_facts", True)),
+                                           on_close=lambda _id, r=ruleset, s=session_id: self._forget(r, s))
+        session.fact_limit = self.settings.max_facts
+        session.durability = durable.Durability(self.log, ruleset, session_id, str(opening["epoch"]),
+                                                every=self.settings.snapshot_every,
+                                                interval_s=self.settings.snapshot_interval_s, seq=rebuilt.seq,
+                                                snapshot_seq=rebuilt.snapshot_seq, last_snapshot=rebuilt.last_snapshot,
+                                                shared_within_s=self._shared_within())
+        session.rebuilder = lambda: self._rebuild(ruleset, session_id)[1]
         return session
 
     def lookup(self, ruleset: str, lookup: str | None) -> tuple[SessionDeclaration, StatefulSession | None]:
@@ -194,6 +339,9 @@ class SessionManager:
             session = self._sessions.get(key)
             if session is not None and not session.closed:
                 return session
+            stored = self._stored(ruleset, name)
+            if stored is not None:
+                return stored
             return self.open(ruleset, session_id=name, kind="kie")
 
     def _check_session_limit(self, ruleset: str) -> None:
@@ -219,13 +367,12 @@ class SessionManager:
         session = self.find(ruleset, session_id)
         if session is not None:
             return session
-        if self.directory is not None:
-            owner = self.directory.owner(ruleset, session_id)
-            if owner is not None and owner.get("process") != self.directory.process:
-                raise SessionElsewhere(ruleset, session_id, owner)
-            if owner is not None:  # recorded as ours but not here: disposed under the record
-                self.directory.release(ruleset, session_id)
         declared = self.declarations(ruleset).get(session_id)
+        if declared is not None and declared.stateful:
+            return self.named(ruleset, session_id)  # rebuilt, elsewhere, or made on first use
+        stored = self._stored(ruleset, session_id)
+        if stored is not None:
+            return stored
         if declared is not None and declared.stateful:
             return self.named(ruleset, session_id)
         raise SessionNotFound(f"no session '{session_id}' on rule set {ruleset} (disposed, idle longer than "
@@ -242,10 +389,7 @@ class SessionManager:
     # ------------------------------------------------------------------ closing
 
     def dispose(self, ruleset: str, session_id: str) -> None:
-        session = self.find(ruleset, session_id)
-        if session is None:
-            self.get(ruleset, session_id)  # SessionElsewhere / SessionNotFound
-            return
+        session = self.find(ruleset, session_id) or self.get(ruleset, session_id)  # elsewhere, or rebuilt to dispose
         session.close()
 
     def dispose_ruleset(self, ruleset: str) -> None:
@@ -262,8 +406,11 @@ class SessionManager:
 
     def _forget(self, ruleset: str, session_id: str) -> None:
         with self._lock:
-            self._sessions.pop((ruleset, session_id), None)
+            session = self._sessions.pop((ruleset, session_id), None)
             self._creating.pop((ruleset, session_id), None)
+        if session is not None and session.durability is not None and self.log is not None and not self._stop.is_set():
+            # disposed (or reaped): its log goes; closed at shutdown: it stays, for a restart or a takeover
+            self.log.delete(ruleset, session_id, session.durability.epoch)
         if self.directory is not None:
             try:
                 self.directory.release(ruleset, session_id)
@@ -323,8 +470,28 @@ class SessionManager:
         while not self._stop.wait(interval):
             try:
                 self.reap()
+                self.reap_stored()
             except Exception:
                 log.exception("reaping idle sessions failed")
+
+    def reap_stored(self) -> list[str]:
+        """Deletes the logs of durable sessions no live process holds that have been idle longer
+        than ``sessions.idle_ttl_s`` (their process died or stopped, and nobody used them since)."""
+        ttl = self.settings.idle_ttl_s
+        if self.log is None or ttl <= 0:
+            return []
+        gone = []
+        for opening in self.log.sessions():
+            key = (str(opening["ruleset"]), str(opening["session"]))
+            if key in self._sessions or time.time() - self.log.last_activity(opening) <= ttl:
+                continue
+            owner = self.directory.owner(*key) if self.directory is not None else None
+            if owner is not None and self.directory is not None and self.directory.alive(owner):
+                continue  # its owner holds it (and reaps it itself)
+            log.info("stored session %s of %s idle past %.0f s: its log is deleted", key[1], key[0], ttl)
+            self.log.delete(key[0], key[1], str(opening["epoch"]))
+            gone.append(key[1])
+        return gone
 
     def reap(self) -> list[str]:
         """Disposes conversation sessions idle longer than ``sessions.idle_ttl_s``."""
@@ -336,6 +503,23 @@ class SessionManager:
                 session.close()
                 gone.append(session.id)
         return gone
+
+
+class _Builder:
+    """Fresh Java sessions of a durable session's rule set, at the versions its log names."""
+
+    def __init__(self, engine: Any, ruleset: str, opening: dict[str, Any]) -> None:
+        self.engine, self.ruleset = engine, ruleset
+        self.clock = str(opening.get("clock", "pseudo"))
+        self.kind = str(opening.get("session_kind", "rest"))
+        self.record_facts = bool(opening.get("record_facts", True))
+
+    def java_session(self, version: int) -> Any:
+        return self.engine.new_java_session(self.engine.compiled_version(self.ruleset, version), self.clock, self.kind,
+                                            self.record_facts)
+
+    def unchanged_rules(self, old: int, new: int) -> list[str]:
+        return list(self.engine.unchanged_rules(self.ruleset, old, new))
 
 
 _RULE = re.compile(r"""^[ \t]*rule\s+("(?:[^"\\]|\\.)*"|'[^']*'|\S+)(.*?)^[ \t]*end\b""", re.MULTILINE | re.DOTALL)

@@ -239,6 +239,7 @@ class Journal:
         self._adopted: deque[tuple[str, str, bytes]] = deque()
         self._adopt_pending = 0
         self._adopted_files: list[tuple[Path, int]] = []
+        self._adopt_lock = threading.Lock()  # the shipper's periodic look and catch_up() adopt one at a time
         self._adopt_orphans()  # now, so that backlog and flush() count what a dead process left
         self._thread = threading.Thread(target=self._run, name="information-state-journal", daemon=True)
         self._thread.start()
@@ -405,10 +406,35 @@ class Journal:
             fh.write(line)
 
     # ---- segments left by processes that are gone ---------------------------------------------
-    def _adopt_orphans(self) -> None:
-        """Take over unlocked segments (their writer died) and queue their entries for shipping."""
+    def catch_up(self, timeout_s: float = 10.0, gone_pids: tuple[int, ...] = ()) -> bool:
+        """Adopt every segment a gone process left here now (not at the next periodic look) and
+        wait until they, and everything appended so far, are in the database; False on timeout.
+        ``gone_pids``: processes of this host known to be dead, whose segments must be gone (shipped
+        by us or by another process adopting them at the same time) before this returns.
+        Why: a durable session rebuilt after its process died must read every entry that process
+        acknowledged (``gateway.engine.durable``)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            found = self._adopt_orphans()
+            if not self.flush(max(0.0, deadline - time.monotonic())):
+                return False
+            left = [p for pid in gone_pids for p in self.folder.glob(f"{pid}-*.jsonl")]
+            if not found and not left:
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            if not found:
+                time.sleep(0.05)  # another process is shipping them
+
+    def _adopt_orphans(self) -> bool:
+        """Take over unlocked segments (their writer died) and queue their entries for shipping;
+        True if there may be more (one file is adopted at a time)."""
+        with self._adopt_lock:
+            return self._adopt_one()
+
+    def _adopt_one(self) -> bool:
         if self._adopted:
-            return
+            return True
         for path in sorted(self.folder.glob("*.jsonl")):
             if self._segment is not None and path == self._segment.path:
                 continue
@@ -421,8 +447,10 @@ class Journal:
                 self._adopted.extend(entries)
                 self._adopt_pending += len(entries)
                 self._adopted_files.append((path, fd))
-            return  # one file at a time keeps memory bounded
+                self._wake.notify()
+            return True  # one file at a time keeps memory bounded
         self._clear_stale_new()
+        return False
 
     def _clear_stale_new(self) -> None:
         """Remove ``*.jsonl.new`` files whose creator died before renaming them (they hold

@@ -47,6 +47,24 @@ class SessionDirectory:
             log.warning("session %s/%s not recorded (the Information State is away): %s", ruleset, session_id, exc)
             return record
 
+    def take(self, ruleset: str, session_id: str, dead: str, info: dict[str, Any]) -> bool:
+        """Compare-and-set: this process becomes the owner if ``dead`` (a gone process) still is.
+        Of processes racing to take over a durable session exactly one wins; the others forward."""
+        try:
+            result = self.db[SESSIONS].update_one(
+                {"_id": self.key(ruleset, session_id), "process": dead},
+                {"$set": {"process": self.process, "url": self.members.url, "taken_from": dead,
+                          "taken_at": datetime.now(timezone.utc), **info}})
+            return result.modified_count == 1
+        except PyMongoError as exc:
+            log.warning("taking over session %s/%s failed: %s", ruleset, session_id, exc)
+            return False
+
+    def alive(self, record: dict[str, Any]) -> bool:
+        """Whether the process owning ``record`` is alive (its member record, see Membership.alive)."""
+        process = record.get("process")
+        return bool(process) and self.members.alive(self.members.get(str(process)))
+
     def owner(self, ruleset: str, session_id: str) -> dict[str, Any] | None:
         try:
             return self.db[SESSIONS].find_one({"_id": self.key(ruleset, session_id)})

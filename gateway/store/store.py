@@ -138,6 +138,15 @@ class InformationState:
                       exc, len(lines), stored_type, collection, self.journal.dropped)
         return ids
 
+    def record_strict(self, collection: str, docs: list[Mapping[str, Any]], *, stored_type: str) -> list[str]:
+        """Like :meth:`record_many`, but raises :class:`JournalFull` instead of dropping: for writes
+        that must be refused to their caller when they cannot be kept (a durable session's commands)."""
+        check_collection(collection)
+        bodies = [_body(doc, stored_type, "gateway", self.process) for doc in docs]
+        lines = [encode(self.database, collection, body) for body in bodies]
+        self.journal.append(self.database, collection, lines)
+        return [body["_id"] for body in bodies]
+
     def keeps_own_indexes(self, collection: str) -> None:
         """``collection`` is indexed by its owner (e.g. the decisions): the shipper adds no generic
         ``_meta`` index to it (every index is a write per document)."""

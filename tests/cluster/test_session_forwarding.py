@@ -1,6 +1,6 @@
 """Stateful sessions across real gateway processes over one MongoDB-protocol server: a session
 lives in the process that created it (recorded in the Information State), calls that reach
-another process are forwarded to it, a gone owner answers 410; with ``--workers`` each worker's
+another process are forwarded to it, a gone owner of a session that is not durable answers 410; with ``--workers`` each worker's
 private loopback port carries the forwarded calls, so a conversation on the shared port is
 continuous whichever worker takes each call."""
 
@@ -32,7 +32,7 @@ def home(tmp_path_factory, mongo):
         "engine": {"rules_dir": str(home / "rules")},
         "store": {"database": "sessions"},
         "streams": {"queries_dir": None},
-        "sessions": {"member_heartbeat_s": 1.0},
+        "sessions": {"member_heartbeat_s": 1.0, "durable": False},  # durable sessions: test_durable_sessions.py
     }))
     return home, config, {**os.environ, "MONGO_URI": mongo.uri}
 

@@ -254,3 +254,32 @@ def test_closing_during_a_backoff_does_not_wait_it_out(tmp_path: Path) -> None:
     j.close(timeout_s=10)
     assert time.monotonic() - start < 5
     assert list(tmp_path.glob("*.jsonl"))  # the write stays on disk for the next process
+
+
+def test_catch_up_ships_a_dead_writers_segments_now_and_waits_for_another_adopter(tmp_path: Path) -> None:
+    """What a durable session's rebuild relies on: every entry a dead process acknowledged is in
+    the database when catch_up returns (adopted now, not at the next periodic look), and a dead
+    process's segment another process is adopting at that moment is waited for."""
+    shipped: list[str] = []
+    dead_pid = 999_999_999
+    (tmp_path / f"{dead_pid}-1-1.jsonl").write_bytes(b"".join(encode("db", "c", {"id": f"d{k}"}) for k in range(5)))
+    journal = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["id"] for x in lines),
+                      adopt_interval_s=3600)
+    try:
+        journal.append("db", "c", [encode("db", "c", {"id": "mine"})])
+        assert journal.catch_up(10, (dead_pid,))
+        assert sorted(shipped) == ["d0", "d1", "d2", "d3", "d4", "mine"]
+        assert not list(tmp_path.glob(f"{dead_pid}-*.jsonl"))
+        # another adopter holds the next dead segment: catch_up waits for it to be gone
+        other = tmp_path / f"{dead_pid}-1-2.jsonl"
+        other.write_bytes(encode("db", "c", {"id": "theirs"}))
+        fd = os.open(other, os.O_RDONLY)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            assert not journal.catch_up(0.3, (dead_pid,))
+        finally:
+            os.unlink(other)  # the other adopter shipped and deleted it
+            os.close(fd)
+        assert journal.catch_up(5, (dead_pid,))
+    finally:
+        journal.close()

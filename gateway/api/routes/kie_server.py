@@ -35,6 +35,7 @@ from gateway.api.auth import Principal, check_kie, kie_caller, require_kie
 from gateway.api.deps import correlation_id
 from gateway.api.errors import ApiError, command_failed_status, retry_after
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
+from gateway.engine.durable import JournalRefused, NotYetShared, RebuildFailed, Rebuilding
 from gateway.api.jsonio import JSON, BadBody, parse_json, run_blocking
 from gateway.api.lean_route import LeanRoute
 from gateway.api.kie.batch import (
@@ -355,7 +356,9 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         try:
             return await forward(request, elsewhere)
         except SessionGone as gone:
-            return failure(410, f"Error calling container {container_id}: {gone}")
+            if engine.session_manager.log is None:
+                return failure(410, f"Error calling container {container_id}: {gone}")
+            return await execute(container_id, request, _)  # a durable session: rebuilt here, or forwarded to its taker
         except OwnerUnreachable as exc:
             return failure(503, f"Error calling container {container_id}: {exc}")
         except Misdirected as exc:
@@ -368,6 +371,13 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
         metrics.fire_failed(container_id)
         metrics.errors.labels("kie_failure").inc()
         return failure(command_failed_status(exc), f"Error calling container {container_id}: {_failed(batch, exc)}")
+    except SessionGone as gone:
+        return failure(410, f"Error calling container {container_id}: {gone}")
+    except (Rebuilding, NotYetShared) as exc:
+        return failure(503, f"Error calling container {container_id}: {exc}", retry_after(exc))
+    except (RebuildFailed, JournalRefused) as exc:
+        return failure(exc.status if isinstance(exc, RebuildFailed) else 503,
+                       f"Error calling container {container_id}: {exc}")
     except SessionNotFound as exc:
         return failure(404, str(exc))
     except SessionLimit as exc:
@@ -430,7 +440,9 @@ def _failed(batch: Batch, exc: CommandFailed) -> str:
     """The failure in KIE's terms: the KIE command's index and name, and what happened to the session."""
     name = batch.steps[exc.index].name if 0 <= exc.index < len(batch.steps) else exc.op or "fire-all-rules"
     index = exc.index if exc.index < len(batch.steps) else len(batch.steps)
-    outcome = ("the commands before it were applied (as in KIE Server, rules that fired are not undone)"
+    outcome = ("the session was rolled back to before the batch (a durable session is rebuilt from its log)"
+               if exc.rolled_back else
+               "the commands before it were applied (as in KIE Server, rules that fired are not undone)"
                if exc.applied else "nothing was executed: the session is as it was")
     where = f"command {index} ({name})" if exc.index >= 0 else "the batch"
     return f"{where}: {exc.detail}; {outcome}"

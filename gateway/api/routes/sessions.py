@@ -5,8 +5,9 @@ A session keeps its facts between calls; facts are addressed by their fact handl
 external form, ``0:id:…``, returned by an insert); the session's clock is a pseudo clock moved by
 ``advance`` (or by an insert's ``timestamp``) unless it was opened with ``"clock": "realtime"``;
 every ``fire`` is a recorded decision (origin ``rest``). A session lives in the gateway process
-that created it: a call that reaches another process is forwarded to it, and answers 410 if that
-process is gone (see :mod:`gateway.api.forwarding`).
+that holds it: a call that reaches another process is forwarded to it (see
+:mod:`gateway.api.forwarding`); if that process is gone, a durable session (the default) is
+rebuilt where the call landed, one that is not durable answers 410.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from gateway.api.jsonio import JSON, JsonRoute, run_blocking
 from gateway.api.routes.rulesets import NAME_PATTERN, check_facts
 from gateway.engine import EngineError, FireResult
 from gateway.engine.errors import Overloaded
-from gateway.engine.sessions import SessionElsewhere, SessionGone
+from gateway.engine.sessions import SessionElsewhere, SessionGone, SessionNotFound
 
 RuleSetName = Annotated[str, PathParam(pattern=NAME_PATTERN, description="Rule set name")]
 SessionId = Annotated[str, PathParam(min_length=1, max_length=128, description="Session id (a declared ksession's name, or "
@@ -53,6 +54,8 @@ class CreateBody(BaseModel):
     on_deploy: Literal["follow", "pin"] | None = Field(
         default=None, description="On a new deploy: move with the facts (follow) or stay (pin); default: sessions.on_deploy")
     facts: list[Fact] = Field(default_factory=list, max_length=100_000, description="Facts to insert at once")
+    durable: bool | None = Field(default=None, description="Outlive this process: journalled, rebuilt elsewhere after "
+                                 "a crash (default: sessions.durable)")
 
 
 class InsertBody(BaseModel):
@@ -109,18 +112,32 @@ async def _on_ruleset_threads(request: Request, fn: Callable[..., Any], *args: A
 
 
 async def _at_owner(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
-    """Runs ``fn`` here, or forwards the request to the process that owns the session."""
+    """Runs ``fn`` here, or forwards the request to the process that owns the session. An owner
+    found gone while forwarding (its record released) leaves a durable session to be rebuilt here:
+    the call is run again, once."""
     try:
         return await _on_ruleset_threads(request, fn, *args)
     except SessionElsewhere as elsewhere:
         try:
             return await forward(request, elsewhere)
         except SessionGone as gone:
+            if request.app.state.engine.session_manager.log is not None:
+                try:
+                    return await _here_after_owner_gone(request, fn, *args)
+                except SessionNotFound:  # it was not durable: lost with its process
+                    pass
             raise ApiError(410, str(gone), session=elsewhere.session_id, owner=elsewhere.owner.get("process")) from None
         except OwnerUnreachable as exc:
             raise ApiError(503, str(exc), headers={"Retry-After": "1"}) from None
         except Misdirected as exc:
             raise ApiError(421, str(exc)) from None
+
+
+async def _here_after_owner_gone(request: Request, fn: Callable[..., Any], *args: Any) -> Any:
+    try:
+        return await _on_ruleset_threads(request, fn, *args)
+    except SessionElsewhere as elsewhere:  # another process took it over first: it answers
+        return await forward(request, elsewhere)
 
 
 def _info(engine: Any, session: Any) -> dict[str, Any]:
@@ -132,8 +149,10 @@ def _info(engine: Any, session: Any) -> dict[str, Any]:
 
 @router.get("/api/rulesets/{name}/sessions")
 def list_sessions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
-    """The rule set's open sessions: this process's (with their clock and fact count) and those
-    other gateway processes hold (their owner), plus the ksessions the rule set declares."""
+    """The rule set's open sessions: this process's (with their clock and fact count, and for a
+    durable one ``durable``, ``last_snapshot``, ``commands_since_snapshot``), those other gateway
+    processes hold (their owner), durable ones no process holds now (``stored``: rebuilt on their
+    next call), plus the ksessions the rule set declares."""
     engine.live_compiled(name)  # 404 for an unknown rule set
     manager = engine.session_manager
     here = [_info(engine, s) for s in manager.list(name) if s.kind != "stream"]
@@ -147,7 +166,19 @@ def list_sessions(name: RuleSetName, engine: EngineDep, _: Caller) -> JSON:
             alive = members.alive(members.get(record["process"])) if members is not None else None
             elsewhere.append({"id": record["session"], "ruleset": name, "process": record["process"], "kind": record.get("kind"),
                               "clock": record.get("clock"), "on_deploy": record.get("on_deploy"), "owner_alive": alive})
-    return JSON({"sessions": here + elsewhere, "declared": engine.declared_sessions(name).to_list()})
+    return JSON({"sessions": here + elsewhere + _stored_only(manager, name, here + elsewhere),
+                 "declared": engine.declared_sessions(name).to_list()})
+
+
+def _stored_only(manager: Any, name: str, listed: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Durable sessions no process holds now (after a restart, or their owner died): rebuilt on
+    their next call."""
+    if manager.log is None:
+        return []
+    known = {s["id"] for s in listed}
+    return [{"id": o["session"], "ruleset": name, "process": None, "kind": o.get("session_kind"), "clock": o.get("clock"),
+             "on_deploy": o.get("on_deploy"), "durable": True, "stored": True}
+            for o in manager.log.sessions(name) if o["session"] not in known]
 
 
 @router.post("/api/rulesets/{name}/sessions", status_code=201)
@@ -173,7 +204,8 @@ async def create_session(name: RuleSetName, body: CreateBody, request: Request, 
                 owner = manager.directory.owner(name, body.id)
                 if owner is not None and owner.get("process") != manager.directory.process:
                     raise SessionElsewhere(name, body.id, owner)
-        session = manager.open(name, session_id=body.id, kind="rest", clock=body.clock, on_deploy=body.on_deploy)
+        session = manager.open(name, session_id=body.id, kind="rest", clock=body.clock, on_deploy=body.on_deploy,
+                               durable_=body.durable)
         return _created(engine, session, body, 201)
 
     return await _at_owner(request, work)

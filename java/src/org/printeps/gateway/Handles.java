@@ -129,4 +129,22 @@ final class Handles implements RuleRuntimeEventListener {
         out.sort((a, b) -> Long.compare(((InternalFactHandle) a).getId(), ((InternalFactHandle) b).getId()));
         return out;
     }
+
+    /**
+     * Every "id:hash" text that resolves to {@code h} here: its id with each identity hash its
+     * object has had, and the aliases of it. A durable session's snapshot carries them, so the
+     * handles clients hold still resolve after the session is rebuilt in another process.
+     */
+    java.util.List<String> keysOf(FactHandle h) {
+        java.util.List<String> out = new java.util.ArrayList<String>();
+        InternalFactHandle ih = (InternalFactHandle) h;
+        Entry e = byId.get(ih.getId());
+        if (e == null) {
+            out.add(ih.getId() + ":" + ih.getIdentityHashCode());
+            return out;
+        }
+        for (Integer hash : e.hashes) out.add(ih.getId() + ":" + hash);
+        for (Map.Entry<String, Entry> a : aliases.entrySet()) if (a.getValue() == e) out.add(a.getKey());
+        return out;
+    }
 }

@@ -590,4 +590,212 @@ public final class Session {
         Json.quote(b, message);
         return b.append('}').toString();
     }
+
+    // ------------------------------------------------------------------ durable sessions (snapshot, restore)
+
+    /**
+     * The session's state as JSON, for a durable session's snapshot: its facts in insertion order
+     * (each with its entry point and every "id:hash" text clients may hold for it), the clock, the
+     * globals but {@code actions}, and the agenda focus. Taken only when the agenda holds nothing
+     * to fire (right after a full fire): {@link #restore} counts every match over these facts as
+     * fired. Returns {"ok":false,"message"} naming a fact that cannot be written.
+     */
+    public synchronized String snapshot() {
+        if (disposed) return problem("the session is disposed");
+        TypeRegistry types = runner.types();
+        StringBuilder b = new StringBuilder(4096).append("{\"ok\":true,\"time\":").append(clock.getCurrentTime());
+        b.append(",\"facts\":[");
+        boolean first = true;
+        for (FactHandle h : Handles.all(session)) {
+            org.drools.core.common.InternalFactHandle ih = (org.drools.core.common.InternalFactHandle) h;
+            Object fact = ih.getObject();
+            if (fact instanceof Actions) continue;
+            StringBuilder json = new StringBuilder();
+            if (!types.writeFact(json, fact)) {
+                return problem("fact " + Handles.external(h) + " is not of a declared type (" + fact.getClass().getName() + ")");
+            }
+            if (!first) b.append(',');
+            first = false;
+            b.append("{\"ep\":");
+            Json.quote(b, ih.getEntryPointName());
+            b.append(",\"keys\":[");
+            List<String> keys = handles != null ? handles.keysOf(h)
+                    : java.util.Collections.singletonList(ih.getId() + ":" + ih.getIdentityHashCode());
+            for (int k = 0; k < keys.size(); k++) {
+                if (k > 0) b.append(',');
+                Json.quote(b, keys.get(k));
+            }
+            b.append("],\"fact\":").append(json).append('}');
+        }
+        b.append("],\"globals\":{");
+        first = true;
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
+                if (g.getName().equals("actions")) continue;
+                Object v = session.getGlobals().get(g.getName());
+                if (v == null) continue;
+                if (!first) b.append(',');
+                first = false;
+                Json.quote(b, g.getName());
+                b.append(':');
+                Json.write(b, v, types);
+            }
+        }
+        b.append("},\"focus\":");
+        String focus = ((org.drools.core.common.InternalAgenda) session.getAgenda()).getFocusName();
+        Json.quote(b, focus == null ? "MAIN" : focus);
+        return b.append('}').toString();
+    }
+
+    /**
+     * Rebuilds a snapshot's state (see {@link #snapshot}) in this fresh session: the facts in
+     * their order into their entry points, the pseudo clock, the globals, the focus, the handles
+     * clients hold (as aliases), and refraction: every match over the restored facts counts as
+     * fired (the snapshot was taken with nothing left to fire), until a fire empties the agenda,
+     * as after {@link #moveFrom}. Checks everything first: a snapshot that does not fit this
+     * version changes nothing and answers {"ok":false,"message"}.
+     */
+    public synchronized String restore(String snapshotJson) {
+        if (disposed) return problem("the session is disposed");
+        TypeRegistry mine = runner.types();
+        Map<?, ?> snap;
+        try {
+            snap = (Map<?, ?>) Json.parse(snapshotJson);
+        } catch (RuntimeException e) {
+            return problem("the snapshot is not readable JSON: " + Runner.rootMessage(e));
+        }
+        if (snap == null || !(snap.get("facts") instanceof List) || !(snap.get("time") instanceof Number)) {
+            return problem("the snapshot has no facts list or no time");
+        }
+        List<?> facts = (List<?>) snap.get("facts");
+        List<Object> built = new ArrayList<Object>(facts.size());
+        List<org.kie.api.runtime.rule.EntryPoint> targets = new ArrayList<org.kie.api.runtime.rule.EntryPoint>();
+        for (int k = 0; k < facts.size(); k++) {
+            if (!(facts.get(k) instanceof Map) || !(((Map<?, ?>) facts.get(k)).get("fact") instanceof Map)) {
+                return problem("snapshot fact " + k + " is not an object with a fact");
+            }
+            Map<?, ?> f = (Map<?, ?>) facts.get(k);
+            Map<?, ?> values = (Map<?, ?>) f.get("fact");
+            String type = String.valueOf(values.get("type"));
+            TypeRegistry.TypeInfo info = mine.type(type);
+            if (info == null) return problem("snapshot fact " + k + ": the version declares no type " + type);
+            try {
+                built.add(mine.build(info, values, 0));
+            } catch (TypeRegistry.FactProblem p) {
+                return problem("snapshot fact " + k + " (" + type + ") does not fit the version: " + p.getMessage());
+            }
+            org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(String.valueOf(f.get("ep")));
+            if (ep == null) return problem("snapshot fact " + k + ": the version has no entry point " + f.get("ep"));
+            targets.add(ep);
+        }
+        Map<String, Object> globals = new java.util.LinkedHashMap<String, Object>();
+        Map<?, ?> savedGlobals = snap.get("globals") instanceof Map ? (Map<?, ?>) snap.get("globals") : new HashMap<String, Object>();
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
+                if (g.getName().equals("actions") || !savedGlobals.containsKey(g.getName())) continue;
+                try {
+                    Class<?> type = mine.declaredClass(g.getType());
+                    if (type == null) type = Class.forName(g.getType(), false, Session.class.getClassLoader());
+                    globals.put(g.getName(), mine.convertValue(g.getName(), type, savedGlobals.get(g.getName())));
+                } catch (Exception e) {
+                    return problem("global '" + g.getName() + "' does not fit the version: " + Runner.rootMessage(e));
+                }
+            }
+        }
+        // the state fits: from here on nothing can refuse
+        long now = ((Number) snap.get("time")).longValue();
+        if (clock instanceof SessionPseudoClock) advanceTo(now);
+        for (Map.Entry<String, Object> g : globals.entrySet()) session.setGlobal(g.getKey(), g.getValue());
+        java.util.Set<Object> restored = java.util.Collections.newSetFromMap(new java.util.IdentityHashMap<Object, Boolean>());
+        for (int k = 0; k < built.size(); k++) {
+            Object fact = built.get(k);
+            FactHandle nh = targets.get(k).insert(fact);
+            restored.add(fact);
+            String id = mine.idOf(fact);
+            if (id != null && !mine.isEvent(fact)) byId.put(id, nh);
+            Object keys = ((Map<?, ?>) facts.get(k)).get("keys");
+            if (handles != null && keys instanceof List) {
+                for (Object key : (List<?>) keys) {
+                    String[] idHash = String.valueOf(key).split(":");
+                    if (idHash.length != 2) continue;
+                    try {
+                        handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
+                    } catch (NumberFormatException e) {
+                        // a key that is no "id:hash" names no handle a client can hold
+                    }
+                }
+            }
+        }
+        if (handles != null) handles.setUnchangedSinceMove(restored);
+        java.util.Set<String> rules = new java.util.HashSet<String>();
+        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
+            for (org.kie.api.definition.rule.Rule r : p.getRules()) rules.add(r.getName());
+        }
+        String focus = snap.get("focus") == null ? "MAIN" : String.valueOf(snap.get("focus"));
+        Map<String, Integer> fired = probeAgenda(built, targets, globals, now, focus, rules, restored);
+        refraction = new Refraction(rules, restored, fired);
+        if (!focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
+        recorder.reset();
+        return "{\"ok\":true,\"facts\":" + built.size() + "}";
+    }
+
+    /**
+     * Makes {@code oldText} (a handle a client holds, from before a rebuild) an alias of the fact
+     * {@code nowText} names here: a durable session's replayed insert gets a new handle.
+     */
+    public synchronized String alias(String oldText, String nowText) {
+        if (handles == null) return problem("this session keeps no fact handles");
+        try {
+            FactHandle now = handles.resolve(nowText);
+            String[] parts = oldText.trim().split(":");
+            handles.alias(Long.parseLong(parts[1]), Integer.parseInt(parts[2]), now);
+            return "{\"ok\":true}";
+        } catch (Handles.Stale e) {
+            return problem(e.getMessage());
+        } catch (RuntimeException e) {
+            return problem("'" + oldText + "' is not a fact handle: " + Runner.rootMessage(e));
+        }
+    }
+
+    /** The external form of the live handle {@code text} names now (an update changes it), or null. */
+    public synchronized String currentHandle(String text) {
+        try {
+            return Handles.external(resolve(text));
+        } catch (Handles.Stale e) {
+            return null;
+        }
+    }
+
+    /**
+     * The keys of the matches of {@code rules} over {@code built} before anything fires, found in
+     * a throwaway session of this version (see {@link #firstAgenda}; this one takes the clock and
+     * focus as values, for a restore that has no old session).
+     */
+    private Map<String, Integer> probeAgenda(List<Object> built, List<org.kie.api.runtime.rule.EntryPoint> targets,
+                                             Map<String, Object> globals, long now, String focus,
+                                             java.util.Set<String> rules, java.util.Set<Object> facts) {
+        final Map<String, Integer> keys = Refraction.emptyKeys();
+        if (rules.isEmpty() || built.isEmpty()) return keys;
+        KieSession probe = runner.newSession(false);
+        try {
+            if (Runner.declaresGlobal(probe.getKieBase(), "actions")) probe.setGlobal("actions", new Actions());
+            for (Map.Entry<String, Object> g : globals.entrySet()) probe.setGlobal(g.getKey(), g.getValue());
+            SessionClock probeClock = probe.getSessionClock();
+            if (probeClock instanceof SessionPseudoClock && now > probeClock.getCurrentTime()) {
+                ((SessionPseudoClock) probeClock).advanceTime(now - probeClock.getCurrentTime(), TimeUnit.MILLISECONDS);
+            }
+            for (int k = 0; k < built.size(); k++) probe.getEntryPoint(targets.get(k).getEntryPointId()).insert(built.get(k));
+            if (focus != null && !focus.equals("MAIN")) probe.getAgenda().getAgendaGroup(focus).setFocus();
+            probe.fireAllRules(match -> {
+                String rule = match.getRule().getName();
+                if (rules.contains(rule)) Refraction.add(keys, Refraction.key(rule, match.getObjects(), null, facts));
+                return false;
+            });
+        } catch (RuntimeException e) {
+            keys.clear();  // a probe that fails refracts nothing: matches fire again rather than one being lost
+        } finally {
+            probe.dispose();
+        }
+        return keys;
+    }
 }

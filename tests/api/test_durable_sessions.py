@@ -1,0 +1,171 @@
+"""Durable sessions in one real gateway (JVM + Drools + Information State): every acknowledged
+command is journalled, and a session lost from its process (as a crash loses it) is rebuilt on its
+next call from its snapshots and log — the same facts, handles, clock and version, nothing that
+fired fires again; refused commands are not journalled; a batch stopped half-way is rolled back;
+a corrupt snapshot falls back to the log; dispose deletes the log. The cross-process cases are in
+tests/cluster/test_durable_sessions.py."""
+
+from __future__ import annotations
+
+import pytest
+from api_helpers import files
+from gw_testing import wait_for
+
+from gateway.store.session_log import LOG, SNAPSHOTS
+
+PREFIX = "/api/rulesets/durable"
+
+
+@pytest.fixture(scope="module")
+def rs(client):
+    assert client.put("/api/rulesets/durable", json={"files": files("D1")}).status_code == 201
+    yield client
+
+
+def _crash(gateway, sid: str) -> None:
+    """What a killed process leaves: the session gone from memory, its log and record kept."""
+    manager = gateway.engine.session_manager
+    session = manager._sessions.pop(("durable", sid))
+    session._java.dispose()  # not close(): nothing is released or deleted
+    session.closed = True
+
+
+def _facts(rs, sid: str) -> list[tuple[str, str | None]]:
+    """The session's facts (handles aside: a rebuilt session shows its own handle texts, as after a
+    deploy's move, while the ones clients hold keep resolving — checked by using them)."""
+    r = rs.get(f"{PREFIX}/sessions/{sid}/facts")
+    assert r.status_code == 200, r.text
+    return sorted((f["fact"]["id"], f["fact"]["category"]) for f in r.json()["facts"])
+
+
+def _texts(answer) -> list[str]:
+    assert answer.status_code in (200, 201), answer.text
+    return sorted(a["params"]["text"] for a in answer.json()["actions"])
+
+
+def test_a_lost_session_is_rebuilt_with_its_facts_handles_clock_and_refraction(rs, api_gateway):
+    made = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "a", "age": 30}]})
+    assert made.status_code == 201 and made.json()["durable"] is True
+    sid, handle_a = made.json()["id"], made.json()["handles"][0]
+    assert _texts(rs.post(f"{PREFIX}/sessions/{sid}/fire")) == ["Welcome a (D1)"]
+    b = rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "b", "age": 9}], "timestamp": 5000})
+    handle_b = b.json()["handles"][0]
+    assert rs.post(f"{PREFIX}/sessions/{sid}/advance", json={"ms": 250}).json()["time"] == 5250
+    refused = rs.patch(f"{PREFIX}/sessions/{sid}/facts/{handle_b}", json={"set": {"age": "x"}})
+    assert refused.status_code == 422  # refused: not journalled, so not replayed
+    before = _facts(rs, sid)
+    _crash(api_gateway, sid)
+    assert _facts(rs, sid) == before  # rebuilt on first use
+    info = rs.get(f"{PREFIX}/sessions/{sid}").json()
+    assert info["time"] == 5250 and info["version"] == 1 and info["durable"] is True
+    assert rs.post(f"{PREFIX}/sessions/{sid}/fire").json()["actions"] == []  # "a" was welcomed already
+    assert rs.patch(f"{PREFIX}/sessions/{sid}/facts/{handle_b}", json={"set": {"age": 19}}).status_code == 200
+    assert _texts(rs.post(f"{PREFIX}/sessions/{sid}/fire")) == ["Welcome b (D1)"]
+    assert rs.delete(f"{PREFIX}/sessions/{sid}/facts/{handle_a}").json()["fact_count"] == 1
+    # once more, with a snapshot in between
+    api_gateway.engine.session_manager.find("durable", sid).durability.every = 1
+    c = rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "c", "age": 40}], "fire": True})
+    assert _texts(c) == ["Welcome c (D1)"]
+    handle_c = c.json()["handles"][0]
+    listed = {s["id"]: s for s in rs.get(f"{PREFIX}/sessions").json()["sessions"]}
+    assert listed[sid]["last_snapshot"] is not None and listed[sid]["commands_since_snapshot"] == 0
+    d = rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "d", "age": 50}]})
+    handle_d = d.json()["handles"][0]
+    before = _facts(rs, sid)
+    _crash(api_gateway, sid)
+    assert _facts(rs, sid) == before
+    assert _texts(rs.post(f"{PREFIX}/sessions/{sid}/fire")) == ["Welcome d (D1)"]  # pending before the crash: fires once
+    assert rs.delete(f"{PREFIX}/sessions/{sid}/facts/{handle_c}").status_code == 200
+    assert rs.delete(f"{PREFIX}/sessions/{sid}/facts/{handle_d}").status_code == 200
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
+
+
+def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, api_gateway):
+    sid = rs.post(f"{PREFIX}/sessions", json={}).json()["id"]
+    manager = api_gateway.engine.session_manager
+    manager.find("durable", sid).durability.every = 1
+    for name in ("p", "q", "r"):
+        assert _texts(rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": name, "age": 20}],
+                                                                      "fire": True})) == [f"Welcome {name} (D1)"]
+    before = _facts(rs, sid)
+    api_gateway.store.flush()
+    db = api_gateway.store.db
+    mine = {"key": {"$regex": f"^durable/{sid}/"}}
+    assert wait_for(lambda: sorted(d["seq"] for d in db[SNAPSHOTS].find(mine)) == [2, 3])  # two kept
+    db[SNAPSHOTS].update_one({**mine, "seq": 3}, {"$set": {"state": '{"ok":true,"facts":[{'}})
+    _crash(api_gateway, sid)
+    listed = rs.get(f"{PREFIX}/sessions/{sid}")
+    assert listed.status_code == 200, listed.text  # the newest is corrupt: the one before and the log since
+    assert listed.json()["commands_since_snapshot"] == 1
+    assert _facts(rs, sid) == before
+    assert rs.post(f"{PREFIX}/sessions/{sid}/fire").json()["actions"] == []
+    # both corrupt, and the log's start pruned: the rebuild refuses, naming the session and why; never half built
+    api_gateway.store.flush()
+    db[SNAPSHOTS].update_many(mine, {"$set": {"state": "{"}})
+    db[LOG].delete_many({**mine, "seq": {"$in": [1, 2]}})
+    _crash(api_gateway, sid)
+    failed = rs.get(f"{PREFIX}/sessions/{sid}")
+    assert failed.status_code == 422, failed.text
+    assert sid in failed.json()["error"] and "corrupt" in failed.json()["error"]
+    assert failed.json()["kind"] == "rebuild" and failed.json()["session"] == sid and len(failed.json()["reasons"]) == 2
+    assert manager.find("durable", sid) is None
+
+
+def test_dispose_deletes_the_log_and_non_durable_sessions_keep_none(rs, api_gateway):
+    sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "x", "age": 3}]}).json()["id"]
+    api_gateway.store.flush()
+    db = api_gateway.store.db
+    assert db[LOG].count_documents({"session": sid}) == 2  # the opening and the insert
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
+    assert wait_for(lambda: db[LOG].count_documents({"session": sid}) == 0)
+    assert rs.get(f"{PREFIX}/sessions/{sid}").status_code == 404
+    plain = rs.post(f"{PREFIX}/sessions", json={"durable": False, "facts": [{"type": "Customer", "id": "y", "age": 3}]})
+    assert plain.json()["durable"] is False
+    api_gateway.store.flush()
+    assert db[LOG].count_documents({"session": plain.json()["id"]}) == 0
+    _crash(api_gateway, plain.json()["id"])
+    assert rs.get(f"{PREFIX}/sessions/{plain.json()['id']}").status_code == 404
+
+
+def test_a_stored_session_nobody_used_past_the_idle_ttl_is_deleted(rs, api_gateway):
+    manager = api_gateway.engine.session_manager
+    sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "idle", "age": 3}]}).json()["id"]
+    _crash(api_gateway, sid)
+    api_gateway.store.flush()  # the list reads the Information State: what the journal has shipped
+    listed = {s["id"]: s for s in rs.get(f"{PREFIX}/sessions").json()["sessions"]}
+    assert listed[sid]["stored"] is True and listed[sid]["process"] is None  # no process holds it now
+    assert manager.reap_stored() == []  # not idle yet
+    settings = manager.settings
+    manager.settings = settings.model_copy(update={"idle_ttl_s": 0.2})
+    try:
+        assert wait_for(lambda: sid in manager.reap_stored(), 10)
+    finally:
+        manager.settings = settings
+    assert wait_for(lambda: api_gateway.store.db[LOG].count_documents({"session": sid}) == 0)
+    assert rs.get(f"{PREFIX}/sessions/{sid}").status_code == 404
+
+
+def test_ack_after_database_answers_once_the_command_is_in_the_information_state(rs, api_gateway, monkeypatch):
+    import time
+
+    journal = api_gateway.store.journal
+    ship = journal.ship
+
+    def slow_ship(database, collection, lines):  # the real database, reached 0.3 s later
+        time.sleep(0.3)
+        ship(database, collection, lines)
+
+    monkeypatch.setattr(journal, "ship", slow_ship)
+    manager = api_gateway.engine.session_manager
+    settings = manager.settings
+    manager.settings = settings.model_copy(update={"ack_after": "database"})
+    try:
+        sid = rs.post(f"{PREFIX}/sessions", json={}).json()["id"]
+    finally:
+        manager.settings = settings
+    db = api_gateway.store.db
+    for k in range(5):
+        assert rs.post(f"{PREFIX}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": f"s{k}", "age": 1}]}
+                       ).status_code == 201
+        assert db[LOG].count_documents({"session": sid, "kind": "batch"}) == k + 1  # there as soon as it is answered
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
