@@ -199,7 +199,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
         engine.session_manager.directory = SessionDirectory(store.db, name, members)
         closers.append(("the session records", engine.session_manager.directory.release_all))
-        from gateway.store.session_log import StoredSessionLog  # durable sessions (their log; see docs/operations.md)
+        from gateway.runtime.session_log import StoredSessionLog  # durable sessions (their log; see docs/operations.md)
 
         engine.session_manager.attach_log(StoredSessionLog(store, catch_up_s=settings.sessions.rebuild_timeout_s))
         closers.append(("the session log", engine.session_manager.log.close))

@@ -23,7 +23,7 @@ plain JSON anyway. So:
   built.
 
 This module is the plain-Python part (which commands count, when to snapshot, the replay order);
-where the log is kept is a :class:`SessionLog` (``gateway.store.session_log`` keeps it in the
+where the log is kept is a :class:`SessionLog` (``gateway.runtime.session_log`` keeps it in the
 Information State through the journal).
 """
 

@@ -113,7 +113,7 @@ class SessionManager:
         self.engine = engine
         self.settings = settings  # gateway.config.SessionSettings
         self.directory: Directory | None = None
-        self.log: durable.SessionLog | None = None  # durable sessions' log (gateway.store.session_log)
+        self.log: durable.SessionLog | None = None  # durable sessions' log (gateway.runtime.session_log)
         self._rebuilding: set[tuple[str, str]] = set()
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()

@@ -11,7 +11,7 @@ import pytest
 from api_helpers import files
 from gw_testing import wait_for
 
-from gateway.store.session_log import LOG, SNAPSHOTS
+from gateway.runtime.session_log import LOG, SNAPSHOTS
 
 PREFIX = "/api/rulesets/durable"
 
