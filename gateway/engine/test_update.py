@@ -54,7 +54,8 @@ class Change:
     old: Any
     new: Any
     rule: str | None = None
-    what: str = "action"  # "action": a param of an expected action; "fact": a field of an expected fact; "rule": a rule's name
+    #: "action": a param of an expected action; "fact": a field of an expected fact; "rule": a rule's name
+    what: str = "action"
 
     def to_dict(self) -> dict[str, Any]:
         return {"scenario": self.scenario, "file": self.file, "line": self.line, "old": self.old,
@@ -184,8 +185,9 @@ def _rewrite_actions(result: ScenarioResult, text: str, draft_src: str, base_src
         if i in matched:
             continue
         candidates = [actual[k] for k in free]
-        pick = _first_changed(wanted.params, [(a.get("params") or {}) if a.get("module") == wanted.module and a.get("rule")
-                                              else None for a in candidates], draft_src, base_src)
+        eligible = [(a.get("params") or {}) if a.get("module") == wanted.module and a.get("rule") else None
+                    for a in candidates]
+        pick = _first_changed(wanted.params, eligible, draft_src, base_src)
         if pick is None:
             return None
         index, diffs = pick

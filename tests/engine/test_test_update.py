@@ -154,5 +154,6 @@ def test_renames_pair_rules_by_their_text_when_several_change():
     assert set(rule_texts(base)) == {"Greet a pair", "Greet a group"}
     twins = base + '\nrule "Greet a pair again"\nwhen\n    $p: Party(size == 2)\nthen\n' \
         '    actions.say("pepper", "Welcome. Two seats?");\n    insert(new Seat($p.getId(), "window"));\nend\n'
-    renamed_twins = twins.replace('rule "Greet a pair"\n', 'rule "P1"\n').replace('rule "Greet a pair again"', 'rule "P2"')
+    renamed_twins = twins.replace('rule "Greet a pair"\n', 'rule "P1"\n')
+    renamed_twins = renamed_twins.replace('rule "Greet a pair again"', 'rule "P2"')
     assert renames(twins, renamed_twins, ["P1", "Greet a group", "P2"]) == {}  # two identical rules: ambiguous

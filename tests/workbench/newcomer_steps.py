@@ -6,9 +6,9 @@ newcomer has neither: they read the top bar, the list on the left, the headings,
 buttons, and click or type into what those words name. Here every control is found by the text a
 person sees (a link's or button's words, a field's label, a menu's options) — no test ids, no CSS
 selectors, no URLs typed, no keyboard shortcuts, no ``force``, and nothing typed but the sentence,
-name or value being changed (two exceptions, both documented in docs/agile-loop.md: #7's target
-position is written as the expression ``${input.table.x - 0.5}``, and #8/#11 add the engineer's rule
-files with "+ Add a file…").
+name or value being changed (exceptions, documented in docs/agile-loop.md: #7's place is typed as
+the expression ``${input.table.id}`` and #8b's facts as ``${input.tables}``; #8a/#11 add the
+engineer's rule files with "+ Add a file…").
 
 Each step is priced with a keystroke-level model (Card, Moran & Newell, "The Keystroke-Level
 Model", CACM 1980), plus the reading the step needs:

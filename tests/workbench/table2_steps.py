@@ -288,19 +288,14 @@ def change_8(owner: Owner, setup: Setup) -> None:
 
 
 def change_9(owner: Owner, setup: Setup) -> None:
-    """Every 'bow' of the greetings becomes a deep bow: the editor's search and replace all."""
+    """Every 'bow' of the greetings becomes a deep bow: Replace… beside the rule list, Replace all."""
     page = owner.page
     open_ruleset(owner, "reception")
-    owner.click(page.locator(EDITOR), "the sentences")
-    owner.keys("Control+f")
-    panel = page.locator(".editor-host:not([hidden]) .cm-search")
-    search = panel.locator("input[name=search]")
-    owner.fill(search, 'gestures "bow"', "find")
-    search.press("End")  # the search box takes its query on key-up (a typing owner makes one)
-    replace = panel.locator("input[name=replace]")
-    owner.fill(replace, 'gestures "deep bow with open arms"', "replace")
-    replace.press("End")
-    owner.click(panel.locator("button[name=replaceAll]"), "replace all")
+    owner.click(page.get_by_role("button", name="Replace…"), "Replace…")
+    owner.fill(page.get_by_label("Find", exact=True), '"bow"', "find")
+    owner.fill(page.get_by_label("Replace with", exact=True), '"deep bow with open arms"', "replace with")
+    owner.click(page.get_by_role("button", name="Replace all"), "Replace all")
+    expect(page.get_by_role("status").filter(has_text="Replaced 6 places")).to_be_visible()
     expect(page.get_by_test_id("check-status")).to_have_text("✓ No problems")
     deploy(owner, "Table 2 #9: a deep bow with open arms")
 
@@ -391,7 +386,7 @@ CHANGES: dict[int, tuple[str, Callable[[Owner, Setup], None]]] = {
     7: ("workflow editor: move to + say before settle_bill", change_7),
     8: ("rules: + New rule set seat_info, add the engineer's files*, deploy; workflow editor: Fire business rules",
         change_8),
-    9: ("rules editor: search and replace all (sentences), deploy", change_9),
+    9: ("rules: Replace… (\"bow\" → \"deep bow with open arms\"), Replace all, deploy", change_9),
     10: ("rules editor: a new rule in sentences (DSL), deploy", change_10),
     11: ("rules: add the engineer's file to seat_info*, deploy", change_11),
     12: ("knowledge editor: a value of pepper1", change_12),
@@ -403,11 +398,9 @@ CHANGES: dict[int, tuple[str, Callable[[Owner, Setup], None]]] = {
 
 
 def show_a_deep_bow(page: Page) -> None:
-    """For #9's screenshot: the editor scrolled to a changed line (not one of the owner's steps)."""
-    search = page.locator(".editor-host:not([hidden]) .cm-search input[name=search]")
-    search.fill("deep bow with open arms")
-    search.press("End")  # the query is taken on key-up
-    search.press("Enter")
+    """For #9's screenshot: the rule list searched for the new words, the editor at the first (not one
+    of the owner's steps)."""
+    page.get_by_test_id("rule-search").fill("deep bow with open arms")
 
 
 def show_the_saved_value(page: Page) -> None:

@@ -26,9 +26,10 @@ function sentencesOf(rule) {
 /**
  * Mount the rule list in `host`.
  * options: name (rule set), files() -> {name: text} (the draft), goTo(rule) (open it in the
- *          editor), onSearch(text) (the search words changed: mark them in the editor).
+ *          editor), onSearch(text) (the search words changed: mark them in the editor), tools (a
+ *          node for the head's right end: the rule tools' buttons).
  */
-export function mountRuleList(host, { name, files, goTo = () => {}, onSearch = () => {} }) {
+export function mountRuleList(host, { name, files, goTo = () => {}, onSearch = () => {}, tools = null }) {
   const usedEl = h("p", { class: "used-by", "data-testid": "used-by" });
   const search = h("input", { type: "search", class: "rule-search", "data-testid": "rule-search",
     placeholder: "Find a rule or what it says, e.g. Two seats", "aria-label": "Find a rule or a sentence",
@@ -36,7 +37,7 @@ export function mountRuleList(host, { name, files, goTo = () => {}, onSearch = (
   const countEl = h("span", { class: "rule-count muted", "aria-live": "polite" });
   const listEl = h("ul", { class: "rule-list", "data-testid": "rule-list" });
   fill(host, h("div", { class: "card rules-outline" },
-    h("div", { class: "outline-head" }, h("h2", {}, "What these rules do"), countEl),
+    h("div", { class: "outline-head" }, h("h2", {}, "What these rules do"), countEl, tools),
     usedEl,
     h("label", { class: "search-field" }, h("span", {}, "Search"), search),
     listEl));

@@ -2,7 +2,8 @@
 // keyboard shortcuts, no rule syntax): "Replace…" changes words in every rule at once (e.g. each
 // "bow" becomes a "deep bow with open arms"), listing where before it changes anything; "+ New rule"
 // writes a rule from sentences chosen in menus (the rule set's own phrase book), with a field for
-// each blank. The logic is in rule-words.js. Self-contained: mountRuleTools(host, options).
+// each blank. The logic is in rule-words.js. Self-contained: mountRuleTools(host, options) puts the
+// panels in `host` and returns the two buttons, which the caller places (in the rule list's head).
 
 import { h, fill } from "./dom.js";
 import { dslEntries } from "./assist-core.js";
@@ -22,7 +23,7 @@ export function mountRuleTools(host, options) {
   const panelEl = h("div", { class: "rule-tool-panel" });
   const replaceBtn = h("button", { class: "secondary", "aria-expanded": "false", onclick: () => open("replace") }, "Replace…");
   const newBtn = h("button", { class: "secondary", "aria-expanded": "false", onclick: () => open("new") }, "+ New rule");
-  fill(host, h("div", { class: "rule-tools" }, h("div", { class: "buttons" }, replaceBtn, newBtn), panelEl));
+  fill(host, panelEl);
   let shown = null;
 
   function open(which) {
@@ -39,7 +40,7 @@ export function mountRuleTools(host, options) {
     newBtn.setAttribute("aria-expanded", "false");
   }
 
-  return { dispose: () => fill(panelEl) };
+  return { buttons: h("span", { class: "rule-tools" }, replaceBtn, newBtn), dispose: () => fill(panelEl) };
 }
 
 /** Where `find` stands in the rule texts: [{file, from, to, line}]. */

@@ -174,8 +174,7 @@ class RulesView {
         "You are signed in with a caller token: you can read and try the rules, but not change or deploy them."),
       h("div", { class: "columns" },
         h("div", { class: "left" },
-          this.buildRuleList(),
-          this.editable ? this.buildRuleTools() : null,
+          ...this.buildRuleListAndTools(),
           h("div", { class: "toolbar" }, this.tabsEl, this.buildAddFile(),
             h("label", { class: "toggle" }, this.previewToggle, " Show the DRL it becomes"),
             this.statusEl),
@@ -593,21 +592,24 @@ class RulesView {
 
   // ---- The rules as a list ----------------------------------------------------------------------
 
-  buildRuleList() {
+  /** The rule list, and under it (authors) the panels of its Replace… and + New rule buttons. */
+  buildRuleListAndTools() {
     const host = h("div", { class: "rule-list-host" });
+    const tools = this.editable ? this.buildRuleTools() : null;
     this.ruleList = mountRuleList(host, {
       name: this.name,
       files: () => this.files(),
       goTo: (rule) => this.goTo(rule.row ? { file: rule.file, line: rule.row, column: 1, sheet: rule.sheet } : { file: rule.file, line: rule.line, column: 1 }),
       onSearch: (text) => this.searchEditors(text),
+      tools: tools ? tools.buttons : null,
     });
-    return host;
+    return [host, tools ? tools.host : null];
   }
 
   /** Replace… and + New rule: change words in every rule, or write a rule from chosen sentences. */
   buildRuleTools() {
     const host = h("div", { class: "rule-tools-host" });
-    mountRuleTools(host, {
+    const tools = mountRuleTools(host, {
       files: () => this.files(),
       rules: () => this.ruleList.all(),
       replace: (file, changes) => this.views[file]?.dispatch({ changes }),
@@ -620,7 +622,7 @@ class RulesView {
       },
       goTo: (file, line) => this.goTo({ file, line, column: 1 }),
     });
-    return host;
+    return { host, buttons: tools.buttons };
   }
 
   /** Mark the search words in every editor and bring the first rule that matches into view. */
