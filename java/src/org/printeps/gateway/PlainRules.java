@@ -40,7 +40,8 @@ import org.drools.modelcompiler.util.ClassUtil;
  * Rules of the plain shapes built at run time as executable-model objects, without generating or
  * compiling Java. The rule set's Python side ({@code gateway.engine.plain_rules}) describes each
  * such rule: patterns on declared or imported types with field-versus-literal and
- * field-versus-bound-field comparisons, a sum accumulate, a then-part of calls on one global with
+ * field-versus-bound-field comparisons, in/matches, not/exists, count/sum/min/max accumulates, the
+ * usual rule attributes (format 2), a then-part of calls on one global with
  * literals, bound facts, their getters and text joined from those. This class builds the same
  * {@link Rule} the executable model's generated code builds: the same alpha and beta indexes,
  * property reactivity, accumulate function and constraint ids, so Drools hashes, shares and fires
