@@ -33,8 +33,6 @@ import org.drools.model.functions.Block4;
 import org.drools.model.functions.Function1;
 import org.drools.model.functions.Predicate1;
 import org.drools.model.functions.Predicate2;
-import org.drools.model.impl.RuleBuilder;
-import org.drools.modelcompiler.util.ClassUtil;
 
 /**
  * Rules of the plain shapes built at run time as executable-model objects, without generating or
@@ -124,35 +122,11 @@ public final class PlainRules {
         }
 
         DomainClassMetadata metadata(Class<?> type) {
-            return metadata.computeIfAbsent(type, Metadata::new);
+            return metadata.computeIfAbsent(type, DroolsInternals::domainClassMetadata);
         }
 
         Property property(Class<?> type, String field) {
             return properties.computeIfAbsent(type.getName() + "\0" + field, key -> Property.of(type, field, metadata(type)));
-        }
-    }
-
-    /**
-     * The property indexes of a class as the executable model numbers them (its generated
-     * {@code DomainClassesMetadata}): the position in Drools' list of accessible properties. Alpha
-     * hashing and property reactivity key on these numbers.
-     */
-    static final class Metadata implements DomainClassMetadata {
-        private final Class<?> type;
-        private final List<String> names;
-
-        Metadata(Class<?> type) {
-            this.type = type;
-            this.names = ClassUtil.getAccessiblePropertiesIncludingNonGetterValueMethod(type);
-        }
-
-        public Class<?> getDomainClass() { return type; }
-        public int getPropertiesSize() { return names.size(); }
-
-        public int getPropertyIndex(String name) {
-            int i = names.indexOf(name);
-            if (i < 0) throw new RuntimeException("Unknown property '" + name + "' for class " + type);
-            return i;
         }
     }
 
@@ -276,28 +250,15 @@ public final class PlainRules {
     }
 
     /**
-     * The id the executable model gives a constraint: an md5 of the pattern class and the Java
-     * expression it generates. Constraints of equal id are one node to Drools, so a rule built here
-     * shares its nodes with a compiled rule of the same constraint; a different id would make two
-     * alpha nodes of one hashed value, and Drools' alpha hashing keeps only one of them.
+     * The id the executable model gives a constraint ({@link DroolsInternals#constraintExprId}).
+     * Constraints of equal id are one node to Drools, so a rule built here shares its nodes with a
+     * compiled rule of the same constraint; a different id would make two alpha nodes of one hashed
+     * value, and Drools' alpha hashing keeps only one of them.
      */
     static String exprId(Class<?> type, Property field, Kind kind, Index.ConstraintType op, String right) {
-        String fn;
-        String not = "";
-        switch (op) {
-            case EQUAL: case NOT_EQUAL:
-                fn = kind == Kind.INTEGRAL || kind == Kind.DECIMAL ? "areNumbersNullSafeEquals" : "areNullSafeEquals";
-                if (op == Index.ConstraintType.NOT_EQUAL) not = "!";
-                break;
-            case GREATER_THAN: fn = "greaterThanNumbers"; break;
-            case GREATER_OR_EQUAL: fn = "greaterOrEqualNumbers"; break;
-            case LESS_THAN: fn = "lessThanNumbers"; break;
-            case LESS_OR_EQUAL: fn = "lessOrEqualNumbers"; break;
-            default: throw new Reject("operator " + op);
-        }
-        String java = not + "org.drools.modelcompiler.util.EvaluationUtil." + fn + "(_this." + field.getter.getName() + "(), "
-                + right + ")";
-        return "GENERATED_" + org.drools.util.StringUtils.md5Hash(String.valueOf(type) + java);
+        String id = DroolsInternals.constraintExprId(type, field.getter.getName(), kind == Kind.INTEGRAL || kind == Kind.DECIMAL, op, right);
+        if (id == null) throw new Reject("operator " + op);
+        return id;
     }
 
     static Index.ConstraintType constraintType(String op) {
@@ -427,10 +388,10 @@ public final class PlainRules {
                 }
             }
             items.add(consequence((List<Object>) spec.get("rhs")));
-            RuleBuilder rule = PatternDSL.rule(pkg, (String) spec.get("name"));
             Object salience = spec.get("salience");
-            if (salience != null) rule = rule.attribute(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
-            return rule.build(items.toArray(new RuleItemBuilder<?>[0]));
+            return (salience == null ? PatternDSL.rule(pkg, (String) spec.get("name"))
+                    : PatternDSL.rule(pkg, (String) spec.get("name")).attribute(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue())))
+                    .build(items.toArray(new RuleItemBuilder<?>[0]));
         }
 
         Class<?> resolve(String name) {
@@ -527,7 +488,7 @@ public final class PlainRules {
             org.drools.model.functions.accumulate.AccumulateFunction fn;
             Class<?> resultType;
             if (function.equals("sum") && input != null && binds.size() == 1) {
-                fn = DSL.accFunction(org.drools.core.base.accumulators.SumAccumulateFunction::new, input);
+                fn = DroolsInternals.sum(input);
                 resultType = Double.class;
             } else {
                 throw new Reject("accumulate function " + function + " is left to the compiler");
