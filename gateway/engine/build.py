@@ -102,17 +102,19 @@ class Source:
 
 
 def _java():
-    """The Java classes this module uses (resolved once the JVM runs)."""
+    """The Java classes this module uses (resolved once the JVM runs). Drools' own classes (the
+    parsers, the executable model's project type) come through ``DroolsInternals``, the one seam
+    to Drools' implementation (docs/architecture.md, "The Drools seam")."""
     jvm.start()
     import jpype
 
+    drools = jvm.helper_class("DroolsInternals")
     return {
         "KieServices": jpype.JClass("org.kie.api.KieServices"),
-        "ExecModel": jpype.JClass("org.drools.model.codegen.ExecutableModelProject"),
-        "DrlParser": jpype.JClass("org.drools.drl.parser.DrlParser"),
-        "LanguageLevel": jpype.JClass("org.kie.internal.builder.conf.LanguageLevelOption"),
-        "DslFile": jpype.JClass("org.drools.drl.parser.lang.dsl.DSLTokenizedMappingFile"),
-        "Expander": jpype.JClass("org.drools.drl.parser.lang.dsl.DefaultExpander"),
+        "ExecModel": drools.executableModelProject(),
+        "DrlParser": drools.newDrlParser,
+        "DslFile": drools.newDslMappingFile,
+        "Expander": drools.newDslExpander,
         "StringReader": jpype.JClass("java.io.StringReader"),
         "Runner": jpype.JClass("org.printeps.gateway.Runner"),
         "CompilationErrors": jpype.JClass("org.kie.api.builder.CompilationErrorsException"),

@@ -227,7 +227,7 @@ def _parse(source: Source) -> tuple[list[CompileError], str | None]:
     """Syntax errors of one DRL text, and (when there are none) its top-level items as
     ``Units.describe`` JSON, for the incremental build to split it."""
     j = java_classes()
-    parser = j["DrlParser"](j["LanguageLevel"].DRL6)
+    parser = j["DrlParser"]()
     try:
         descr = parser.parse(False, source.drl)
     except Exception as exc:  # DroolsParserException: report it with what we know

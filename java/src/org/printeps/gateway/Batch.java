@@ -377,7 +377,7 @@ final class Batch {
                 List<FactHandle> listed = new ArrayList<FactHandle>();
                 List<Object> objects = new ArrayList<Object>();
                 for (FactHandle h : handlesIn(p)) {
-                    Object f = ((org.drools.core.common.InternalFactHandle) h).getObject();
+                    Object f = DroolsInternals.objectOf(h);
                     if (f instanceof Actions) continue;
                     if (type != null && !type.isInstance(f)) continue;
                     listed.add(h);
@@ -392,7 +392,7 @@ final class Batch {
             case "get_object": o.value = live(p); o.hasValue = true; break;
             case "delete": {
                 live(p);
-                ks.getEntryPoint(((org.drools.core.common.InternalFactHandle) p.handle).getEntryPointName()).delete(p.handle);
+                ks.getEntryPoint(DroolsInternals.entryPointName(p.handle)).delete(p.handle);
                 break;
             }
             case "modify": {
@@ -408,7 +408,7 @@ final class Batch {
                     }
                     names[k++] = f.name;
                 }
-                EntryPoint ep = ks.getEntryPoint(((org.drools.core.common.InternalFactHandle) p.handle).getEntryPointName());
+                EntryPoint ep = ks.getEntryPoint(DroolsInternals.entryPointName(p.handle));
                 if (Boolean.TRUE.equals(p.cmd.get("whole"))) ep.update(p.handle, fact);  // KIE's ModifyCommand
                 else ep.update(p.handle, fact, names);  // only the rules that react to these fields
                 o.value = fact;
@@ -417,7 +417,7 @@ final class Batch {
             }
             case "update": {
                 live(p);
-                EntryPoint ep = ks.getEntryPoint(((org.drools.core.common.InternalFactHandle) p.handle).getEntryPointName());
+                EntryPoint ep = ks.getEntryPoint(DroolsInternals.entryPointName(p.handle));
                 ep.update(p.handle, p.objects.get(0));
                 break;
             }
@@ -451,7 +451,7 @@ final class Batch {
                         if (h == null) continue;
                         Object v = row.get(id);
                         r.put(id, v);
-                        hs.put(id, disconnected((org.drools.core.common.InternalFactHandle) h, v));
+                        hs.put(id, DroolsInternals.disconnectedHandle(h, v));
                     }
                     rows.add(r);
                     handles.add(hs);
@@ -487,7 +487,7 @@ final class Batch {
             case "get_fact_handles": {
                 List<Object> texts = new ArrayList<Object>();
                 for (FactHandle h : handlesIn(p)) {
-                    if (!(((org.drools.core.common.InternalFactHandle) h).getObject() instanceof Actions)) texts.add(Handles.external(h));
+                    if (!(DroolsInternals.objectOf(h) instanceof Actions)) texts.add(Handles.external(h));
                 }
                 o.value = texts;
                 o.hasValue = true;
@@ -498,20 +498,6 @@ final class Batch {
         }
     }
 
-    /** A query row's fact handle as KIE's DisconnectedFactHandle carries it; its object is the row's
-     *  value (for a query parameter the handle is the query's own, whose object is not a fact). */
-    private static Map<String, Object> disconnected(org.drools.core.common.InternalFactHandle h, Object value) {
-        Map<String, Object> out = new java.util.LinkedHashMap<String, Object>();
-        out.put("id", h.getId());
-        out.put("identityHashCode", h.getIdentityHashCode());
-        out.put("objectHashCode", h.getObjectHashCode());
-        out.put("recency", h.getRecency());
-        out.put("object", value);
-        out.put("traitType", String.valueOf(h.getTraitType()));
-        out.put("external", h.toExternalForm());
-        return out;
-    }
-
     /** The handles a listing command reads: of its entry point "ep" only (KIE's getObjects() and
      *  getFactHandles() read the default entry point), else of every entry point (the REST API). */
     private List<FactHandle> handlesIn(Prepared p) {
@@ -519,7 +505,7 @@ final class Batch {
         if (ep == null) return Handles.all(ks);
         List<FactHandle> out = new ArrayList<FactHandle>();
         for (FactHandle h : Handles.all(ks)) {
-            if (ep.equals(((org.drools.core.common.InternalFactHandle) h).getEntryPointName())) out.add(h);
+            if (ep.equals(DroolsInternals.entryPointName(h))) out.add(h);
         }
         return out;
     }
@@ -581,7 +567,7 @@ final class Batch {
                     b.append("{\"handle\":");
                     Json.quote(b, Handles.external(h));
                     b.append(",\"fact\":");
-                    Json.write(b, ((org.drools.core.common.InternalFactHandle) h).getObject(), types);
+                    Json.write(b, DroolsInternals.objectOf(h), types);
                     b.append('}');
                 }
                 b.append(']');

@@ -5,7 +5,6 @@ import java.util.HashSet;
 import java.util.Map;
 import java.util.Set;
 
-import org.drools.core.common.InternalFactHandle;
 import org.kie.api.event.rule.ObjectDeletedEvent;
 import org.kie.api.event.rule.ObjectInsertedEvent;
 import org.kie.api.event.rule.ObjectUpdatedEvent;
@@ -35,7 +34,7 @@ final class Handles implements RuleRuntimeEventListener {
         final Set<Integer> hashes = new HashSet<Integer>(2);
         Entry(FactHandle handle) {
             this.handle = handle;
-            hashes.add(((InternalFactHandle) handle).getIdentityHashCode());
+            hashes.add(DroolsInternals.identityHashCode(handle));
         }
     }
 
@@ -50,14 +49,14 @@ final class Handles implements RuleRuntimeEventListener {
     @Override
     public void objectInserted(ObjectInsertedEvent event) {
         FactHandle h = event.getFactHandle();
-        byId.put(((InternalFactHandle) h).getId(), new Entry(h));
+        byId.put(DroolsInternals.handleId(h), new Entry(h));
     }
 
     @Override
     public void objectUpdated(ObjectUpdatedEvent event) {
-        InternalFactHandle h = (InternalFactHandle) event.getFactHandle();
-        Entry e = byId.get(h.getId());
-        if (e != null) e.hashes.add(h.getIdentityHashCode());
+        FactHandle h = event.getFactHandle();
+        Entry e = byId.get(DroolsInternals.handleId(h));
+        if (e != null) e.hashes.add(DroolsInternals.identityHashCode(h));
         if (unchangedSinceMove != null) {
             unchangedSinceMove.remove(event.getOldObject());
             unchangedSinceMove.remove(event.getObject());
@@ -66,15 +65,15 @@ final class Handles implements RuleRuntimeEventListener {
 
     @Override
     public void objectDeleted(ObjectDeletedEvent event) {
-        InternalFactHandle h = (InternalFactHandle) event.getFactHandle();
-        Entry e = byId.remove(h.getId());
+        FactHandle h = event.getFactHandle();
+        Entry e = byId.remove(DroolsInternals.handleId(h));
         if (e != null) aliases.values().removeIf(x -> x == e);
         if (unchangedSinceMove != null) unchangedSinceMove.remove(event.getOldObject());
     }
 
     /** Registers a handle from before a move as an alias of the fact's handle now. */
     void alias(long oldId, int oldHash, FactHandle now) {
-        Entry e = byId.get(((InternalFactHandle) now).getId());
+        Entry e = byId.get(DroolsInternals.handleId(now));
         if (e != null) aliases.put(oldId + ":" + oldHash, e);
     }
 
@@ -119,14 +118,14 @@ final class Handles implements RuleRuntimeEventListener {
     }
 
     static String external(FactHandle h) {
-        return ((InternalFactHandle) h).toExternalForm();
+        return h.toExternalForm();
     }
 
     /** Every live handle of the session, in id order, over all its entry points. */
     static java.util.List<FactHandle> all(KieSession session) {
         java.util.List<FactHandle> out = new java.util.ArrayList<FactHandle>();
         for (EntryPoint ep : session.getEntryPoints()) out.addAll(ep.getFactHandles());
-        out.sort((a, b) -> Long.compare(((InternalFactHandle) a).getId(), ((InternalFactHandle) b).getId()));
+        out.sort((a, b) -> Long.compare(DroolsInternals.handleId(a), DroolsInternals.handleId(b)));
         return out;
     }
 
@@ -137,13 +136,13 @@ final class Handles implements RuleRuntimeEventListener {
      */
     java.util.List<String> keysOf(FactHandle h) {
         java.util.List<String> out = new java.util.ArrayList<String>();
-        InternalFactHandle ih = (InternalFactHandle) h;
-        Entry e = byId.get(ih.getId());
+        long id = DroolsInternals.handleId(h);
+        Entry e = byId.get(id);
         if (e == null) {
-            out.add(ih.getId() + ":" + ih.getIdentityHashCode());
+            out.add(id + ":" + DroolsInternals.identityHashCode(h));
             return out;
         }
-        for (Integer hash : e.hashes) out.add(ih.getId() + ":" + hash);
+        for (Integer hash : e.hashes) out.add(id + ":" + hash);
         for (Map.Entry<String, Entry> a : aliases.entrySet()) if (a.getValue() == e) out.add(a.getKey());
         return out;
     }

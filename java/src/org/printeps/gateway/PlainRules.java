@@ -33,8 +33,6 @@ import org.drools.model.functions.Block4;
 import org.drools.model.functions.Function1;
 import org.drools.model.functions.Predicate1;
 import org.drools.model.functions.Predicate2;
-import org.drools.model.impl.RuleBuilder;
-import org.drools.modelcompiler.util.ClassUtil;
 
 /**
  * Rules of the plain shapes built at run time as executable-model objects, without generating or
@@ -125,35 +123,11 @@ public final class PlainRules {
         }
 
         DomainClassMetadata metadata(Class<?> type) {
-            return metadata.computeIfAbsent(type, Metadata::new);
+            return metadata.computeIfAbsent(type, DroolsInternals::domainClassMetadata);
         }
 
         Property property(Class<?> type, String field) {
             return properties.computeIfAbsent(type.getName() + "\0" + field, key -> Property.of(type, field, metadata(type)));
-        }
-    }
-
-    /**
-     * The property indexes of a class as the executable model numbers them (its generated
-     * {@code DomainClassesMetadata}): the position in Drools' list of accessible properties. Alpha
-     * hashing and property reactivity key on these numbers.
-     */
-    static final class Metadata implements DomainClassMetadata {
-        private final Class<?> type;
-        private final List<String> names;
-
-        Metadata(Class<?> type) {
-            this.type = type;
-            this.names = ClassUtil.getAccessiblePropertiesIncludingNonGetterValueMethod(type);
-        }
-
-        public Class<?> getDomainClass() { return type; }
-        public int getPropertiesSize() { return names.size(); }
-
-        public int getPropertyIndex(String name) {
-            int i = names.indexOf(name);
-            if (i < 0) throw new RuntimeException("Unknown property '" + name + "' for class " + type);
-            return i;
         }
     }
 
@@ -277,28 +251,15 @@ public final class PlainRules {
     }
 
     /**
-     * The id the executable model gives a constraint: an md5 of the pattern class and the Java
-     * expression it generates. Constraints of equal id are one node to Drools, so a rule built here
-     * shares its nodes with a compiled rule of the same constraint; a different id would make two
-     * alpha nodes of one hashed value, and Drools' alpha hashing keeps only one of them.
+     * The id the executable model gives a constraint ({@link DroolsInternals#constraintExprId}).
+     * Constraints of equal id are one node to Drools, so a rule built here shares its nodes with a
+     * compiled rule of the same constraint; a different id would make two alpha nodes of one hashed
+     * value, and Drools' alpha hashing keeps only one of them.
      */
     static String exprId(Class<?> type, Property field, Kind kind, Index.ConstraintType op, String right) {
-        String fn;
-        String not = "";
-        switch (op) {
-            case EQUAL: case NOT_EQUAL:
-                fn = kind == Kind.INTEGRAL || kind == Kind.DECIMAL ? "areNumbersNullSafeEquals" : "areNullSafeEquals";
-                if (op == Index.ConstraintType.NOT_EQUAL) not = "!";
-                break;
-            case GREATER_THAN: fn = "greaterThanNumbers"; break;
-            case GREATER_OR_EQUAL: fn = "greaterOrEqualNumbers"; break;
-            case LESS_THAN: fn = "lessThanNumbers"; break;
-            case LESS_OR_EQUAL: fn = "lessOrEqualNumbers"; break;
-            default: throw new Reject("operator " + op);
-        }
-        String java = not + "org.drools.modelcompiler.util.EvaluationUtil." + fn + "(_this." + field.getter.getName() + "(), "
-                + right + ")";
-        return "GENERATED_" + org.drools.util.StringUtils.md5Hash(String.valueOf(type) + java);
+        String id = DroolsInternals.constraintExprId(type, field.getter.getName(), kind == Kind.INTEGRAL || kind == Kind.DECIMAL, op, right);
+        if (id == null) throw new Reject("operator " + op);
+        return id;
     }
 
     static Index.ConstraintType constraintType(String op) {
@@ -435,11 +396,11 @@ public final class PlainRules {
                 }
             }
             items.add(consequence((List<Object>) spec.get("rhs")));
-            RuleBuilder rule = PatternDSL.rule(pkg, (String) spec.get("name"));
             Object salience = spec.get("salience");
-            if (salience != null) rule = rule.attribute(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
-            rule = attributes(rule, (Map<String, Object>) spec.get("attributes"));
-            return rule.build(items.toArray(new RuleItemBuilder<?>[0]));
+            Map<Rule.Attribute, Object> attributes = new LinkedHashMap<Rule.Attribute, Object>();
+            if (salience != null) attributes.put(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
+            attributes(attributes, (Map<String, Object>) spec.get("attributes"));
+            return DroolsInternals.rule(pkg, (String) spec.get("name"), attributes, items.toArray(new RuleItemBuilder<?>[0]));
         }
 
         Class<?> resolve(String name) {
@@ -539,7 +500,7 @@ public final class PlainRules {
             org.drools.model.functions.accumulate.AccumulateFunction fn;
             Class<?> resultType;
             if (function.equals("sum") && input != null && binds.size() == 1) {
-                fn = DSL.accFunction(org.drools.core.base.accumulators.SumAccumulateFunction::new, input);
+                fn = DroolsInternals.sum(input);
                 resultType = Double.class;
             } else {
                 throw new Reject("accumulate function " + function + " is left to the compiler");
@@ -656,7 +617,7 @@ public final class PlainRules {
                 java.append(", ").append(javaText(literals.get(i), field.type));
             }
             java.append(")");
-            String exprId = "GENERATED_" + org.drools.util.StringUtils.md5Hash(String.valueOf(type) + java);
+            String exprId = DroolsInternals.generatedExprId(type, java);
             Predicate1<Object> test = negated
                     ? fact -> !DSL.eval(operator, field.apply(fact), values)
                     : fact -> DSL.eval(operator, field.apply(fact), values);
@@ -677,7 +638,7 @@ public final class PlainRules {
         /**
          * {@code Number( intValue >= 2 ) from accumulate( Loan( applicant == $id, $m : amount ), count( 1 ) )}:
          * the accumulate function and result type the executable model chooses
-         * ({@link PlainRulesInternals#accumulateFunction}), every binding of the source pattern made
+         * ({@link DroolsInternals#accumulateFunction}), every binding of the source pattern made
          * (used or not, as the generated code does), and the result pattern's comparisons of
          * {@code intValue}/{@code longValue}/{@code doubleValue} with numbers.
          */
@@ -719,9 +680,9 @@ public final class PlainRules {
             } else {
                 throw new Reject(function + " of a constant");
             }
-            java.util.function.Supplier<?> fn = PlainRulesInternals.accumulateFunction(function, inputType);
+            java.util.function.Supplier<?> fn = DroolsInternals.accumulateFunction(function, inputType);
             if (fn == null) throw new Reject("accumulate function " + function + " over " + inputType.getName() + " is left to the compiler");
-            Class<?> resultType = PlainRulesInternals.accumulateResultType(function);
+            Class<?> resultType = DroolsInternals.accumulateResultType(function);
             String resultVar = (String) resultSpec.get("var");
             String resultName = resultVar != null ? resultVar : "$pattern_Number$" + (++unnamed) + "$";
             if (vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
@@ -756,8 +717,8 @@ public final class PlainRules {
 
         /** The attributes besides salience, as the executable model sets them. */
         @SuppressWarnings({"unchecked", "rawtypes"})
-        RuleBuilder attributes(RuleBuilder rule, Map<String, Object> attributes) {
-            if (attributes == null) return rule;
+        void attributes(Map<Rule.Attribute, Object> into, Map<String, Object> attributes) {
+            if (attributes == null) return;
             for (Map.Entry<String, Object> a : attributes.entrySet()) {
                 Object v = a.getValue();
                 Rule.Attribute attribute;
@@ -767,13 +728,12 @@ public final class PlainRules {
                     case "auto-focus": attribute = Rule.Attribute.AUTO_FOCUS; break;
                     case "no-loop": attribute = Rule.Attribute.NO_LOOP; break;
                     case "lock-on-active": attribute = Rule.Attribute.LOCK_ON_ACTIVE; break;
-                    case "date-effective": attribute = Rule.Attribute.DATE_EFFECTIVE; v = PlainRulesInternals.ruleDate((String) v); break;
-                    case "date-expires": attribute = Rule.Attribute.DATE_EXPIRES; v = PlainRulesInternals.ruleDate((String) v); break;
+                    case "date-effective": attribute = Rule.Attribute.DATE_EFFECTIVE; v = DroolsInternals.ruleDate((String) v); break;
+                    case "date-expires": attribute = Rule.Attribute.DATE_EXPIRES; v = DroolsInternals.ruleDate((String) v); break;
                     default: throw new Reject("attribute " + a.getKey());
                 }
-                rule = rule.attribute(attribute, v);
+                into.put(attribute, v);
             }
-            return rule;
         }
 
         @SuppressWarnings({"unchecked", "rawtypes"})

@@ -59,9 +59,7 @@ public final class Runner {
     static boolean usesCalendarAttributes(KieBase kb) {
         for (KiePackage p : kb.getKiePackages()) {
             for (org.kie.api.definition.rule.Rule r : p.getRules()) {
-                if (!(r instanceof org.drools.core.definitions.rule.impl.RuleImpl)) continue;
-                org.drools.core.definitions.rule.impl.RuleImpl rule = (org.drools.core.definitions.rule.impl.RuleImpl) r;
-                if (rule.getDateEffective() != null || rule.getDateExpires() != null) return true;
+                if (DroolsInternals.hasCalendarAttributes(r)) return true;
             }
         }
         return false;
@@ -88,23 +86,7 @@ public final class Runner {
         if (types.hasEventTypes()) return false;
         for (KiePackage p : kb.getKiePackages()) {
             for (org.kie.api.definition.rule.Rule r : p.getRules()) {
-                if (!(r instanceof org.drools.core.definitions.rule.impl.RuleImpl)) return false;
-                org.drools.core.definitions.rule.impl.RuleImpl rule = (org.drools.core.definitions.rule.impl.RuleImpl) r;
-                if (rule.isQuery()) continue;
-                if (rule.getTimer() != null || rule.getAutoFocus()) return false;
-                if (rule.getAgendaGroup() != null && !"MAIN".equals(rule.getAgendaGroup())) return false;
-                if (rule.getRuleFlowGroup() != null && !rule.getRuleFlowGroup().isEmpty()) return false;
-                org.drools.core.rule.GroupElement lhs = rule.getLhs();
-                if (lhs == null || !lhs.isAnd() || lhs.getChildren().isEmpty()) return false;
-                Object first = lhs.getChildren().get(0);
-                if (!(first instanceof org.drools.core.rule.Pattern)) return false;
-                org.drools.core.rule.Pattern pattern = (org.drools.core.rule.Pattern) first;
-                if (pattern.getSource() != null) return false;
-                // a rule opening with not/exists/eval/accumulate or a query call starts from the
-                // session's initial fact: it matches without any fact of the request
-                if (!(pattern.getObjectType() instanceof org.drools.core.base.ClassObjectType)) return false;
-                Class<?> type = ((org.drools.core.base.ClassObjectType) pattern.getObjectType()).getClassType();
-                if (type == null || type.getName().endsWith(".InitialFactImpl")) return false;
+                if (!DroolsInternals.matchesOnlyFromFacts(r)) return false;
             }
         }
         return true;
@@ -244,11 +226,10 @@ public final class Runner {
     /** The session's facts in the order they were inserted (a session's own store iterates in hash
      *  order, which would differ between a fresh and a reused session). */
     static List<Object> inInsertionOrder(KieSession session) {
-        List<org.drools.core.common.InternalFactHandle> handles = new ArrayList<org.drools.core.common.InternalFactHandle>();
-        for (FactHandle h : session.getFactHandles()) handles.add((org.drools.core.common.InternalFactHandle) h);
-        handles.sort((x, y) -> Long.compare(x.getId(), y.getId()));
+        List<FactHandle> handles = new ArrayList<FactHandle>(session.getFactHandles());
+        handles.sort((x, y) -> Long.compare(DroolsInternals.handleId(x), DroolsInternals.handleId(y)));
         List<Object> out = new ArrayList<Object>(handles.size());
-        for (org.drools.core.common.InternalFactHandle h : handles) out.add(h.getObject());
+        for (FactHandle h : handles) out.add(DroolsInternals.objectOf(h));
         return out;
     }
 

@@ -78,7 +78,7 @@ public final class Session {
         private final FactHandle h;
         InsertedEvent(FactHandle h) { this.h = h; }
         public FactHandle getFactHandle() { return h; }
-        public Object getObject() { return ((org.drools.core.common.InternalFactHandle) h).getObject(); }
+        public Object getObject() { return DroolsInternals.objectOf(h); }
         public org.kie.api.definition.rule.Rule getRule() { return null; }
         public org.kie.api.runtime.KieRuntime getKieRuntime() { return null; }
     }
@@ -369,11 +369,9 @@ public final class Session {
     Class<?>[] queryParameterTypes(String name) {
         for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
             for (org.kie.api.definition.rule.Query q : p.getQueries()) {
-                if (q.getName().equals(name) && q instanceof org.drools.core.definitions.rule.impl.QueryImpl) {
-                    org.drools.core.rule.Declaration[] ds = ((org.drools.core.definitions.rule.impl.QueryImpl) q).getParameters();
-                    Class<?>[] out = new Class<?>[ds.length];
-                    for (int k = 0; k < ds.length; k++) out[k] = ds[k].getDeclarationClass();
-                    return out;
+                if (q.getName().equals(name)) {
+                    Class<?>[] out = DroolsInternals.queryParameterTypes(q);
+                    if (out != null) return out;
                 }
             }
         }
@@ -441,8 +439,7 @@ public final class Session {
             List<Object> built = new ArrayList<Object>(oldHandles.size());
             List<org.kie.api.runtime.rule.EntryPoint> targets = new ArrayList<org.kie.api.runtime.rule.EntryPoint>();
             for (FactHandle h : oldHandles) {
-                org.drools.core.common.InternalFactHandle ih = (org.drools.core.common.InternalFactHandle) h;
-                Object fact = ih.getObject();
+                Object fact = DroolsInternals.objectOf(h);
                 if (fact instanceof Actions) { built.add(null); targets.add(null); continue; }
                 StringBuilder json = new StringBuilder();
                 if (!theirs.writeFact(json, fact)) {
@@ -458,8 +455,8 @@ public final class Session {
                 } catch (TypeRegistry.FactProblem p) {
                     return problem("fact " + Handles.external(h) + " (" + type + ") does not fit the new version: " + p.getMessage());
                 }
-                org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(ih.getEntryPointName());
-                if (ep == null) return problem("fact " + Handles.external(h) + ": the new version has no entry point " + ih.getEntryPointName());
+                org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(DroolsInternals.entryPointName(h));
+                if (ep == null) return problem("fact " + Handles.external(h) + ": the new version has no entry point " + DroolsInternals.entryPointName(h));
                 targets.add(ep);
             }
             Map<String, Object> globals = new java.util.LinkedHashMap<String, Object>();
@@ -491,13 +488,13 @@ public final class Session {
                 Object fact = built.get(k);
                 if (fact == null) continue;
                 FactHandle nh = targets.get(k).insert(fact);
-                org.drools.core.common.InternalFactHandle oh = (org.drools.core.common.InternalFactHandle) oldHandles.get(k);
+                FactHandle oh = oldHandles.get(k);
                 moved.put(oh, nh);
-                mapped.put(oh.getObject(), fact);
+                mapped.put(DroolsInternals.objectOf(oh), fact);
                 unchanged.add(fact);
-                String id = theirs.idOf(oh.getObject());
+                String id = theirs.idOf(DroolsInternals.objectOf(oh));
                 if (id != null && !types().isEvent(fact)) byId.put(id, nh);
-                if (handles != null) handles.alias(oh.getId(), oh.getIdentityHashCode(), nh);
+                if (handles != null) handles.alias(DroolsInternals.handleId(oh), DroolsInternals.identityHashCode(oh), nh);
                 count++;
             }
             if (handles != null) {
@@ -537,7 +534,7 @@ public final class Session {
             Map<String, Integer> fired = firstAgenda(built, targets, globals, old, unchangedRules, cameAcross);
             Refraction.subtract(fired, pending);
             refraction = new Refraction(unchangedRules, unchanged, fired);
-            String focus = ((org.drools.core.common.InternalAgenda) old.session.getAgenda()).getFocusName();
+            String focus = DroolsInternals.focusName(old.session);
             if (focus != null && !focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
             return "{\"ok\":true,\"facts\":" + count + "}";
         }
@@ -567,7 +564,7 @@ public final class Session {
                 if (built.get(k) == null) continue;
                 probe.getEntryPoint(targets.get(k).getEntryPointId()).insert(built.get(k));
             }
-            String focus = ((org.drools.core.common.InternalAgenda) old.session.getAgenda()).getFocusName();
+            String focus = DroolsInternals.focusName(old.session);
             if (focus != null && !focus.equals("MAIN")) probe.getAgenda().getAgendaGroup(focus).setFocus();
             probe.fireAllRules(match -> {
                 String rule = match.getRule().getName();
@@ -607,8 +604,7 @@ public final class Session {
         b.append(",\"facts\":[");
         boolean first = true;
         for (FactHandle h : Handles.all(session)) {
-            org.drools.core.common.InternalFactHandle ih = (org.drools.core.common.InternalFactHandle) h;
-            Object fact = ih.getObject();
+            Object fact = DroolsInternals.objectOf(h);
             if (fact instanceof Actions) continue;
             StringBuilder json = new StringBuilder();
             if (!types.writeFact(json, fact)) {
@@ -617,10 +613,10 @@ public final class Session {
             if (!first) b.append(',');
             first = false;
             b.append("{\"ep\":");
-            Json.quote(b, ih.getEntryPointName());
+            Json.quote(b, DroolsInternals.entryPointName(h));
             b.append(",\"keys\":[");
             List<String> keys = handles != null ? handles.keysOf(h)
-                    : java.util.Collections.singletonList(ih.getId() + ":" + ih.getIdentityHashCode());
+                    : java.util.Collections.singletonList(DroolsInternals.handleId(h) + ":" + DroolsInternals.identityHashCode(h));
             for (int k = 0; k < keys.size(); k++) {
                 if (k > 0) b.append(',');
                 Json.quote(b, keys.get(k));
@@ -642,7 +638,7 @@ public final class Session {
             }
         }
         b.append("},\"focus\":");
-        String focus = ((org.drools.core.common.InternalAgenda) session.getAgenda()).getFocusName();
+        String focus = DroolsInternals.focusName(session);
         Json.quote(b, focus == null ? "MAIN" : focus);
         return b.append('}').toString();
     }

@@ -17,14 +17,12 @@ import java.util.zip.ZipEntry;
 import java.util.zip.ZipInputStream;
 import java.util.zip.ZipOutputStream;
 
-import org.drools.compiler.kie.builder.impl.InternalKieModule;
 import org.drools.model.EntryPoint;
 import org.drools.model.Global;
 import org.drools.model.Model;
 import org.drools.model.Query;
 import org.drools.model.Rule;
 import org.drools.model.TypeMetaData;
-import org.drools.modelcompiler.KieBaseBuilder;
 import org.kie.api.KieBase;
 import org.kie.api.KieBaseConfiguration;
 import org.kie.api.builder.KieModule;
@@ -116,27 +114,16 @@ public final class Units {
 
     /** The generated classes of a built KieModule (binary name -> bytes). */
     public static Map<String, byte[]> classesOf(KieModule module) {
-        InternalKieModule km = (InternalKieModule) module;
         Map<String, byte[]> out = new HashMap<String, byte[]>();
-        for (String file : km.getFileNames()) {
-            if (file.endsWith(".class")) out.put(binaryName(file), km.getBytes(file));
+        for (String file : DroolsInternals.moduleFileNames(module)) {
+            if (file.endsWith(".class")) out.put(binaryName(file), DroolsInternals.moduleFile(module, file));
         }
         return out;
     }
 
     /** The executable-model classes ({@code Rules<uuid>}, one per package) a KieModule lists. */
     public static String[] modelClassNames(KieModule module) {
-        InternalKieModule km = (InternalKieModule) module;
-        List<String> out = new ArrayList<String>();
-        for (String file : km.getFileNames()) {
-            if (!file.endsWith("/drools-model")) continue;
-            String[] lines = new String(km.getBytes(file), java.nio.charset.StandardCharsets.UTF_8).split("\n");
-            for (String line : lines) {
-                line = line.trim();
-                if (!line.isEmpty() && !line.startsWith("Drools-Model-Version")) out.add(line);
-            }
-        }
-        return out.toArray(new String[0]);
+        return DroolsInternals.modelClassNames(module);
     }
 
     /** Class bytes as one zip (what the disk cache and exported rule sets hold). */
@@ -219,12 +206,12 @@ public final class Units {
             }
             merged.computeIfAbsent(packages[k], MergedModel::new).rules.add(rule);
         }
-        return KieBaseBuilder.createKieBaseFromModel(new ArrayList<Model>(merged.values()), conf);
+        return DroolsInternals.kieBaseFromModels(new ArrayList<Model>(merged.values()), conf);
     }
 
     /** One KieBase from whole models as they are (a rule set compiled as one unit, without a rule order). */
     public static KieBase build(List<Model> models, KieBaseConfiguration conf) {
-        return KieBaseBuilder.createKieBaseFromModel(models, conf);
+        return DroolsInternals.kieBaseFromModels(models, conf);
     }
 
     /** All of one package: declarations from the declarations unit, rules from wherever they were compiled. */
@@ -266,42 +253,12 @@ public final class Units {
      * with kind one of rule, query, type, enum, function, window, entrypoint; start/end are the
      * parser's character offsets (refined on the Python side), parent the rule a rule extends.
      */
-    public static String describe(org.drools.drl.ast.descr.PackageDescr pd) {
-        StringBuilder b = new StringBuilder(256 + 96 * pd.getRules().size());
-        b.append("{\"package\":");
-        Json.quote(b, pd.getName() == null ? "" : pd.getName());
-        b.append(",\"unit\":").append(pd.getUnit() != null);
-        b.append(",\"items\":[");
-        boolean[] first = {true};
-        for (org.drools.drl.ast.descr.RuleDescr r : pd.getRules()) {
-            item(b, first, r.isQuery() ? "query" : "rule", r.getName(), r, r.getParentName());
-        }
-        for (org.drools.drl.ast.descr.TypeDeclarationDescr t : pd.getTypeDeclarations()) item(b, first, "type", t.getTypeName(), t, null);
-        for (org.drools.drl.ast.descr.EnumDeclarationDescr t : pd.getEnumDeclarations()) item(b, first, "enum", t.getTypeName(), t, null);
-        for (org.drools.drl.ast.descr.FunctionDescr f : pd.getFunctions()) item(b, first, "function", f.getName(), f, null);
-        for (org.drools.drl.ast.descr.WindowDeclarationDescr w : pd.getWindowDeclarations()) item(b, first, "window", w.getName(), w, null);
-        for (org.drools.drl.ast.descr.EntryPointDeclarationDescr e : pd.getEntryPointDeclarations()) item(b, first, "entrypoint", e.getEntryPointId(), e, null);
-        return b.append("]}").toString();
-    }
-
-    private static void item(StringBuilder b, boolean[] first, String kind, String name,
-                             org.drools.drl.ast.descr.BaseDescr d, String parent) {
-        if (!first[0]) b.append(',');
-        first[0] = false;
-        b.append('[');
-        Json.quote(b, kind);
-        b.append(',');
-        Json.quote(b, name == null ? "" : name);
-        b.append(',').append(d.getStartCharacter()).append(',').append(d.getEndCharacter());
-        b.append(',').append(d.getLine()).append(',');
-        if (parent == null) b.append("null"); else Json.quote(b, parent);
-        b.append(']');
+    public static String describe(Object packageDescr) {
+        return DroolsInternals.drlItems(packageDescr);
     }
 
     /** Drools' version, part of the cache key: generated classes are only valid for the Drools that made them. */
     public static String droolsVersion() {
-        Package p = KieBaseBuilder.class.getPackage();
-        String v = p == null ? null : p.getImplementationVersion();
-        return v == null ? "unknown" : v;
+        return DroolsInternals.droolsVersion();
     }
 }
