@@ -77,8 +77,8 @@ class WorkflowRegistry:
                 continue
             if self.catalog.head(KIND, wf.name) is not None:
                 continue
-            try:
-                self.replace(wf.name, wf.source, author="seed", comment=f"seeded from {path.name}", base_version=0)
+            try:  # already parsed and checked above: stored as it is, not parsed a second time
+                self._save(wf.name, wf, author="seed", comment=f"seeded from {path.name}", base_version=0)
             except WorkflowConflict:
                 pass  # another process seeded it at the same moment
         return problems
@@ -141,7 +141,12 @@ class WorkflowRegistry:
         Raises :class:`WorkflowInvalid` (nothing changes) or :class:`WorkflowConflict` when
         ``base_version`` is stale.
         """
-        wf = parse(text, file=f"{name}.yaml")
+        return self._save(name, parse(text, file=f"{name}.yaml"), author=author, comment=comment,
+                          base_version=base_version)
+
+    def _save(self, name: str, wf: Workflow, *, author: str, comment: str, base_version: int | None) -> VersionInfo:
+        """Store the parsed workflow ``wf`` (its text: ``wf.source``) as the current version of ``name``."""
+        text = wf.source
         if wf.name != name:
             raise WorkflowInvalid([Problem(f"{name}.yaml", "workflow", *_place_of_name(text),
                                            f"the text defines workflow {wf.name!r}, not {name!r}")])

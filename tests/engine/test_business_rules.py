@@ -64,7 +64,9 @@ def check(compiled, rules: BusinessRules) -> int:
     return total
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+# Seed 1 (with its incremental edit) in the inner loop; the other random bases, a thousand rules
+# compiled from scratch each, in the full run (make test): they are the soak of this model check.
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow), pytest.param(3, marks=pytest.mark.slow)])
 def test_a_random_thousand_rule_business_base_fires_as_its_model(seed, options):
     rules = generator(seed)
     shapes = {r.shape for r in rules.rules()}
