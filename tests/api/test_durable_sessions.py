@@ -3,7 +3,7 @@ command is journalled, and a session lost from its process (as a crash loses it)
 next call from its snapshots and log — the same facts, handles, clock and version, nothing that
 fired fires again; refused commands are not journalled; a batch stopped half-way is rolled back;
 a corrupt snapshot falls back to the log; dispose deletes the log. The cross-process cases are in
-tests/cluster/test_durable_sessions.py."""
+tests/cluster/test_durable_takeover.py."""
 
 from __future__ import annotations
 

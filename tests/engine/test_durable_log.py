@@ -1,7 +1,7 @@
 """The plain-Python part of durable sessions (gateway.engine.durable): which batches are journalled,
 when a snapshot may be taken, what an entry keeps, and the order a rebuild tries its starts in
 and replays entries (over a recording stand-in for the Java session; the real one is exercised in
-tests/api/test_durable_sessions.py and tests/cluster/test_durable_sessions.py)."""
+tests/api/test_durable_sessions.py and tests/cluster/test_durable_takeover.py)."""
 
 from __future__ import annotations
 
