@@ -42,7 +42,7 @@ def test_clean_shutdown(sig, domain_id, tmp_path) -> None:
                 break
         assert any("gateway node ready" in x for x in lines), "".join(lines)
         proc.send_signal(sig)
-        out, _ = proc.communicate(timeout=30)
+        out, _ = proc.communicate(timeout=90)  # a safety limit: the node, the JVM and the database close in turn
     finally:
         if proc.poll() is None:
             proc.kill()
