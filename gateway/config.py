@@ -79,6 +79,10 @@ class EngineSettings(BaseModel):
     explain_prebuild: bool = Field(
         default=True, description="After a deploy (rollback, load, sync) build the version's explain queries on "
         "the explain thread, so the first explanation of it does not compile them (seconds, one core).")
+    explain_prebuild_max_rules: int = Field(
+        default=200, ge=0, description="Explain queries are built in advance only for versions of at most this "
+        "many rules (0: no limit). Why: their compile grows with the rules (~10 s for 32, minutes for 1,000) "
+        "and shares the compiler with deploys; a bigger rule set builds them at its first explanation.")
     rule_policy: RulePolicySettings = Field(default_factory=RulePolicySettings)
     max_queued_jobs: int = Field(
         default=16, ge=1, description="Build jobs (asynchronous deploys/validations) waiting per process; "
@@ -416,6 +420,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_COMPILE_TIMEOUT": ("engine", "compile_timeout_s"),
     "PRINTEPS_COMPILE_WORKERS": ("engine", "compile_workers"),
     "PRINTEPS_EXPLAIN_PREBUILD": ("engine", "explain_prebuild"),
+    "PRINTEPS_EXPLAIN_PREBUILD_MAX_RULES": ("engine", "explain_prebuild_max_rules"),
     "PRINTEPS_RULE_CACHE_DIR": ("engine", "compile_cache_dir"),
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),

@@ -236,7 +236,7 @@ class Engine:
             stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
             entry = LiveRuleSet(stored.info, self._compile(stored.payload, name), head.seq)
             self._live[name] = entry
-        self.prepare_explain(name, stored.payload)
+        self.prepare_explain(name, stored.payload, entry.compiled.rule_count)
         return entry
 
     def _swap(self, name: str, entry: LiveRuleSet | None, seq: int) -> bool:
@@ -338,7 +338,7 @@ class Engine:
         except CatalogConflict as conflict:
             raise VersionConflict(name, conflict.base, conflict.current) from None
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
-        self.prepare_explain(name, files)
+        self.prepare_explain(name, files, compiled.rule_count)
         elapsed = (time.perf_counter() - started) * 1000
         log.info("deployed %s version %d (%d rules) in %.0f ms", name, info.version, compiled.rule_count, elapsed)
         self._notify("deploy", {**info.to_dict(), "rules": compiled.rule_count, "duration_ms": elapsed})
@@ -354,7 +354,7 @@ class Engine:
         info, seq = self.catalog.set_current(KIND, name, stored.info.version, author=author, comment=comment,
                                              role=_audit_role(role))
         self._swap(name, LiveRuleSet(info, compiled, seq), seq)
-        self.prepare_explain(name, stored.files)
+        self.prepare_explain(name, stored.files, compiled.rule_count)
         self._notify("rollback", {**info.to_dict(), "by": author})
         return info
 
@@ -385,7 +385,7 @@ class Engine:
         stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
         compiled = self._compile(stored.payload, name)
         if self._swap(name, LiveRuleSet(stored.info, compiled, head.seq), head.seq):
-            self.prepare_explain(name, stored.payload)
+            self.prepare_explain(name, stored.payload, compiled.rule_count)
             log.info("rule set %s: now serving version %d (changed elsewhere)", name, stored.info.version)
             self._notify("sync", {**stored.info.to_dict()})
 
@@ -493,11 +493,19 @@ class Engine:
         encode_facts(facts, self.settings.engine.max_facts)  # bad facts: the fire's own error, before any build
         return {"ruleset": name, **label, **self._explainers.run(self, files, facts)}
 
-    def prepare_explain(self, name: str, files: dict[str, str]) -> None:
+    def prepare_explain(self, name: str, files: dict[str, str], rules: int) -> None:
         """A version of ``name`` went live here: build its explain queries in the background
-        (``engine.explain_prebuild``), so its first explanation answers in milliseconds."""
-        if self.settings.engine.explain_prebuild:
-            self._explainers.prebuild(self, name, files)
+        (``engine.explain_prebuild``), so its first explanation answers in milliseconds. Only
+        for versions of at most ``engine.explain_prebuild_max_rules`` rules: the queries' compile
+        grows with the rules and holds the compiler, which a big rule set's next deploy needs."""
+        engine_settings = self.settings.engine
+        if not engine_settings.explain_prebuild:
+            return
+        limit = engine_settings.explain_prebuild_max_rules
+        if limit and rules > limit:
+            log.info("explain queries of %s are built at its first explanation (more than %d rules)", name, limit)
+            return
+        self._explainers.prebuild(self, name, files)
 
     def explain_ready(self, files: dict[str, str]) -> bool:
         """Whether explaining ``files`` would find its queries built (no compile)."""

@@ -298,6 +298,29 @@ def test_an_explanation_after_a_deploy_compiles_nothing(client, api_gateway):
     assert engine.explain_builds() == builds and compiler.stats["compiles"] == compiles
 
 
+def test_a_rule_set_over_the_prebuild_limit_builds_at_its_first_explanation(client, api_gateway):
+    """``engine.explain_prebuild_max_rules``: a version with more rules than the limit queues no
+    build in advance (its queries' compile would hold the compiler its next deploy needs); its
+    first explanation builds them."""
+    from gateway.engine import compiler
+
+    engine = api_gateway.engine
+    files = {"r.drl": DRL.replace('"Hello"', '"Hello, big set"')}  # a text no other test built
+    engine.settings.engine.explain_prebuild = True
+    engine.settings.engine.explain_prebuild_max_rules = 1
+    try:
+        assert client.put("/api/rulesets/explain-over-limit", json={"files": files}).status_code == 201
+        assert engine.rule_count("explain-over-limit") > 1
+        assert not engine.explain_ready(files)
+        builds, compiles = engine.explain_builds(), compiler.stats["compiles"]
+        answer = client.post("/api/rulesets/explain-over-limit/explain", json={"facts": []})
+    finally:
+        engine.settings.engine.explain_prebuild = False
+        engine.settings.engine.explain_prebuild_max_rules = 200
+    assert answer.status_code == 200, answer.text
+    assert engine.explain_builds() == builds + 1 and compiler.stats["compiles"] > compiles
+
+
 def test_without_prebuild_the_first_explanation_builds(client, api_gateway):
     """The counter the test above relies on does count: an explanation of a text nobody built
     builds its explainer (and compiles)."""
