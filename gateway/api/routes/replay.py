@@ -8,7 +8,7 @@ A replay performs no action, records no decision and changes nothing live.
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable
 
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, ConfigDict, Field
@@ -69,8 +69,15 @@ def replay_decisions(name: RuleSetName, body: ReplayBody, request: Request, engi
     def task(progress: Any = None) -> dict[str, Any]:
         return replay.run(engine, decisions, name, params, on_progress=progress)
 
+    return run_replay(request, jobs, name, who.name, task)
+
+
+def run_replay(request: Request, jobs: Any, subject: str, author: str, task: Callable[..., dict[str, Any]]) -> JSON:
+    """Run a replay ``task`` (rule-set or stream replay) the one way: a ``replay`` build job with
+    ``Prefer: respond-async``, else now, at most MAX_SYNC_REPLAYS at once per process (429 +
+    Retry-After beyond), a store away being 503."""
     if wants_async(request):
-        return accepted(jobs.submit("replay", name, {}, author=who.name, task=task))
+        return accepted(jobs.submit("replay", subject, {}, author=author, task=task))
     if not running.acquire(blocking=False):
         raise ApiError(429, f"{MAX_SYNC_REPLAYS} replays are already running on this gateway process; try again "
                             "shortly, or send Prefer: respond-async to queue it as a job",

@@ -15,18 +15,17 @@ from typing import Any
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, ConfigDict, Field
 
-from gateway.api.deps import Caller, EngineDep, GatewayDep, JobsDep, iso_datetime, wants_async
+from gateway.api.deps import Caller, EngineDep, GatewayDep, JobsDep, iso_datetime
 from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute
 from gateway.api.routes.mappings import DraftBody
-from gateway.api.routes.replay import MAX_SYNC_REPLAYS, running
-from gateway.api.routes.rulesets import MAX_FILES, accepted
+from gateway.api.routes.replay import run_replay
+from gateway.api.routes.rulesets import MAX_FILES
 from gateway.rdf.mapping import Mapper, MappingError
 from gateway.stream import replay
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.store.store import StoreUnavailable
 
 router = APIRouter(tags=["replay"], route_class=JsonRoute)
 MAX_CANDIDATES = 50
@@ -170,15 +169,4 @@ def replay_streams(body: StreamReplayBody, request: Request, gateway: GatewayDep
         return replay.run(engine, gateway.streams, gateway.queries.definitions(), recorded, params,
                           on_progress=progress)
 
-    if wants_async(request):
-        return accepted(jobs.submit("replay", JOB_SUBJECT, {}, author=who.name, task=task))
-    if not running.acquire(blocking=False):
-        raise ApiError(429, f"{MAX_SYNC_REPLAYS} replays are already running on this gateway process; try again "
-                            "shortly, or send Prefer: respond-async to queue it as a job",
-                       headers={"Retry-After": "5"})
-    try:
-        return JSON(task())
-    except StoreUnavailable as exc:
-        raise ApiError(503, str(exc)) from None
-    finally:
-        running.release()
+    return run_replay(request, jobs, JOB_SUBJECT, who.name, task)
