@@ -31,12 +31,11 @@ import time
 from pathlib import Path
 
 import httpx
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from http_bench import free_port  # noqa: E402
 from report import machine_note, write_section  # noqa: E402
-from session_bench import FACT, RULES  # noqa: E402
+from session_bench import FACT, serve_visits  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Durable sessions"
@@ -44,32 +43,8 @@ SECTION = "## Durable sessions"
 
 def serve(home: Path, port: int, snapshot_every: int, ack_after: str = "journal") -> subprocess.Popen:
     """``printeps serve`` on ``home`` (its data dir kept across restarts), once it answers."""
-    rules = home / "rules" / "visits"
-    if not rules.exists():
-        rules.mkdir(parents=True)
-        for name, text in RULES.items():
-            (rules / name).write_text(text)
-    config = home / "printeps.yaml"
-    config.write_text(yaml.safe_dump({
-        "data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "rules")}, "ros": {"enabled": False},
-        "streams": {"queries_dir": None},
-        "sessions": {"max_facts": 10_000_000, "snapshot_every": snapshot_every, "snapshot_interval_s": 0,
-                     "ack_after": ack_after}}))
-    proc = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config", str(config)],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 300
-    while True:
-        if proc.poll() is not None:
-            raise RuntimeError(proc.stderr.read().decode()[-2000:])
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/health", timeout=2).status_code == 200:
-                return proc
-        except httpx.HTTPError:
-            pass
-        if time.monotonic() > deadline:
-            proc.kill()
-            raise RuntimeError("the gateway did not start")
-        time.sleep(0.2)
+    return serve_visits(home, port, {"max_facts": 10_000_000, "snapshot_every": snapshot_every,
+                                     "snapshot_interval_s": 0, "ack_after": ack_after})
 
 
 def percentiles(samples: list[float]) -> dict[str, float]:

@@ -60,15 +60,19 @@ FACT = {"type": "Visit", "id": "v", "party": 5}
 KIE_FACT = {f"{PKG}.Visit": {"id": "v", "party": 5}}
 
 
-def start(tmp: Path, port: int) -> subprocess.Popen:
-    tmp.mkdir(parents=True, exist_ok=True)
-    (tmp / "rules" / "visits").mkdir(parents=True)
-    for name, text in RULES.items():
-        (tmp / "rules" / "visits" / name).write_text(text)
-    config = tmp / "printeps.yaml"
+def serve_visits(home: Path, port: int, sessions: dict) -> subprocess.Popen:
+    """``printeps serve`` on ``home`` with the visits rule set and these ``sessions`` settings,
+    once /health answers. The data dir is kept: a second call on the same ``home`` is a restart
+    (bench/durable_sessions.py's takeover uses that)."""
+    rules = home / "rules" / "visits"
+    if not rules.exists():
+        rules.mkdir(parents=True)
+        for name, text in RULES.items():
+            (rules / name).write_text(text)
+    config = home / "printeps.yaml"
     config.write_text(yaml.safe_dump({
-        "data_dir": str(tmp / "var"), "engine": {"rules_dir": str(tmp / "rules")}, "ros": {"enabled": False},
-        "streams": {"queries_dir": None}, "sessions": {"max_facts": 10_000_000, "max_per_ruleset": 1000}}))
+        "data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "rules")}, "ros": {"enabled": False},
+        "streams": {"queries_dir": None}, "sessions": sessions}))
     proc = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config", str(config)],
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 300
@@ -77,13 +81,18 @@ def start(tmp: Path, port: int) -> subprocess.Popen:
             raise RuntimeError(proc.stderr.read().decode()[-2000:])
         try:
             if httpx.get(f"http://127.0.0.1:{port}/health", timeout=2).status_code == 200:
-                break
+                return proc
         except httpx.HTTPError:
             pass
         if time.monotonic() > deadline:
             proc.kill()
             raise RuntimeError("the gateway did not start")
         time.sleep(0.2)
+
+
+def start(tmp: Path, port: int) -> subprocess.Popen:
+    tmp.mkdir(parents=True, exist_ok=True)
+    proc = serve_visits(tmp, port, {"max_facts": 10_000_000, "max_per_ruleset": 1000})
     time.sleep(5)  # the start-up warm-up
     return proc
 
