@@ -8,15 +8,13 @@ a corrupt snapshot falls back to the log."""
 
 from __future__ import annotations
 
-import os
 import signal
 import threading
 import time
 
 import httpx
 import pytest
-import yaml
-from test_processes import Process, files, wait_for
+from test_processes import Process, cluster_home, files, wait_for
 
 pytestmark = pytest.mark.slow
 BASE = "/kie-server/services/rest/server"
@@ -36,19 +34,7 @@ end
 
 @pytest.fixture(scope="module")
 def home(tmp_path_factory, mongo):
-    home = tmp_path_factory.mktemp("durable")
-    (home / "rules" / "cluster").mkdir(parents=True)
-    for name, text in files("Hello").items():
-        (home / "rules" / "cluster" / name).write_text(text)
-    config = home / "printeps.yaml"
-    config.write_text(yaml.safe_dump({
-        "data_dir": str(home / "var"),
-        "engine": {"rules_dir": str(home / "rules")},
-        "store": {"database": "durable"},
-        "streams": {"queries_dir": None},
-        "sessions": {"member_heartbeat_s": 1.0, "snapshot_every": 5},
-    }))
-    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+    return cluster_home(tmp_path_factory, mongo, "durable", {"sessions": {"member_heartbeat_s": 1.0, "snapshot_every": 5}})
 
 
 def kill(p: Process) -> None:

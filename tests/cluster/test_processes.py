@@ -115,10 +115,11 @@ def wait_for(cond, timeout: float = 10.0, step: float = 0.02) -> float | None:
     return None
 
 
-@pytest.fixture(scope="module")
-def cluster(tmp_path_factory, mongo):
-    """Three gateway processes (A, B, C) on one database and one data dir (one host)."""
-    home = tmp_path_factory.mktemp("cluster")
+def cluster_home(tmp_path_factory, mongo, database: str, settings: dict) -> tuple[Path, Path, dict[str, str]]:
+    """A host for gateway processes: a home with the ``cluster`` rule set ("Hello"), a
+    printeps.yaml on one data dir and the test database ``database`` (plus ``settings``), and the
+    environment that points them at the test's MongoDB-protocol server."""
+    home = tmp_path_factory.mktemp(database)
     (home / "rules" / "cluster").mkdir(parents=True)
     for name, text in files("Hello").items():
         (home / "rules" / "cluster" / name).write_text(text)
@@ -126,11 +127,17 @@ def cluster(tmp_path_factory, mongo):
     config.write_text(yaml.safe_dump({
         "data_dir": str(home / "var"),
         "engine": {"rules_dir": str(home / "rules")},
-        "store": {"database": "cluster"},
+        "store": {"database": database},
         "streams": {"queries_dir": None},
-        "sync": {"reconcile_interval_s": 5},
+        **settings,
     }))
-    env = {**os.environ, "MONGO_URI": mongo.uri}
+    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory, mongo):
+    """Three gateway processes (A, B, C) on one database and one data dir (one host)."""
+    home, config, env = cluster_home(tmp_path_factory, mongo, "cluster", {"sync": {"reconcile_interval_s": 5}})
     procs = {name: Process(name, config, env, home) for name in "ABC"}
     for p in procs.values():
         p.start()

@@ -6,14 +6,12 @@ continuous whichever worker takes each call."""
 
 from __future__ import annotations
 
-import os
 import signal
 import time
 
 import httpx
 import pytest
-import yaml
-from test_processes import Process, files, wait_for
+from test_processes import Process, cluster_home, wait_for
 
 pytestmark = pytest.mark.slow
 BASE = "/kie-server/services/rest/server"
@@ -22,19 +20,8 @@ PKG = "org.printeps.cluster"
 
 @pytest.fixture(scope="module")
 def home(tmp_path_factory, mongo):
-    home = tmp_path_factory.mktemp("sessions")
-    (home / "rules" / "cluster").mkdir(parents=True)
-    for name, text in files("Hello").items():
-        (home / "rules" / "cluster" / name).write_text(text)
-    config = home / "printeps.yaml"
-    config.write_text(yaml.safe_dump({
-        "data_dir": str(home / "var"),
-        "engine": {"rules_dir": str(home / "rules")},
-        "store": {"database": "sessions"},
-        "streams": {"queries_dir": None},
-        "sessions": {"member_heartbeat_s": 1.0, "durable": False},  # durable sessions: test_durable_sessions.py
-    }))
-    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+    # not durable: this file pins the 410 of a lost session (durable ones: test_durable_takeover.py)
+    return cluster_home(tmp_path_factory, mongo, "sessions", {"sessions": {"member_heartbeat_s": 1.0, "durable": False}})
 
 
 def insert(url: str, cid: str, lookup: str = "defaultKieSession") -> httpx.Response:
