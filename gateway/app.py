@@ -174,7 +174,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         catalog = MongoCatalog(store.db, name, change_streams=settings.sync.change_streams,
                                poll_interval_s=settings.sync.poll_interval_s)
         closers.append(("the catalog", catalog.close))
-        decisions = DecisionRecord(store, enabled=settings.store.record_fires, max_facts=settings.store.decision_facts_max)
+        decisions = DecisionRecord(store)
         from gateway.store.members import Membership
 
         members = Membership(store.db, name, heartbeat_s=settings.sessions.member_heartbeat_s)
@@ -191,9 +191,9 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
     engine = Engine(settings, catalog)
     if decisions is not None:
-        engine.add_listener(decisions.on_engine_event)
+        engine.recorder.journal_to(decisions)  # the one recorder journals every decision there
     live = LiveFeed()
-    engine.add_listener(live.on_engine_event)  # after the decision record: a decision shown can be opened
+    engine.add_listener(live.on_engine_event)
     if members is not None:  # sessions are recorded with their owner, so other processes can forward to it
         from gateway.store.session_records import SessionDirectory
 

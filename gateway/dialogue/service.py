@@ -377,7 +377,7 @@ class DialogueService:
                 "drinks": menu.plural_of(drink_label) if (slots["cups"] or 0) > 1 else drink_label}
         actions = [_filled(a, fill) for a in result.actions]
         result.actions = actions
-        decision_id = self.engine.record_decision(result, [done.fact], origin="dialogue", correlation_id=doc["_id"],
+        decision_id = self.engine.recorder.record(result, [done.fact], origin="dialogue", correlation_id=doc["_id"],
                                                   context={**context, "state": doc["state"]})
         doc["decisions"] = [*doc["decisions"], decision_id]
         doc["last_decision_id"] = decision_id

@@ -25,8 +25,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from bson import ObjectId
-
 from gateway.base import jvm
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
@@ -41,6 +39,7 @@ from gateway.engine.errors import (
     VersionConflict,
     VersionNotFound,
 )
+from gateway.engine.recorder import DecisionRecorder
 from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
@@ -74,12 +73,6 @@ class LiveRuleSet:
     seq: int
 
 
-def new_decision_id() -> str:
-    """A decision's id: an ObjectId's text (time-ordered, unique across processes), so the
-    Information State can use it as the document ``_id`` and page through decisions by it."""
-    return str(ObjectId())
-
-
 class Engine:
     """Rule sets by name, each with a live version; thread-safe."""
 
@@ -101,11 +94,14 @@ class Engine:
         self.session_manager = SessionManager(self, self.settings.sessions)
         self._fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)
         self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
+        store = self.settings.store  # every decision, from every origin, is recorded by this one recorder
+        self.recorder = DecisionRecorder(self._notify, enabled=store.record_fires, max_facts=store.decision_facts_max)
 
     # ------------------------------------------------------------------ events
 
     def add_listener(self, listener: Listener) -> None:
-        """``listener(kind, payload)`` for "deploy", "rollback", "delete", "fire" (errors are logged)."""
+        """``listener(kind, payload)`` for "deploy", "rollback", "delete", "sync", and "fire" (its payload
+        the recorded decision's document, see gateway.engine.recorder); errors are logged."""
         self._listeners.append(listener)
 
     def _notify(self, kind: str, payload: dict[str, Any]) -> None:
@@ -437,28 +433,16 @@ class Engine:
     ) -> FireResult:
         """Fires the live version of ``name`` on ``facts`` in a fresh session (stateless).
 
-        Every fire is a decision: it gets a ``decision_id`` and listeners (the Information State's
-        decision record, metrics) hear of it with its ``origin`` (rest, kie, stream, ros,
-        workflow…), the caller's ``correlation_id`` and any ``context``. ``record=False`` is for
-        trials (a workflow's "try my edits"): no decision, nobody hears of it.
+        Every fire is a decision: :attr:`recorder` gives it a ``decision_id`` and records it with
+        its ``origin`` (rest, kie, stream, ros, workflow…), the caller's ``correlation_id`` and any
+        ``context``. ``record=False`` is for trials (a workflow's "try my edits") and for callers
+        that record it themselves through :attr:`recorder` (the REST fire route, off the fire thread).
         """
         info, compiled = self._live_entry(name)
         result = self._fire(compiled, name, info.version, facts, fire_limit, return_facts, record_facts)
         if record:
-            result.decision_id = self.record_decision(result, facts, origin=origin, correlation_id=correlation_id,
-                                                      context=context)
+            self.recorder.record(result, facts, origin=origin, correlation_id=correlation_id, context=context)
         return result
-
-    def record_decision(self, result: FireResult, facts: list[dict[str, Any]], *, origin: str,
-                        correlation_id: str | None = None, context: dict[str, Any] | None = None) -> str:
-        """Announce a decision made on this engine (by :meth:`fire`, or in a session by a KIE
-        batch or a stream binding) to the listeners; returns its new ``decision_id``."""
-        decision_id = new_decision_id()
-        if self._listeners:
-            self._notify("fire", {"decision_id": decision_id, "ruleset": result.ruleset, "version": result.version,
-                                  "facts": facts, "origin": origin, "correlation_id": correlation_id,
-                                  "context": context or {}, **_summary(result)})
-        return decision_id
 
     def fire_files(self, files: dict[str, str], facts: list[dict[str, Any]], fire_limit: int | None = None, *,
                    role: str | None = None) -> FireResult:
@@ -778,15 +762,6 @@ def _audit_role(role: str | None) -> str:
     """The role a change is logged with: the principal's, or "local" for the gateway itself and
     local commands (seeds, ``printeps import``), which act with the machine's own rights."""
     return role or "local"
-
-
-def _summary(result: FireResult) -> dict[str, Any]:
-    return {
-        "actions": result.actions,
-        "fired": [f["rule"] for f in result.fired],
-        "fire_count": result.fire_count,
-        "duration_ms": result.duration_ms,
-    }
 
 
 def _no_progress(done: int, total: int, stage: str) -> None:

@@ -8,9 +8,10 @@ caller's correlation id (``X-Request-ID`` / ``traceparent`` / the ROS request), 
 version, the facts in, the rules fired and the actions. Robot action outcomes are written to
 ``actions`` with the ``decision_id`` they carry out, so ``get`` returns a decision with them.
 
-Writes go through the store's journal (durable before the fire is answered, shipped in batches);
-reads go to the database, from any process and after restarts. The last decisions of this
-process are also kept in memory for a moment, so one that is not shipped yet is found anyway.
+Each decision is built and written by the one recorder (:mod:`gateway.engine.recorder`) through
+the store's journal (durable before the fire is answered, shipped in batches). This module keeps
+the indexes and reads, from the database: from any process and after restarts. The last decisions
+of this process are also kept in memory for a moment, so one that is not shipped yet is found anyway.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from bson import ObjectId
 from bson.errors import InvalidId
 from pymongo.errors import PyMongoError
 
-from gateway.store.store import ACTIONS, StoreError, StoreUnavailable, process_name
+from gateway.store.store import ACTIONS, StoreError, StoreUnavailable
 
 log = logging.getLogger(__name__)
 
@@ -39,13 +40,10 @@ RETIRED_INDEXES = {"origin_1__id_-1", "fired_1__id_-1", "correlation_id_1", "_me
 
 
 class DecisionRecord:
-    """Writes decisions (an engine listener) and reads them back with filters and a cursor."""
+    """Reads decisions back with filters and a cursor (the recorder writes them, through ``store``)."""
 
-    def __init__(self, store: Any, *, enabled: bool = True, max_facts: int = 1000) -> None:
+    def __init__(self, store: Any) -> None:
         self.store = store
-        self.enabled = enabled
-        self.max_facts = max_facts
-        self.process = process_name()
         self._recent: OrderedDict[str, dict[str, Any]] = OrderedDict()
         self._lock = threading.Lock()
         self._indexes()
@@ -75,39 +73,14 @@ class DecisionRecord:
         except PyMongoError as exc:  # not fatal: indexes are created again at the next start
             log.warning("decisions: could not create indexes now: %s", exc)
 
-    # ---- writing -------------------------------------------------------------------------------
-    def on_engine_event(self, kind: str, payload: dict[str, Any]) -> None:
-        """Engine listener: each "fire" event is a decision to record."""
-        if kind != "fire" or not self.enabled:
-            return
-        doc = self.document(payload)
+    # ---- the recorder's side --------------------------------------------------------------------
+    def remember(self, doc: dict[str, Any]) -> None:
+        """Keep a decision the recorder (:mod:`gateway.engine.recorder`, the one writer of
+        ``decisions``) just journalled, for :meth:`get` until it is shipped to the database."""
         with self._lock:
             self._recent[doc["_id"]] = doc
             while len(self._recent) > RECENT_KEPT:
                 self._recent.popitem(last=False)
-        # check_keys=False: built here from checked parts (facts the engine accepted), on the fire path
-        self.store.record(DECISIONS, doc, stored_type="printeps/Decision", inserted_by=self.process, check_keys=False)
-
-    def document(self, payload: dict[str, Any]) -> dict[str, Any]:
-        facts = payload.get("facts") or []
-        kept = facts if len(facts) <= self.max_facts else facts[: self.max_facts]
-        return {
-            "_id": payload["decision_id"],
-            "decision_id": payload["decision_id"],
-            "origin": payload.get("origin") or "api",
-            "correlation_id": payload.get("correlation_id"),
-            "ruleset": payload.get("ruleset"),
-            "version": payload.get("version"),
-            "facts": kept,
-            "facts_count": len(facts),
-            "fired": list(payload.get("fired") or []),
-            "actions": list(payload.get("actions") or []),
-            "fire_count": payload.get("fire_count"),
-            "duration_ms": payload.get("duration_ms"),
-            "context": payload.get("context") or {},
-            "at": at_text(datetime.now(timezone.utc)),
-            "process": self.process,
-        }
 
     # ---- reading -------------------------------------------------------------------------------
     def find(self, *, ruleset: str | None = None, version: int | None = None, origin: str | None = None,

@@ -861,12 +861,12 @@ class StreamEngine:
                 runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
             # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
             result = runtime.session.push(facts, instant)
-            result.decision_id = self.rules_engine.record_decision(
-                result, facts, origin="stream", correlation_id=correlation,
-                context={"query": name, "window": window, "session": runtime.session.id})  # not replayable alone
-            return result
-        return self.rules_engine.fire(binding.ruleset, facts, origin="stream", correlation_id=correlation,
-                                      context={"query": name, "window": window})
+            context = {"query": name, "window": window, "session": runtime.session.id}  # not replayable alone
+        else:
+            result = self.rules_engine.fire(binding.ruleset, facts, record=False)
+            context = {"query": name, "window": window}
+        self.rules_engine.recorder.record(result, facts, origin="stream", correlation_id=correlation, context=context)
+        return result
 
     def _publish_actions(self, runtime: QueryRuntime, binding: RuleBinding, facts: list[dict[str, Any]],
                          window: dict[str, int], result: Any, late: bool = False) -> None:

@@ -214,6 +214,13 @@ class ReplayFire:
                 "decision_id": None}
 
 
+class NoDecisions:
+    """The recorder of a replay's rules: a replayed fire is never a decision (nothing is recorded)."""
+
+    def record(self, result: Any, facts: list[dict[str, Any]], **_what: Any) -> None:
+        return None
+
+
 class ReplayRules:
     """What a scratch stream engine asks of the rules engine, answered by rule sets compiled for
     the run: their types, and fires that only record what the then-parts ask (never a decision)."""
@@ -221,6 +228,7 @@ class ReplayRules:
     def __init__(self, engine: Any, compiled: dict[str, tuple[Any, Any]]) -> None:
         self._compiled = compiled  # name -> (label, CompiledRuleSet)
         self._fires = {name: engine.replay_fire(c) for name, (_label, c) in compiled.items()}
+        self.recorder = NoDecisions()
 
     def declared_types(self, name: str) -> dict[str, dict[str, str]]:
         if name not in self._compiled:

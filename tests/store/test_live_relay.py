@@ -6,8 +6,9 @@ from __future__ import annotations
 import time
 
 import pytest
-from bson import ObjectId
 
+from gateway.engine.recorder import DecisionRecorder
+from gateway.engine.results import FireResult
 from gateway.runtime.live import LiveFeed
 from gateway.store.decisions import DecisionRecord
 from gateway.store.live_relay import LiveRelay
@@ -40,20 +41,21 @@ def test_other_processes_writes_reach_a_watched_feed_and_its_own_do_not(store: I
     # this "process" is another one than the store's writer: it relays what the store writes
     relay = LiveRelay(store.db, feed, "another-host:1", change_streams=change_streams, poll_interval_s=0.1)
     own = LiveRelay(store.db, LiveFeed(), store.process, change_streams=change_streams, poll_interval_s=0.1)
-    record = DecisionRecord(store)
+    recorder = DecisionRecorder(lambda kind, payload: None)
+    recorder.journal_to(DecisionRecord(store))
+
+    def decide() -> str:
+        return recorder.record(FireResult("reception", 2, [{"module": "say"}], [{"rule": "greet"}]), [], origin="ros")
+
     try:
-        decision_id = str(ObjectId())
-        record.on_engine_event("fire", {"decision_id": decision_id, "ruleset": "reception", "version": 2,
-                                        "origin": "ros", "fired": ["greet"], "actions": [{"module": "say"}]})
+        decide()
         assert store.flush(10)
         # nobody watches: nothing is followed (that decision is never relayed: see the first event below)
         assert not relay.following.is_set() and relay.relayed == 0
         watcher = feed.subscribe(replay=False)
         own.feed.subscribe(replay=False)
         wait_until(lambda: relay.following.is_set() and own.following.is_set())  # both noticed their subscriber
-        decision_id = str(ObjectId())
-        record.on_engine_event("fire", {"decision_id": decision_id, "ruleset": "reception", "version": 2,
-                                        "origin": "ros", "fired": ["greet"], "actions": [{"module": "say"}]})
+        decision_id = decide()
         store.record("actions", {"action": {"module": "say", "params": {"text": "hi"}}, "status": "ok",
                                  "decision_id": decision_id, "ruleset": "reception"},
                      stored_type="printeps/Action/ok", inserted_by="gateway")

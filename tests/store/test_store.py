@@ -235,15 +235,18 @@ def test_decisions_keep_two_secondary_indexes_and_retire_the_old_ones(store: Inf
     """Every index is a write per recorded fire: decisions keep (ruleset, _id) and (correlation_id,
     _id) only; indexes an earlier version made are dropped at start, and filters still answer
     without them."""
+    from gateway.engine.recorder import DecisionRecorder
+    from gateway.engine.results import FireResult
     from gateway.store.decisions import DecisionRecord
 
     coll = store.db["decisions"]
     coll.create_index([("origin", 1), ("_id", -1)])
     coll.create_index([("fired", 1), ("_id", -1)])
     record = DecisionRecord(store)
+    recorder = DecisionRecorder(lambda kind, payload: None)
+    recorder.journal_to(record)
     for i in range(3):
-        record.on_engine_event("fire", {"decision_id": str(__import__("bson").ObjectId()), "ruleset": f"r{i % 2}",
-                                        "version": 1, "origin": "rest" if i else "kie", "fired": [f"rule {i}"]})
+        recorder.record(FireResult(f"r{i % 2}", 1, [], [{"rule": f"rule {i}"}]), [], origin="rest" if i else "kie")
     assert store.flush(10)
     assert sorted(coll.index_information()) == ["_id_", "correlation_id_1__id_1", "ruleset_1__id_-1"]
     assert [d["ruleset"] for d in record.find(origin="rest")[0]] == ["r0", "r1"]
@@ -255,14 +258,15 @@ def test_a_trace_reads_its_decisions_through_the_correlation_index(store: Inform
     """The decisions of one correlation id are found by the index, not by scanning: the server's
     own plan (SecantusDB answers ``explain`` with the plan and what it examined) reads the index
     and examines only the matching documents, however many others are recorded."""
-    from bson import ObjectId
-
+    from gateway.engine.recorder import DecisionRecorder
+    from gateway.engine.results import FireResult
     from gateway.store.decisions import CORRELATION_INDEX, DecisionRecord
 
     record = DecisionRecord(store)
+    recorder = DecisionRecorder(lambda kind, payload: None)
+    recorder.journal_to(record)
     for i in range(300):
-        record.on_engine_event("fire", {"decision_id": str(ObjectId()), "ruleset": "r", "version": 1,
-                                        "origin": "rest", "correlation_id": f"req-{i % 30}" if i % 3 else None})
+        recorder.record(FireResult("r", 1, [], []), [], origin="rest", correlation_id=f"req-{i % 30}" if i % 3 else None)
     assert store.flush(10)
     keys = {name: info["key"] for name, info in store.db["decisions"].index_information().items()}
     assert list(CORRELATION_INDEX) in [list(k) for k in keys.values()]

@@ -56,7 +56,7 @@ from gateway.api.kie.containers import (
     server_info,
     service_response,
 )
-from gateway.engine import EngineError, FireResult, RuleSetNotFound, VersionNotFound
+from gateway.engine import EngineError, RuleSetNotFound, VersionNotFound
 from gateway.engine.errors import Overloaded
 from gateway.engine.session import CommandFailed
 from gateway.engine.sessions import (
@@ -394,12 +394,10 @@ async def execute(container_id: str, request: Request, _: Principal = Depends(ki
                or conversation_id(state.settings.api.server_id, container_id, answer.version)}
     if session_id:
         headers["X-Session-Id"] = session_id
-    if answer.fires:
-        decision = FireResult(container_id, answer.version, answer.actions(), fired, fire_count=len(fired),
-                              duration_ms=answer.duration_ms)
-        decision_id = engine.record_decision(decision, batch.inserted_facts(), origin="kie",
-                                             correlation_id=correlation_id(request),
-                                             context={"lookup": batch.lookup, "session": session_id})
+    decision_id = engine.recorder.batch(container_id, answer, batch.inserted_facts(), origin="kie",
+                                        correlation_id=correlation_id(request),
+                                        context={"lookup": batch.lookup, "session": session_id})
+    if decision_id is not None:
         payload["results"].append({"key": "actions", "value": answer.actions()})
         payload["results"].append({"key": "decision-id", "value": decision_id})
         headers["X-Decision-Id"] = decision_id

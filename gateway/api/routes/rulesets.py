@@ -223,7 +223,7 @@ async def fire_answer(state: Any, name: str, body: Any, correlation: str | None)
     except Exception as exc:
         metrics.fire_error(name, exc)
         raise
-    result.decision_id = engine.record_decision(result, facts, origin="rest", correlation_id=correlation)
+    engine.recorder.record(result, facts, origin="rest", correlation_id=correlation)
     out = result.to_dict()
     metrics.observe_fire(name, time.perf_counter() - start, len(out.get("fired") or ()))
     return out

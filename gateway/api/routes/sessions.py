@@ -25,7 +25,7 @@ from gateway.api.errors import ApiError
 from gateway.api.forwarding import Misdirected, OwnerUnreachable, forward
 from gateway.api.jsonio import JSON, JsonRoute, run_blocking
 from gateway.api.routes.rulesets import NAME_PATTERN, check_facts
-from gateway.engine import EngineError, FireResult
+from gateway.engine import EngineError
 from gateway.engine.errors import Overloaded
 from gateway.engine.sessions import SessionElsewhere, SessionGone, SessionNotFound
 
@@ -351,12 +351,9 @@ def _fire(engine: Any, name: str, session_id: str, commands: list[dict[str, Any]
     session = engine.session_manager.get(name, session_id)
     started = time.perf_counter()
     answer = session.execute(commands)
-    fire = answer.results[-1]["fire"]
-    result = FireResult(name, answer.version, fire["actions"], fire["fired"], [], int(fire["fireCount"]),
-                        (time.perf_counter() - started) * 1000)
-    inserted = [f for c in commands if c["op"] == "insert" for f in c["facts"]]
-    result.decision_id = engine.record_decision(result, inserted, origin="rest", correlation_id=correlation,
-                                                context={"session": session_id, "fact_count": answer.fact_count})
+    result = engine.recorder.session_fire(name, commands, answer, duration_ms=(time.perf_counter() - started) * 1000,
+                                          origin="rest", correlation_id=correlation,
+                                          context={"session": session_id, "fact_count": answer.fact_count})
     out = result.to_dict()
     out.pop("facts", None)
     out.update({"session": session_id, "time": answer.time, "fact_count": answer.fact_count})
