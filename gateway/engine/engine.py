@@ -16,8 +16,6 @@ newer version.
 
 from __future__ import annotations
 
-import collections
-import json
 import logging
 import threading
 import time
@@ -43,7 +41,7 @@ from gateway.engine.recorder import DecisionRecorder
 from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
-from gateway.engine.sessions import SessionManager, SessionNotFound, rule_fingerprints
+from gateway.engine.sessions import SessionManager, rule_fingerprints
 from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
@@ -84,13 +82,12 @@ class Engine:
         self._lock = threading.RLock()
         self._listeners: list[Listener] = []
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
-        self._recent: dict[str, collections.deque[str]] = {}  # rule set -> its last requests' facts (warm-up samples)
+        self._recent = warmup.RecentRequests()  # each rule set's last requests' facts (warm-up samples)
         self._unchanged: dict[tuple[str, int, int], list[str]] = {}
         self.rule_policy = policy.RulePolicy(tuple(self.settings.engine.rule_policy.allow))
         self._policy_verdicts: dict[str, bool] = {}  # content hash -> passes the rule policy
         self._explainers = explain.ExplainCache()
-        self._warm_up_stop = threading.Event()
-        self._warm_up_thread: threading.Thread | None = None
+        self._warm_up = warmup.ProcessWarmUp(self)
         self.session_manager = SessionManager(self, self.settings.sessions)
         self._fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)
         self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
@@ -130,21 +127,11 @@ class Engine:
             warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s, recent=self.recent_requests(label))
         return compiled
 
-    RECENT_REQUESTS = 8  # per rule set: the warm-up samples a new version gets from real traffic
-    RECENT_MAX_BYTES = 64 * 1024  # a bigger request is not kept (warming is about paths, not volume)
+    RECENT_REQUESTS = warmup.RecentRequests.KEPT  # per rule set: the warm-up samples a new version gets
 
     def recent_requests(self, name: str) -> list[str]:
         """The facts (JSON) of the last stateless fires of ``name`` in this process, oldest first."""
-        kept = self._recent.get(name)
-        return list(kept) if kept else []
-
-    def _remember(self, name: str, facts_json: str) -> None:
-        if name == DRAFT or len(facts_json) > self.RECENT_MAX_BYTES:
-            return
-        kept = self._recent.get(name)
-        if kept is None:
-            kept = self._recent.setdefault(name, collections.deque(maxlen=self.RECENT_REQUESTS))
-        kept.append(facts_json)
+        return self._recent.of(name)
 
     def validate(self, name: str, files: dict[str, str],
                  on_progress: Callable[[int, int, str], None] | None = None, *,
@@ -548,7 +535,8 @@ class Engine:
         record_facts: bool,
     ) -> FireResult:
         facts_json = encode_facts(facts, self.settings.engine.max_facts)
-        self._remember(name, facts_json)
+        if name != DRAFT:
+            self._recent.remember(name, facts_json)
         limit = int(fire_limit or self.settings.engine.fire_limit)
         started = time.perf_counter()
         answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts, self._fire_timeout_ms))
@@ -625,12 +613,6 @@ class Engine:
             pass
         return texts
 
-    def get_session(self, session_id: str) -> StatefulSession:
-        session = self.session_manager.by_id(session_id)
-        if session is None:
-            raise SessionNotFound(f"no open session '{session_id}'")
-        return session
-
     def sessions(self) -> list[StatefulSession]:
         return self.session_manager.list()
 
@@ -642,58 +624,13 @@ class Engine:
     # ------------------------------------------------------------------ warm-up
 
     def warm_up(self, rounds: int = 2, fires: int = 200, background: bool = True) -> threading.Thread | None:
-        """Builds a small rule set ``rounds`` times (results thrown away) and fires each live rule set
-        ``fires`` times with its ``examples.json`` facts (or none), so the JIT has compiled Drools'
-        builder and firing paths before an author's first live edit or the first customer: the
-        first firings in a fresh JVM are ~100x slower. Runs in a daemon thread by default.
-        (Not the live sets themselves: with incremental builds they would come from the cache, and
-        compiling a 10,000-rule set twice at start would cost minutes.)
-        """
-
-        stopping = self._warm_up_stop
-
-        def work() -> None:
-            try:
-                compiler.warm_builder(rounds)
-            except Exception:  # best effort, as below
-                log.debug("warm-up of the builder failed", exc_info=True)
-            try:
-                infos = [] if stopping.is_set() else self.list_rulesets()
-            except Exception:  # the store closed under us (shutdown) or is away: nothing to warm
-                log.debug("warm-up could not list the rule sets", exc_info=True)
-                infos = []
-            for info in infos:
-                if stopping.is_set():
-                    return
-                try:
-                    files = self.version(info.name, info.version).files
-                    _, compiled = self._live_entry(info.name)
-                    samples = _example_fact_sets(files) or [[]]
-                    for k in range(fires):  # not through fire(): warm-up is no decision to log
-                        if stopping.is_set():
-                            return
-                        try:
-                            self._fire(compiled, info.name, info.version, samples[k % len(samples)], None, False, True)
-                        except EngineError:
-                            samples = [[]]
-                except Exception:  # warm-up is best effort; real errors show on real use
-                    log.debug("warm-up of %s failed", info.name, exc_info=True)
-
-        if not background:
-            work()
-            return None
-        thread = threading.Thread(target=work, name="engine-warm-up", daemon=True)
-        self._warm_up_thread = thread
-        thread.start()
-        return thread
+        """Warm the JIT for a fresh process (see :class:`gateway.engine.warmup.ProcessWarmUp`), in
+        a daemon thread by default."""
+        return self._warm_up.start(rounds, fires, background)
 
     def stop_warm_up(self, timeout_s: float = 10.0) -> None:
-        """Ends a background warm-up at its next step and waits for it (a JVM call in progress
-        cannot be interrupted), so shutting down never races it for the store or the JVM."""
-        self._warm_up_stop.set()
-        thread = self._warm_up_thread
-        if thread is not None and thread.is_alive():
-            thread.join(timeout_s)
+        """Ends a background warm-up and waits for it (shutting down never races it)."""
+        self._warm_up.stop(timeout_s)
 
     # ------------------------------------------------------------------ the seed folders
 
@@ -747,15 +684,6 @@ class Engine:
             return f"unchanged v{head.current}"
         info = self.deploy(name, files, author=author, comment=comment, role=role)
         return f"deployed v{info.version}"
-
-
-def _example_fact_sets(files: dict[str, str]) -> list[list[dict[str, Any]]]:
-    """The fact lists of a rule set's ``examples.json`` ([{"name", "facts"}]), [] if none/unreadable."""
-    try:
-        examples = json.loads(files.get("examples.json", "[]"))
-        return [e["facts"] for e in examples if isinstance(e, dict) and isinstance(e.get("facts"), list)]
-    except (ValueError, TypeError, KeyError):
-        return []
 
 
 def _audit_role(role: str | None) -> str:

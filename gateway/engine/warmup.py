@@ -16,6 +16,7 @@ plain values. Firing errors
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import threading
@@ -23,8 +24,12 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from gateway.engine import compiler
+from gateway.engine.errors import EngineError
+
 if TYPE_CHECKING:  # pragma: no cover
     from gateway.engine.build import CompiledRuleSet
+    from gateway.engine.engine import Engine
 
 log = logging.getLogger(__name__)
 
@@ -110,3 +115,87 @@ def plain_facts(types: dict[str, dict[str, str]]) -> list[dict[str, Any]]:
                 fact[field_name] = _PLAIN_VALUES[type_name]
         facts.append(fact)
     return facts
+
+
+class RecentRequests:
+    """The facts (JSON) of the last stateless fires of each rule set in this process: the warm-up
+    samples a new version of it gets from real traffic (see :func:`warm`)."""
+
+    KEPT = 8  # per rule set
+    MAX_BYTES = 64 * 1024  # a bigger request is not kept (warming is about paths, not volume)
+
+    def __init__(self) -> None:
+        self._kept: dict[str, collections.deque[str]] = {}
+
+    def of(self, name: str) -> list[str]:
+        """The last requests of ``name``, oldest first."""
+        kept = self._kept.get(name)
+        return list(kept) if kept else []
+
+    def remember(self, name: str, facts_json: str) -> None:
+        if len(facts_json) > self.MAX_BYTES:
+            return
+        kept = self._kept.get(name)
+        if kept is None:
+            kept = self._kept.setdefault(name, collections.deque(maxlen=self.KEPT))
+        kept.append(facts_json)
+
+
+class ProcessWarmUp:
+    """The JIT warm-up of a fresh process (``Engine.warm_up``): builds a small rule set ``rounds``
+    times (results thrown away) and fires each live rule set ``fires`` times with its
+    ``examples.json`` facts (or none), so the JIT has compiled Drools' builder and firing paths
+    before an author's first live edit or the first customer: the first firings in a fresh JVM are
+    ~100x slower. (Not the live sets themselves: with incremental builds they would come from the
+    cache, and compiling a 10,000-rule set twice at start would cost minutes.)"""
+
+    def __init__(self, engine: Engine) -> None:
+        self._engine = engine
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self, rounds: int, fires: int, background: bool) -> threading.Thread | None:
+        """Run it, in a daemon thread when ``background`` (returned)."""
+        if not background:
+            self._work(rounds, fires)
+            return None
+        thread = threading.Thread(target=self._work, args=(rounds, fires), name="engine-warm-up", daemon=True)
+        self._thread = thread
+        thread.start()
+        return thread
+
+    def stop(self, timeout_s: float) -> None:
+        """Ends a background warm-up at its next step and waits for it (a JVM call in progress
+        cannot be interrupted), so shutting down never races it for the store or the JVM."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread.is_alive():
+            thread.join(timeout_s)
+
+    def _work(self, rounds: int, fires: int) -> None:
+        try:
+            compiler.warm_builder(rounds)
+        except Exception:  # best effort, as below
+            log.debug("warm-up of the builder failed", exc_info=True)
+        try:
+            infos = [] if self._stop.is_set() else self._engine.list_rulesets()
+        except Exception:  # the store closed under us (shutdown) or is away: nothing to warm
+            log.debug("warm-up could not list the rule sets", exc_info=True)
+            infos = []
+        for info in infos:
+            if self._stop.is_set():
+                return
+            try:
+                self._fire_examples(info.name, info.version, fires)
+            except Exception:  # warm-up is best effort; real errors show on real use
+                log.debug("warm-up of %s failed", info.name, exc_info=True)
+
+    def _fire_examples(self, name: str, version: int, fires: int) -> None:
+        samples = example_fact_sets(self._engine.version(name, version).files) or [[]]
+        for k in range(fires):
+            if self._stop.is_set():
+                return
+            try:  # no decision: warm-up is nothing to record
+                self._engine.fire(name, samples[k % len(samples)], None, False, True, record=False)
+            except EngineError:
+                samples = [[]]

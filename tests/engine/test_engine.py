@@ -382,6 +382,16 @@ def test_listener_sees_deploys_and_fires(engine, simple_files):
     assert seen == ["deploy", "fire"]
 
 
+def test_the_process_warm_up_fires_the_live_sets_and_records_no_decision(engine, simple_files):
+    engine.deploy("warmed", simple_files)
+    seen: list[str] = []
+    engine.add_listener(lambda kind, payload: seen.append(kind))
+    before = engine.recent_requests("warmed")
+    assert engine.warm_up(rounds=1, fires=3, background=False) is None
+    assert "fire" not in seen  # warm-up is no decision
+    assert len(engine.recent_requests("warmed")) == min(len(before) + 3, Engine.RECENT_REQUESTS)  # it did fire
+
+
 def test_dslr_error_lines_account_for_continuation_lines(engine):
     # Two "- " continuation lines above the error are folded away by the expander: the reported
     # line must still be the .dslr line, not the expanded one.
