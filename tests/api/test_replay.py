@@ -165,7 +165,7 @@ def test_bad_requests_are_told_and_change_nothing(client, api_gateway, recorded)
 def test_cut_and_session_decisions_are_reported_not_compared(client, api_gateway):
     name = "replay-b"
     deploy(client, name, 12)
-    keep = api_gateway.decisions.max_facts
+    keep = api_gateway.engine.recorder.max_facts
     many = [{"type": "Guest", "id": f"m{i}", "age": 11} for i in range(keep + 5)]
     record(client, name, [many, [{"type": "Guest", "id": "plain", "age": 11}]])
     session = client.post(f"/api/rulesets/{name}/sessions", json={})
