@@ -99,27 +99,32 @@ def _score(acc: list, text: str, ms: float, sentence: str, drink: str, cups: int
 
 
 def turn_latency(turns: int, with_store: bool = False) -> dict:
-    """Text turns through a real gateway (engine, session per conversation); the conversations
-    in memory, or ``with_store`` in the Information State (an embedded SecantusDB), as several
-    processes share them (read, run, write over the rev read, the decision noted)."""
+    """Text turns through the gateway's engine (a session per conversation); the conversations
+    in memory (one process: the engine, the knowledge and the dialogue service alone), or
+    ``with_store`` in a real gateway over the Information State (an embedded SecantusDB), as
+    several processes share them (read, run, write over the rev read, the decision noted)."""
     import tempfile
 
-    from gateway.app import build_gateway
     from gateway.config import Settings
 
     settings = Settings.model_validate({"data_dir": "/tmp/printeps-dialogue-bench", "streams": {"queries_dir": None}})
     with tempfile.TemporaryDirectory(prefix="bench-dialogue-") as tmpdir:
         db = store = None
+        closers = []
         if with_store:
+            from gateway.app import build_gateway
             from gateway.store.embedded import EmbeddedMongo
             from gateway.store.store import InformationState
 
             db = EmbeddedMongo(Path(tmpdir) / "mongo")
             store = InformationState(db.start(), "dialogue_bench", Path(tmpdir) / "journal", backend="embedded")
-        gateway = build_gateway(settings, rest=False, ros=False, warm_up=False,
-                                **({"store": store} if with_store else {"use_store": False}))
-        try:
+            gateway = build_gateway(settings, rest=False, ros=False, warm_up=False, store=store)
             d = gateway.dialogue
+            closers.append(gateway.close)
+        else:
+            d = _dialogue_in_memory(settings)
+            closers.append(d.close)
+        try:
             for i in range(20):  # warm-up
                 d.turn(f"w{i}", text="two green teas please")
             times = []
@@ -130,11 +135,33 @@ def turn_latency(turns: int, with_store: bool = False) -> dict:
             return {"n": turns, "p50": statistics.median(times), "p95": sorted(times)[int(len(times) * 0.95) - 1],
                     "mean": statistics.fmean(times)}
         finally:
-            gateway.close()
+            for close in closers:
+                close()
             if store is not None:
                 store.close()
             if db is not None:
                 db.stop()
+
+
+def _dialogue_in_memory(settings):
+    """The dialogue service over an engine and a knowledge base on an in-memory catalog, seeded
+    from the repository's folders as a gateway seeds them (conversations kept in memory)."""
+    from gateway.base import jvm
+    from gateway.dialogue.service import DialogueService
+    from gateway.engine import Engine
+    from gateway.ontology.knowledge import KnowledgeBase
+    from gateway.runtime.transfer import seed_folders
+
+    jvm.start(settings.jvm)
+    cfg = settings.streams
+    engine = Engine(settings)
+    knowledge = KnowledgeBase(files={"ontology": Path(cfg.ontology_file).name, "swrl": Path(cfg.swrl_file).name})
+    folders = seed_folders(settings)
+    for service in (knowledge, engine):
+        for folder in folders[service.kind]:
+            service.seed(folder)
+        service.load()
+    return DialogueService(engine, knowledge, settings.dialogue)
 
 
 def main() -> int:

@@ -58,7 +58,7 @@ async def drive(call: Callable[[], Awaitable[Any]], seconds: float, tasks: int =
 async def main_async(seconds: float, rounds: int) -> dict[str, list[dict[str, float]]]:
     with tempfile.TemporaryDirectory() as tmp:
         engine = Engine(Settings.model_validate({"data_dir": tmp, "engine": {"rules_dir": str(RULES)}}))
-        engine.seed_from()
+        engine.seed(engine.settings.engine.rules_dir)
         facts = teahouse_facts()
 
         def fire() -> Any:

@@ -25,10 +25,12 @@ import logging
 import os
 import socket
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 from gateway.base import jvm
-from gateway.base.versions import Catalog, MemoryCatalog
+from gateway.base.lifecycle import CatalogLifecycle
+from gateway.base.versions import Catalog
 from gateway.config import Settings
 from gateway.dialogue.service import DialogueService
 from gateway.engine import Engine
@@ -39,6 +41,13 @@ from gateway.runtime.actions import ActionRouter, workflow_handler
 from gateway.runtime.follower import ChangeFollower
 from gateway.runtime.jobs import JobRecords, JobService
 from gateway.runtime.live import LiveFeed
+from gateway.runtime.session_log import StoredSessionLog
+from gateway.runtime.transfer import seed_folders
+from gateway.store import open_store
+from gateway.store.catalog import MongoCatalog
+from gateway.store.decisions import DecisionRecord
+from gateway.store.members import Membership
+from gateway.store.session_records import SessionDirectory
 from gateway.store.store import QUERY_RESULTS
 from gateway.stream.engine import StreamEngine
 from gateway.stream.services import MappingService, QueryService
@@ -123,7 +132,6 @@ def build_gateway(
     rest: bool = True,
     ros: bool | None = None,
     store: Any = None,
-    use_store: bool = True,
     seed: bool = True,
     warm_up: bool = True,
     follow: bool = True,
@@ -133,13 +141,12 @@ def build_gateway(
     """Build one gateway process from ``settings`` (see the module docstring).
 
     ``ros``: run the ROS node (None: ``settings.ros.enabled``, else when rclpy is importable).
-    ``store``: an open Information State to use (None: open the configured one); ``use_store``
-    False runs on a catalog in memory with no decision record (local CLI tools only).
+    ``store``: an open Information State to use (None: open the configured one).
     ``seed``: import ``rules/drl``, ``workflows``, ``ontology`` into a store that lacks them.
     """
     closers: list[tuple[str, Callable[[], None]]] = []
     try:
-        return _build(settings, closers, rest=rest, ros=ros, store=store, use_store=use_store, seed=seed,
+        return _build(settings, closers, rest=rest, ros=ros, store=store, seed=seed,
                       warm_up=warm_up, follow=follow, domain_id=domain_id, on_ros_event=on_ros_event)
     except BaseException:
         while closers:
@@ -152,73 +159,53 @@ def build_gateway(
 
 
 def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *, rest: bool, ros: bool | None,
-           store: Any, use_store: bool, seed: bool, warm_up: bool, follow: bool, domain_id: int | None,
+           store: Any, seed: bool, warm_up: bool, follow: bool, domain_id: int | None,
            on_ros_event: Callable[[str, dict[str, Any]], None] | None) -> Gateway:
     name = process_name()
     # The JVM starts in this (normally the main) thread: a JVM first started from a worker thread
     # makes the interpreter hang at exit (JPype).
     jvm.start(settings.jvm)
 
-    catalog: Catalog
-    decisions = None
-    members = None
-    if use_store:
-        from gateway.store import open_store
-        from gateway.store.catalog import MongoCatalog
-        from gateway.store.decisions import DecisionRecord
+    if store is None:
+        store = open_store(settings)
+        closers.append(("the Information State", store.close))
+    store.ping()
+    catalog = MongoCatalog(store.db, name, change_streams=settings.sync.change_streams,
+                           poll_interval_s=settings.sync.poll_interval_s)
+    closers.append(("the catalog", catalog.close))
+    decisions = DecisionRecord(store)
+    members = Membership(store.db, name, heartbeat_s=settings.sessions.member_heartbeat_s)
+    closers.append(("the member record", members.close))
+    if settings.engine.compile_shared_cache:  # followers on other hosts assemble, not compile
+        from gateway.engine import incremental
+        from gateway.store.unit_store import SharedUnitStore
 
-        if store is None:
-            store = open_store(settings)
-            closers.append(("the Information State", store.close))
-        store.ping()
-        catalog = MongoCatalog(store.db, name, change_streams=settings.sync.change_streams,
-                               poll_interval_s=settings.sync.poll_interval_s)
-        closers.append(("the catalog", catalog.close))
-        decisions = DecisionRecord(store)
-        from gateway.store.members import Membership
-
-        members = Membership(store.db, name, heartbeat_s=settings.sessions.member_heartbeat_s)
-        closers.append(("the member record", members.close))
-        if settings.engine.compile_shared_cache:  # followers on other hosts assemble, not compile
-            from gateway.engine import incremental
-            from gateway.store.unit_store import SharedUnitStore
-
-            incremental.share_units(SharedUnitStore(store.db, settings.engine.compile_shared_cache_days))
-            closers.append(("the shared rule units", lambda: incremental.share_units(None)))
-    else:
-        catalog = MemoryCatalog(name)
+        incremental.share_units(SharedUnitStore(store.db, settings.engine.compile_shared_cache_days))
+        closers.append(("the shared rule units", lambda: incremental.share_units(None)))
     start_seq = catalog.last_seq()  # follow from here: nothing changed after loading is missed
 
     engine = Engine(settings, catalog)
-    if decisions is not None:
-        engine.recorder.journal_to(decisions)  # the one recorder journals every decision there
+    engine.recorder.journal_to(decisions)  # the one recorder journals every decision there
     live = LiveFeed()
     engine.add_listener(live.on_engine_event)
-    if members is not None:  # sessions are recorded with their owner, so other processes can forward to it
-        from gateway.store.session_records import SessionDirectory
-
-        engine.session_manager.directory = SessionDirectory(store.db, name, members)
-        closers.append(("the session records", engine.session_manager.directory.release_all))
-        from gateway.runtime.session_log import StoredSessionLog  # durable sessions (their log; see docs/operations.md)
-
-        engine.session_manager.attach_log(StoredSessionLog(store, catch_up_s=settings.sessions.rebuild_timeout_s))
-        closers.append(("the session log", engine.session_manager.log.close))
+    # sessions are recorded with their owner, so other processes can forward to it
+    engine.session_manager.directory = SessionDirectory(store.db, name, members)
+    closers.append(("the session records", engine.session_manager.directory.release_all))
+    # durable sessions (their log; see docs/operations.md)
+    engine.session_manager.attach_log(StoredSessionLog(store, catch_up_s=settings.sessions.rebuild_timeout_s))
+    closers.append(("the session log", engine.session_manager.log.close))
     closers.append(("the rules engine's sessions", engine.session_manager.close_all))
     closers.append(("explaining", engine.close_explain))
-    jobs = JobService(engine, JobRecords(store.db if store is not None else None), name,
-                      alive=(lambda p: members.alive(members.get(p))) if members is not None else None,
+    jobs = JobService(engine, JobRecords(store.db), name, alive=lambda p: members.alive(members.get(p)),
                       max_queued=settings.engine.max_queued_jobs)
     closers.append(("the build jobs", jobs.close))
 
     cfg = settings.streams
-    knowledge = KnowledgeBase(catalog)
-    if seed:
-        knowledge.seed(cfg.ontology_file, cfg.swrl_file)
-        for ruleset, status in engine.seed_from(settings.engine.rules_dir).items():
-            (log.error if status.startswith("failed") else log.info)("rule set %s: %s", ruleset, status)
-    knowledge.load()
-    for ruleset, status in engine.load_all().items():
-        (log.error if status.startswith("failed") else log.info)("rule set %s: %s", ruleset, status)
+    seeds = seed_folders(settings) if seed else {}
+    knowledge = KnowledgeBase(catalog, files={"ontology": Path(cfg.ontology_file).name,
+                                              "swrl": Path(cfg.swrl_file).name})
+    _seed_and_load(knowledge, seeds)
+    _seed_and_load(engine, seeds)
 
     robots = RobotStates(settings.ros.robot_start)
     actions = ActionRouter(store, queue_size=settings.ros.queue_size)
@@ -231,13 +218,9 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     streams.add_input_listener(live.on_stream_item)
     streams.subscribe(live.on_stream_event, nonempty=True)
     queries = QueryService(streams, catalog)
-    if seed:
-        mappings.seed(cfg.mappings_dir)
-        queries.seed(cfg.queries_dir)
-    mappings.load()
-    queries.load()
-    if store is not None:
-        streams.subscribe(_result_recorder(store), nonempty=True)
+    _seed_and_load(mappings, seeds)
+    _seed_and_load(queries, seeds)
+    streams.subscribe(_result_recorder(store), nonempty=True)
 
     run_ros = _want_ros(settings, ros)
     ros_gateway = None
@@ -254,8 +237,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     closers.append(("the action router", actions.close))  # finishes queued actions while the robots are reachable
     dialogue = DialogueService(engine, knowledge, settings.dialogue, store=store, dispatch=actions.on_stream_event)
     closers.append(("the conversations", dialogue.close))
-    if store is not None:  # every process watches the shared conversations (their process may be gone)
-        dialogue.start_watching()
+    dialogue.start_watching()  # every process watches the shared conversations (their process may be gone)
     if ros_gateway is not None:
         ros_gateway.attach_dialogue(dialogue)
 
@@ -267,9 +249,9 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
     streams.subscribe(actions.on_stream_event)
 
     follower = None
-    if follow and use_store:
-        follower = ChangeFollower(catalog, {"ruleset": engine, "workflow": workflows.registry, "knowledge": knowledge,
-                                            "mapping": mappings, "query": queries},
+    if follow:
+        services = (engine, workflows.registry, knowledge, mappings, queries)
+        follower = ChangeFollower(catalog, {service.kind: service for service in services},
                                   start_seq=start_seq, reconcile_interval_s=settings.sync.reconcile_interval_s).start()
         closers.append(("the change follower", follower.stop))
 
@@ -278,7 +260,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
                       workflows=workflows,
                       store=store, decisions=decisions, ros=ros_gateway, follower=follower, name=name,
                       members=members, jobs=jobs, live=live, dialogue=dialogue, _closers=closers)
-    if store is not None and settings.sync.live_relay:  # the Live view shows every process's teahouse
+    if settings.sync.live_relay:  # the Live view shows every process's teahouse
         from gateway.store.live_relay import LiveRelay
 
         relay = LiveRelay(store.db, live, store.process, change_streams=settings.sync.change_streams,
@@ -293,6 +275,20 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         engine.warm_up()
         closers.append(("engine warm-up", engine.stop_warm_up))  # closed first: it reads the store
     return gateway
+
+
+def _seed_and_load(service: CatalogLifecycle, seeds: dict[str, list[Path]]) -> None:
+    """Seed a catalog-backed service from its folders (none: ``seed=False``), then serve what the
+    catalog holds. One log line per item; failures as errors, so a start that serves less than
+    the store holds says so."""
+    for folder in seeds.get(service.kind, []):
+        _log_report(service.kind, service.seed(folder))
+    _log_report(service.kind, service.load())
+
+
+def _log_report(kind: str, report: dict[str, str]) -> None:
+    for item, status in report.items():
+        (log.error if status.startswith("failed") else log.info)("%s %s: %s", kind, item, status)
 
 
 def _want_ros(settings: Settings, ros: bool | None) -> bool:

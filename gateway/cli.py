@@ -537,7 +537,7 @@ def fire(
 
     engine = Engine(_settings(config))  # local: the rule sets of the rules dir, in memory
     try:
-        engine.seed_from()
+        engine.seed(engine.settings.engine.rules_dir)
         result = engine.fire(ruleset, facts, origin="cli")
     except EngineError as exc:
         _print_json(exc.to_dict())

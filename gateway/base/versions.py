@@ -194,11 +194,6 @@ class Served:
                 self._items[name] = (version, seq)
             return True
 
-    def is_current(self, name: str, head: Head) -> bool:
-        """Already serving what ``head`` points at."""
-        served = self.get(name)
-        return served is not None and served[0] == head.current and served[1] >= head.seq
-
 
 # --------------------------------------------------------------------------- in memory
 

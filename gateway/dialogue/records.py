@@ -28,8 +28,9 @@ One document per conversation::
 
 Written straight to MongoDB, not the journal: a turn must know at once that it won. While the
 database is away a turn is refused (:class:`RecordsUnavailable`, 503) rather than answered from
-a state other processes cannot see. Without an Information State (``use_store=False``) the
-same records live in memory (:class:`MemoryConversations`): one process only.
+a state other processes cannot see. A dialogue service built without an Information State (unit
+tests, the dialogue bench) keeps the same records in memory (:class:`MemoryConversations`): one
+process only.
 
 Times are wall-clock epoch seconds: they are compared across processes.
 """

@@ -11,7 +11,8 @@ one, shared by every gateway process. A deploy made here is live here at once; a
 another process reaches this one through :meth:`sync` (called by the change follower), which
 compiles the new version off the serving path and then swaps it in. Each live entry remembers the
 sequence number of the catalog change that produced it, so a slower swap can never replace a
-newer version.
+newer version. Seeding, loading and following are the shared life cycle of
+:mod:`gateway.base.lifecycle`; the engine says how a version is compiled, swapped in and dropped.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from gateway.base import jvm
+from gateway.base.lifecycle import CatalogLifecycle, NotAnItem
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
 from gateway.engine.build import CompiledRuleSet
@@ -42,7 +44,7 @@ from gateway.engine.results import FireResult, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
 from gateway.engine.sessions import SessionManager, rule_fingerprints
-from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.versions import Catalog, CatalogConflict, Version, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
@@ -71,15 +73,18 @@ class LiveRuleSet:
     seq: int
 
 
-class Engine:
+class Engine(CatalogLifecycle):
     """Rule sets by name, each with a live version; thread-safe."""
 
+    kind = KIND
+    failures = (EngineError, OSError, UnicodeDecodeError)
+    seed_races = (VersionConflict,)
+
     def __init__(self, settings: Settings | None = None, catalog: Catalog | None = None):
+        super().__init__(catalog)
         self.settings = settings or load_settings()
         jvm.configure(self.settings.jvm)
-        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
         self._live: dict[str, LiveRuleSet] = {}
-        self._lock = threading.RLock()
         self._listeners: list[Listener] = []
         self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
         self._recent = warmup.RecentRequests()  # each rule set's last requests' facts (warm-up samples)
@@ -351,47 +356,28 @@ class Engine:
         self._swap(name, None, seq)
         self._notify("delete", {"name": name, "by": author})
 
-    # ------------------------------------------------------------------ following other processes
+    # ------------------------------------------------------------------ the shared life cycle's hooks
 
-    def sync(self, name: str) -> None:
-        """Converge ``name`` to the catalog's head: compile a new current version (off the serving
-        path: the old one keeps serving meanwhile), then swap; drop a deleted rule set."""
-        head = self.catalog.head(KIND, name)
-        live = self._live.get(name)
-        if head is None or not head.live:
-            if live is not None and self._swap(name, None, head.seq if head else live.seq + 1):
-                log.info("rule set %s: deleted elsewhere; no longer served", name)
-                self._notify("delete", {"name": name, "by": "(another process)"})
-            return
-        if live is not None and live.info.version == head.current and live.seq >= head.seq:
-            return
-        stored = self.catalog.load(KIND, name, head.current)  # type: ignore[arg-type]
+    def served(self, name: str) -> tuple[int, int] | None:
+        entry = self._live.get(name)
+        return (entry.info.version, entry.seq) if entry is not None else None
+
+    def served_names(self) -> list[str]:
+        return list(self._live)
+
+    def _apply(self, name: str, stored: Version, seq: int, *, elsewhere: bool) -> None:
+        """Compile the version off the serving path (the old one keeps serving meanwhile), then swap."""
         compiled = self._compile(stored.payload, name)
-        if self._swap(name, LiveRuleSet(stored.info, compiled, head.seq), head.seq):
+        if self._swap(name, LiveRuleSet(stored.info, compiled, seq), seq):
             self.prepare_explain(name, stored.payload, compiled.rule_count)
-            log.info("rule set %s: now serving version %d (changed elsewhere)", name, stored.info.version)
-            self._notify("sync", {**stored.info.to_dict()})
+            if elsewhere:
+                log.info("rule set %s: now serving version %d (changed elsewhere)", name, stored.info.version)
+                self._notify("sync", {**stored.info.to_dict()})
 
-    def reconcile(self) -> None:
-        """Converge every rule set (the follower's periodic safety net)."""
-        names = {h.name for h in self.catalog.heads(KIND)} | set(self._live)
-        for name in sorted(names):
-            self.sync(name)
-
-    def load_all(self) -> dict[str, str]:
-        """Compile every current version now (at start: serve at once, not on the first request).
-        A version that no longer compiles is reported and not served."""
-        report: dict[str, str] = {}
-        for head in self.catalog.heads(KIND):
-            if not head.live:
-                continue
-            try:
-                entry = self._load_live(head.name)
-                report[head.name] = f"serving v{entry.info.version}"
-            except EngineError as exc:
-                log.error("rule set %s v%s does not load: %s", head.name, head.current, exc)
-                report[head.name] = f"failed: {exc}"
-        return report
+    def _withdraw(self, name: str, seq: int) -> None:
+        if name in self._live and self._swap(name, None, seq):
+            log.info("rule set %s: deleted elsewhere; no longer served", name)
+            self._notify("delete", {"name": name, "by": "(another process)"})
 
     def declared_types(self, name: str) -> dict[str, dict[str, str]]:
         return self._live_entry(name)[1].types
@@ -632,47 +618,28 @@ class Engine:
         """Ends a background warm-up and waits for it (shutting down never races it)."""
         self._warm_up.stop(timeout_s)
 
-    # ------------------------------------------------------------------ the seed folders
+    # ------------------------------------------------------------------ the seed folder
 
-    def seed_from(self, rules_dir: str | None = None) -> dict[str, str]:
-        """Imports each ``<rules_dir>/<name>/`` folder the catalog has never seen (author "seed").
+    def _seed_paths(self, folder: Path) -> list[Path]:
+        """Each ``<folder>/<name>/`` holds one rule set."""
+        return sorted(p for p in folder.iterdir() if p.is_dir())
 
-        The folders are the seed of an empty store, nothing more: a rule set the catalog already
-        has (even deleted) is never overwritten by files. A folder that does not compile is
-        reported and skipped. Returns ``{name: "seeded v1" | "kept v3" | "failed: …"}``.
-        """
-        root = Path(rules_dir or self.settings.engine.rules_dir)
-        report: dict[str, str] = {}
-        if not root.is_dir():
-            log.warning("rules directory %s does not exist", root)
-            return report
-        for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-            report[folder.name] = self._seed_folder(folder)
-        return report
-
-    def _seed_folder(self, folder: Path) -> str:
-        name = folder.name
-        try:
-            check_name(name)
-            files = read_folder(folder)
-        except (InvalidRuleSet, OSError, UnicodeDecodeError) as exc:
-            log.error("skipping rules folder %s: %s", folder, exc)
-            return f"failed: {exc}"
+    def _read_seed(self, path: Path) -> tuple[str, dict[str, str]]:
+        check_name(path.name)
+        files = read_folder(path)
         if not files:
-            return "skipped: no rule files"
-        head = self.catalog.head(KIND, name)
-        if head is not None:
-            return f"kept v{head.current}" if head.live else "kept (deleted)"
+            raise NotAnItem("no rule files")
+        return path.name, files
+
+    def _store_seed(self, name: str, item: dict[str, str], path: Path) -> int:
+        """A seed is what the repository holds: served as is (its red scenarios show in the Tests view)."""
         try:
-            # a seed is what the repository holds: served as is (its red scenarios show in the Tests view)
-            info = self.deploy(name, files, author="seed", comment=f"seeded from {folder}", base_version=0, force=True)
-        except VersionConflict:  # another process seeded it at the same moment
-            return "kept (seeded by another process)"
-        except (CompileFailed, InvalidRuleSet) as failed:
-            for err in getattr(failed, "errors", []) or [failed]:
-                log.error("%s/%s", folder, err)
-            return f"failed: {failed}"
-        return f"seeded v{info.version}"
+            return self.deploy(name, item, author="seed", comment=f"seeded from {path.name}", base_version=0,
+                               force=True).version
+        except CompileFailed as failed:
+            for err in failed.errors or [failed]:
+                log.error("%s/%s", path, err)
+            raise
 
     def import_folder(self, folder: Path, author: str, comment: str, *, role: str | None = None) -> str:
         """Deploy ``folder`` as rule set ``folder.name`` when its files differ from the current

@@ -10,7 +10,9 @@ once, runs Pellet once, and hands the asserted **and inferred** facts to everyon
 SWRL rule infers reaches the queries, bindings and workflows, not only ``/api/reason``.
 
 A replacement is checked first (the Turtle must parse, Pellet must accept ontology + rules
-together); a bad one changes nothing and gives the file, line and column.
+together); a bad one changes nothing and gives the file, line and column. Seeding, loading and
+following other processes are the shared life cycle of :mod:`gateway.base.lifecycle`; the
+knowledge is never deleted, and a load or reconcile that finds both texts new derives once.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import logging
 import re
-import threading
 from decimal import Decimal
 from pathlib import Path
 from typing import Any, Callable
@@ -28,7 +29,8 @@ from pyoxigraph import Literal, NamedNode, RdfFormat, parse
 from gateway.ontology.reasoner import KnowledgeText, Reasoner, ReasonerError
 from gateway.rdf.terms import Triple
 from gateway.stream.params import OntologySource
-from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.lifecycle import CatalogLifecycle
+from gateway.base.versions import Catalog, CatalogConflict, Version, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
@@ -58,16 +60,21 @@ class KnowledgeInvalid(ValueError):
         self.kind, self.errors = kind, errors
 
 
-class KnowledgeBase:
+class KnowledgeBase(CatalogLifecycle):
     """Current ontology + SWRL texts, their versions, and everything derived from them."""
+
+    kind = KIND
+    failures = (OSError, UnicodeDecodeError)
 
     def __init__(self, catalog: Catalog | None = None, *, files: dict[str, str] | None = None,
                  infer: bool = True) -> None:
-        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
+        """``files``: the file name of each item (``ontology``, ``swrl``), as a seed folder holds
+        it and as errors name it."""
+        super().__init__(catalog)
         self.files = dict(files or {"ontology": "teahouse.ttl", "swrl": "teahouse.swrl"})
         self.infer = infer
         self._text = KnowledgeText(0, "", "", self.files["ontology"], self.files["swrl"])
-        self._served: dict[str, tuple[VersionInfo, int]] = {}
+        self._infos: dict[str, VersionInfo] = {}
         self.reasoner = Reasoner(lambda: self._text)
         self.ontology = OntologySource(None)  # the stream engine's view (parameters, FROM <ontology>)
         self._values: dict[tuple[str, str], Any] = {}
@@ -75,7 +82,6 @@ class KnowledgeBase:
         self.inferred: list[dict[str, Any]] = []
         self.inferred_types: list[dict[str, str]] = []
         self.error: str | None = None
-        self._lock = threading.RLock()
         self._listeners: list[Callable[[str], None]] = []
 
     # ---- reading --------------------------------------------------------------------------------
@@ -88,8 +94,7 @@ class KnowledgeBase:
         return self._text.ontology if kind == "ontology" else self._text.swrl
 
     def info(self, kind: str) -> VersionInfo | None:
-        served = self._served.get(kind)
-        return served[0] if served else None
+        return self._infos.get(kind)
 
     def value(self, name: str) -> Any:
         """``<individual>.<property>`` in the ontology's namespace, asserted or inferred; None if absent."""
@@ -173,62 +178,30 @@ class KnowledgeBase:
     def history(self, kind: str) -> list[dict[str, Any]]:
         return [c.to_dict() for c in self.catalog.history(KIND, _kind(kind))]
 
-    # ---- seed and follow -----------------------------------------------------------------------
-    def seed(self, ontology_file: str | Path | None, swrl_file: str | Path | None) -> dict[str, str]:
-        """Store the files as version 1 of what the catalog has never had (author "seed")."""
-        report = {}
-        for kind, path in (("ontology", ontology_file), ("swrl", swrl_file)):
-            if not path:
-                continue
-            path = Path(path)
-            self.files[kind] = path.name
-            if self.catalog.head(KIND, kind) is not None:
-                report[kind] = "kept"
-                continue
-            try:
-                text = path.read_text(encoding="utf-8")
-            except OSError as exc:
-                log.error("knowledge seed %s: %s", path, exc)
-                report[kind] = f"failed: {exc}"
-                continue
-            try:
-                self.catalog.save(KIND, kind, {"text": text, "file": path.name}, author="seed",
-                                  comment=f"seeded from {path}", hash=digest(text), base_version=0)
-                report[kind] = "seeded v1"
-            except CatalogConflict:
-                report[kind] = "kept (seeded by another process)"
-        return report
+    # ---- the shared life cycle's hooks -------------------------------------------------------
+    def _seed_paths(self, folder: Path) -> list[Path]:
+        """The ontology and SWRL files (by their names in :attr:`files`) the folder holds."""
+        return [folder / self.files[kind] for kind in NAMES if (folder / self.files[kind]).is_file()]
 
-    def load(self) -> None:
-        """Serve the catalog's current texts (at start)."""
-        self.reconcile()
+    def _read_seed(self, path: Path) -> tuple[str, Path]:
+        return ("ontology" if path.name == self.files["ontology"] else "swrl"), path
 
-    def sync(self, kind: str) -> None:
-        if kind not in NAMES:
-            raise ValueError(f"unknown knowledge item {kind!r}")
-        head = self.catalog.head(KIND, kind)
-        if head is None or not head.live:
-            return  # the knowledge cannot be deleted: keep serving what we have
-        served = self._served.get(kind)
-        if served is not None and served[0].version == head.current and served[1] >= head.seq:
-            return
-        stored = self.catalog.load(KIND, kind, head.current)  # type: ignore[arg-type]
+    def _store_seed(self, name: str, item: Path, path: Path) -> int:
+        """Stored as the repository holds it (not checked: the seed is the reference)."""
+        text = path.read_text(encoding="utf-8")
+        return self._save_seed(name, {"text": text, "file": path.name}, digest(text), path)
+
+    def _apply(self, name: str, stored: Version, seq: int, *, elsewhere: bool) -> None:
+        self._apply_all([(stored, seq)], elsewhere=elsewhere)
+
+    def _apply_all(self, stale: list[tuple[Version, int]], *, elsewhere: bool) -> dict[str, str]:
+        """Both texts at once when both are new: Pellet runs once."""
         with self._lock:
-            self._serve({kind: (stored.info, head.seq, stored.payload["text"])})
+            self._serve({_kind(s.info.name): (s.info, seq, s.payload["text"]) for s, seq in stale})
+        return {s.info.name: f"serving v{s.info.version}" for s, _ in stale}
 
-    def reconcile(self) -> None:
-        changes = {}
-        for kind in NAMES:
-            head = self.catalog.head(KIND, kind)
-            if head is None or not head.live:
-                continue
-            served = self._served.get(kind)
-            if served is None or served[0].version != head.current or served[1] < head.seq:
-                stored = self.catalog.load(KIND, kind, head.current)  # type: ignore[arg-type]
-                changes[kind] = (stored.info, head.seq, stored.payload["text"])
-        if changes:
-            with self._lock:
-                self._serve(changes)
+    def _withdraw(self, name: str, seq: int) -> None:
+        """The knowledge cannot be deleted: keep serving what we have."""
 
     # ---- deriving ------------------------------------------------------------------------------
     def _serve(self, changes: dict[str, tuple[VersionInfo, int, str]]) -> None:
@@ -236,10 +209,9 @@ class KnowledgeBase:
         applied = []
         texts = {"ontology": self._text.ontology, "swrl": self._text.swrl}
         for kind, (info, seq, text) in changes.items():
-            served = self._served.get(kind)
-            if served is not None and served[1] > seq:
+            if not self._served.set(kind, info.version, seq):
                 continue
-            self._served[kind] = (info, seq)
+            self._infos[kind] = info
             texts[kind] = text
             applied.append(kind)
         if not applied:
@@ -248,7 +220,7 @@ class KnowledgeBase:
                                    self.files["ontology"], self.files["swrl"])
         self._derive()
         for kind in applied:
-            log.info("knowledge: %s now version %d", kind, self._served[kind][0].version)
+            log.info("knowledge: %s now version %d", kind, self._infos[kind].version)
             for listener in list(self._listeners):
                 try:
                     listener(kind)

@@ -24,14 +24,17 @@ log = logging.getLogger(__name__)
 
 
 class Follows(Protocol):
-    """A service whose items are versioned in the catalog."""
+    """A service whose items are versioned in the catalog (every one is a
+    :class:`gateway.base.lifecycle.CatalogLifecycle`; the protocol keeps the follower testable
+    with a stub)."""
 
     def sync(self, name: str) -> None:
         """Converge ``name`` to the catalog's head (deployed, moved back, or deleted)."""
         ...
 
-    def reconcile(self) -> None:
-        """Converge every item of this kind (names no longer in the catalog included)."""
+    def reconcile(self) -> object:
+        """Converge every item of this kind (names no longer in the catalog included); what it
+        returns (a report) is not read here."""
         ...
 
 

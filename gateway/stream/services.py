@@ -8,6 +8,10 @@ that names a field the message type lacks all fail with what and where, and chan
 then stored as a new version in the catalog (kinds ``query`` and ``mapping``), made live here,
 and followed by every other process (``sync``). The files under ``ontology/queries`` (``*.rq``
 plus ``<stem>.binding.yaml``) and ``ontology/mappings/*.yaml`` only seed an empty store.
+
+The two services differ only in what they check and serve: the changes (check → store → serve),
+rollbacks, deletes and stored versions are :class:`_CheckedItems`; seeding, loading and following
+other processes are the shared life cycle of :mod:`gateway.base.lifecycle`.
 """
 
 from __future__ import annotations
@@ -15,7 +19,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -27,7 +30,8 @@ from gateway.stream.engine import QueryNotFound, StreamEngine, StreamError
 from gateway.stream.lexer import QueryParseError
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import BindingError, RuleBinding
-from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, Served, VersionInfo, VersionMissing
+from gateway.base.lifecycle import CatalogLifecycle
+from gateway.base.versions import Catalog, Version, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
@@ -61,14 +65,76 @@ class QueryDefinition:
     report: str | None = None
 
 
-class QueryService:
+class _CheckedItems(CatalogLifecycle):
+    """A change is checked, stored as a new version, then served here; a rollback is checked like
+    a change; a stored version is served again by other processes without the author's checks."""
+
+    def _not_found(self, name: str, version: int | None = None) -> Exception:
+        """The error for an unknown item or version (each service names its own)."""
+        raise NotImplementedError
+
+    def _prepare(self, name: str, payload: Any) -> Any:
+        """Check ``payload`` as an author's change; returns what :meth:`_serve` needs."""
+        raise NotImplementedError
+
+    def _prepare_stored(self, name: str, payload: Any) -> Any:
+        """What :meth:`_serve` needs for a version already stored (checked when it was made)."""
+        raise NotImplementedError
+
+    def _serve(self, name: str, payload: Any, prepared: Any, version: int, seq: int) -> Any:
+        """Serve a version unless a newer change is served already."""
+        raise NotImplementedError
+
+    def _change(self, name: str, payload: Any, *, author: str, comment: str,
+                base_version: int | None = None) -> tuple[VersionInfo, Any]:
+        """Check, store and serve a new version; CatalogConflict when ``base_version`` is stale."""
+        with self._lock:
+            prepared = self._prepare(name, payload)
+            info, seq = self.catalog.save(self.kind, name, payload, author=author, comment=comment,
+                                          hash=_hash(payload), base_version=base_version)
+            return info, self._serve(name, payload, prepared, info.version, seq)
+
+    def _rollback(self, name: str, version: int, *, author: str) -> tuple[VersionInfo, Any]:
+        """Make a stored version current again (checked first, like a change)."""
+        with self._lock:
+            payload = self._stored(name, int(version)).payload
+            prepared = self._prepare(name, payload)
+            info, seq = self.catalog.set_current(self.kind, name, int(version), author=author,
+                                                 comment=f"rollback to version {version}")
+            return info, self._serve(name, payload, prepared, info.version, seq)
+
+    def _remove(self, name: str, *, author: str) -> None:
+        with self._lock:
+            try:
+                seq = self.catalog.delete(self.kind, name, author=author)
+            except VersionMissing:
+                raise self._not_found(name) from None
+            self._withdraw(name, seq)
+
+    def _stored(self, name: str, version: int) -> Version:
+        try:
+            return self.catalog.load(self.kind, name, version)
+        except VersionMissing:
+            raise self._not_found(name, version) from None
+
+    def current_version(self, name: str) -> int | None:
+        head = self.catalog.head(self.kind, name)
+        return head.current if head is not None and head.live else None
+
+    def _apply(self, name: str, stored: Version, seq: int, *, elsewhere: bool) -> None:
+        with self._lock:
+            self._serve(name, stored.payload, self._prepare_stored(name, stored.payload), stored.info.version, seq)
+
+
+class QueryService(_CheckedItems):
     """Register, replace, bind and remove continuous queries through the catalog."""
 
+    kind = QUERY
+    failures = (OSError, UnicodeDecodeError, QueryParseError, StreamError, BindingError, yaml.YAMLError)
+
     def __init__(self, engine: StreamEngine, catalog: Catalog | None = None) -> None:
+        super().__init__(catalog)
         self.engine = engine
-        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
-        self._served = Served()
-        self._lock = threading.RLock()
 
     # ---- changing -------------------------------------------------------------------------------
     def register(self, text: str, params: list[ParamSpec] | None = None, replace: bool = False,
@@ -79,55 +145,40 @@ class QueryService:
         edit started from, 0 for a new query — CatalogConflict when someone saved meanwhile)."""
         name = parse_query(text, params).name
         with self._lock:
-            head = self.catalog.head(QUERY, name)
-            if head is not None and head.live and not replace:
+            if self.current_version(name) is not None and not replace:
                 raise StreamError(f"a query named {name!r} is already registered")
-            self._check(text, params, binding, report)
             payload = {"text": text, "params": _params_payload(params),
                        "binding": binding.to_dict() if binding else None, "report": report}
-            info, seq = self.catalog.save(QUERY, name, payload, author=author, comment=comment, hash=_hash(payload),
-                                          base_version=base_version)
-            result = self._serve(name, payload, info.version, seq)
+            info, result = self._change(name, payload, author=author, comment=comment, base_version=base_version)
         return {**result, "version": info.version}
 
     def bind_rules(self, name: str, binding: RuleBinding | None, *, author: str = "anonymous") -> dict[str, Any]:
         """A new version of the query with this binding (None: unbound)."""
         with self._lock:
             payload = dict(self._current_payload(name))
-            self._check(payload["text"], _params_from(payload.get("params")), binding, payload.get("report"))
             payload["binding"] = binding.to_dict() if binding else None
-            info, seq = self.catalog.save(QUERY, name, payload, author=author,
-                                          comment="rules bound" if binding else "rules unbound", hash=_hash(payload))
-            return {**self._serve(name, payload, info.version, seq), "version": info.version}
+            info, result = self._change(name, payload, author=author,
+                                        comment="rules bound" if binding else "rules unbound")
+            return {**result, "version": info.version}
 
     def unregister(self, name: str, *, author: str = "anonymous") -> None:
-        with self._lock:
-            try:
-                seq = self.catalog.delete(QUERY, name, author=author)
-            except VersionMissing:
-                raise QueryNotFound(f"no query named {name!r}") from None
-            self._drop(name, seq)
+        self._remove(name, author=author)
 
     def rollback(self, name: str, version: int, *, author: str = "anonymous") -> dict[str, Any]:
-        with self._lock:
-            stored = self.catalog.load(QUERY, name, int(version))
-            self._check(stored.payload["text"], _params_from(stored.payload.get("params")),
-                        _binding(stored.payload.get("binding")), stored.payload.get("report"))
-            info, seq = self.catalog.set_current(QUERY, name, int(version), author=author,
-                                                 comment=f"rollback to version {version}")
-            return {**self._serve(name, stored.payload, info.version, seq), "version": info.version}
+        info, result = self._rollback(name, version, author=author)
+        return {**result, "version": info.version}
 
     def versions(self, name: str) -> list[VersionInfo]:
         infos = self.catalog.versions(QUERY, name)
         if not infos:
-            raise QueryNotFound(f"no query named {name!r}")
+            raise self._not_found(name)
         return infos
 
     def _current_payload(self, name: str) -> dict[str, Any]:
-        head = self.catalog.head(QUERY, name)
-        if head is None or not head.live:
-            raise QueryNotFound(f"no query named {name!r}")
-        return self.catalog.load(QUERY, name, head.current).payload  # type: ignore[arg-type]
+        current = self.current_version(name)
+        if current is None:
+            raise self._not_found(name)
+        return self.catalog.load(QUERY, name, current).payload
 
     def validate(self, text: str, params: list[ParamSpec] | None = None, binding: RuleBinding | None = None,
                  report: str | None = None) -> dict[str, Any]:
@@ -136,13 +187,8 @@ class QueryService:
         a new version of it). Raises what registering would raise."""
         name = parse_query(text, params).name
         info = self._check(text, params, binding, report)
-        head = self.catalog.head(QUERY, name)
-        live = head is not None and head.live
-        return {"name": name, "exists": live, "version": head.current if live else None, "query": info}
-
-    def current_version(self, name: str) -> int | None:
-        head = self.catalog.head(QUERY, name)
-        return head.current if head is not None and head.live else None
+        current = self.current_version(name)
+        return {"name": name, "exists": current is not None, "version": current, "query": info}
 
     def version(self, name: str, version: int | None = None) -> dict[str, Any]:
         """One stored version (the current one when ``version`` is None): its info, its definition
@@ -150,11 +196,8 @@ class QueryService:
         current = self.current_version(name)
         wanted = current if version is None else int(version)
         if wanted is None:
-            raise QueryNotFound(f"no query named {name!r}")
-        try:
-            stored = self.catalog.load(QUERY, name, wanted)
-        except VersionMissing:
-            raise QueryNotFound(f"query {name!r} has no version {wanted}") from None
+            raise self._not_found(name)
+        stored = self._stored(name, wanted)
         return {**stored.info.to_dict(), "text": stored.payload["text"], "params": stored.payload.get("params"),
                 "binding": stored.payload.get("binding"), "report": stored.payload.get("report"),
                 "current": wanted == current}
@@ -165,7 +208,7 @@ class QueryService:
         out = []
         for name in self._served.names():
             served = self._served.get(name)
-            if served is None or served[0] is None:
+            if served is None:
                 continue
             try:
                 payload = self.catalog.load(QUERY, name, served[0]).payload
@@ -185,7 +228,18 @@ class QueryService:
         return scratch.register(text, params, replace=True, binding=binding, report=report)
 
     # ---- serving --------------------------------------------------------------------------------
-    def _serve(self, name: str, payload: dict[str, Any], version: int, seq: int) -> dict[str, Any]:
+    def _not_found(self, name: str, version: int | None = None) -> Exception:
+        return QueryNotFound(f"no query named {name!r}" if version is None else
+                             f"query {name!r} has no version {version}")
+
+    def _prepare(self, name: str, payload: dict[str, Any]) -> None:
+        self._check(payload["text"], _params_from(payload.get("params")), _binding(payload.get("binding")),
+                    payload.get("report"))
+
+    def _prepare_stored(self, name: str, payload: dict[str, Any]) -> None:
+        return None  # the stream engine's registration parses it again
+
+    def _serve(self, name: str, payload: dict[str, Any], prepared: None, version: int, seq: int) -> dict[str, Any]:
         if not self._served.accepts(name, seq):
             return self.engine.query_info(name)
         info = self.engine.register(payload["text"], _params_from(payload.get("params")), replace=True,
@@ -193,84 +247,48 @@ class QueryService:
         self._served.set(name, version, seq)
         return info
 
-    def _drop(self, name: str, seq: int) -> None:
-        if not self._served.set(name, None, seq):
-            return
-        try:
-            self.engine.unregister(name)
-        except QueryNotFound:
-            pass
-
-    def sync(self, name: str) -> None:
+    def _withdraw(self, name: str, seq: int) -> None:
         with self._lock:
-            head = self.catalog.head(QUERY, name)
-            if head is None or not head.live:
-                self._drop(name, head.seq if head else 1 << 62)
+            if not self._served.set(name, None, seq):
                 return
-            if self._served.is_current(name, head):
-                return
-            stored = self.catalog.load(QUERY, name, head.current)  # type: ignore[arg-type]
-            self._serve(name, stored.payload, head.current, head.seq)  # type: ignore[arg-type]
-
-    def reconcile(self) -> None:
-        names = {h.name for h in self.catalog.heads(QUERY)} | set(self._served.names())
-        for name in sorted(names):
             try:
-                self.sync(name)
-            except (QueryParseError, StreamError, BindingError) as exc:
-                log.error("query %s not served: %s", name, exc)
+                self.engine.unregister(name)
+            except QueryNotFound:
+                pass
 
-    def load(self) -> None:
-        """Serve the catalog's current queries (at start); one that fails is logged and skipped."""
-        self.reconcile()
+    # ---- the seed folder ------------------------------------------------------------------------
+    def _seed_paths(self, folder: Path) -> list[Path]:
+        """``*.rq`` files, each with its ``<stem>.binding.yaml`` when there is one."""
+        return sorted(folder.glob("*.rq"))
 
-    def seed(self, folder: str | Path | None) -> dict[str, str]:
-        """``*.rq`` files (with ``<stem>.binding.yaml``) the catalog has never had become version 1."""
-        report: dict[str, str] = {}
-        if not folder or not Path(folder).is_dir():
-            return report
-        for path in sorted(Path(folder).glob("*.rq")):
-            try:
-                text = path.read_text(encoding="utf-8")
-                name = parse_query(text).name
-                sidecar = path.with_name(path.stem + ".binding.yaml")
-                binding = RuleBinding.from_dict(yaml.safe_load(sidecar.read_text(encoding="utf-8")),
-                                                str(sidecar.name)) if sidecar.exists() else None
-            except (OSError, QueryParseError, BindingError, yaml.YAMLError) as exc:
-                log.error("query file %s not seeded: %s", path, exc)
-                report[path.name] = f"failed: {exc}"
-                continue
-            if self.catalog.head(QUERY, name) is not None:
-                report[name] = "kept"
-                continue
-            payload = {"text": text, "params": None, "binding": binding.to_dict() if binding else None}
-            try:
-                self._check(text, None, binding)
-                self.catalog.save(QUERY, name, payload, author="seed", comment=f"seeded from {path.name}",
-                                  hash=_hash(payload), base_version=0)
-                report[name] = "seeded v1"
-            except CatalogConflict:
-                report[name] = "kept (seeded by another process)"
-            except (QueryParseError, StreamError, BindingError) as exc:
-                log.error("query file %s not seeded: %s", path, exc)
-                report[name] = f"failed: {exc}"
-        return report
+    def _read_seed(self, path: Path) -> tuple[str, dict[str, Any]]:
+        text = path.read_text(encoding="utf-8")
+        sidecar = path.with_name(path.stem + ".binding.yaml")
+        binding = RuleBinding.from_dict(yaml.safe_load(sidecar.read_text(encoding="utf-8")),
+                                        str(sidecar.name)) if sidecar.exists() else None
+        return parse_query(text).name, {"text": text, "params": None,
+                                        "binding": binding.to_dict() if binding else None}
+
+    def _store_seed(self, name: str, item: dict[str, Any], path: Path) -> int:
+        self._prepare(name, item)
+        return self._save_seed(name, item, _hash(item), path)
 
 
 def _binding(raw: Any) -> RuleBinding | None:
     return None if raw is None else RuleBinding.from_dict(raw)
 
 
-class MappingService:
+class MappingService(_CheckedItems):
     """Named message → RDF mappings (``ontology/mappings/*.yaml``), versioned in the catalog."""
 
+    kind = MAPPING
+    failures = (OSError, UnicodeDecodeError, yaml.YAMLError, MappingError)
+
     def __init__(self, mapper: Mapper, catalog: Catalog | None = None, describe: Describe | None = None) -> None:
+        super().__init__(catalog)
         self.mapper = mapper
-        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
         self.describe = describe  # message type -> its fields (rosidl), when ROS types are importable
-        self._served = Served()
         self._specs: dict[str, dict[str, Any]] = {}
-        self._lock = threading.RLock()
 
     def names(self) -> list[str]:
         return sorted(self.mapper.mappings)
@@ -296,99 +314,56 @@ class MappingService:
 
     def replace(self, name: str, spec: dict[str, Any], *, author: str = "anonymous", comment: str = "",
                 base_version: int | None = None) -> VersionInfo:
-        with self._lock:
-            node = self.check(name, spec)
-            info, seq = self.catalog.save(MAPPING, name, spec, author=author, comment=comment, hash=_hash(spec),
-                                          base_version=base_version)
-            self._serve(name, spec, node, info.version, seq)
-            return info
+        return self._change(name, spec, author=author, comment=comment, base_version=base_version)[0]
 
     def delete(self, name: str, *, author: str = "anonymous") -> None:
-        with self._lock:
-            try:
-                seq = self.catalog.delete(MAPPING, name, author=author)
-            except VersionMissing:
-                raise MappingError("mapping", f"no stored mapping named {name!r}") from None
-            self._drop(name, seq)
+        self._remove(name, author=author)
 
     def versions(self, name: str) -> list[VersionInfo]:
         return self.catalog.versions(MAPPING, name)
 
     def version(self, name: str, version: int) -> dict[str, Any]:
         """One stored version: its info, its spec and whether it is the current one."""
-        try:
-            stored = self.catalog.load(MAPPING, name, int(version))
-        except VersionMissing:
-            raise MappingError("mapping", f"mapping {name!r} has no version {version}") from None
-        head = self.catalog.head(MAPPING, name)
+        stored = self._stored(name, int(version))
         return {**stored.info.to_dict(), "spec": stored.payload,
-                "current": bool(head and head.live and head.current == stored.info.version)}
+                "current": self.current_version(name) == stored.info.version}
 
     def rollback(self, name: str, version: int, *, author: str = "anonymous") -> VersionInfo:
         """Make a stored version current again (checked first, like a change)."""
-        with self._lock:
-            try:
-                spec = self.catalog.load(MAPPING, name, int(version)).payload
-            except VersionMissing:
-                raise MappingError("mapping", f"mapping {name!r} has no version {version}") from None
-            node = self.check(name, spec)
-            info, seq = self.catalog.set_current(MAPPING, name, int(version), author=author,
-                                                 comment=f"rollback to version {version}")
-            self._serve(name, spec, node, info.version, seq)
-            return info
+        return self._rollback(name, version, author=author)[0]
 
-    def _serve(self, name: str, spec: dict[str, Any], node: NodeMap, version: int, seq: int) -> None:
+    # ---- serving --------------------------------------------------------------------------------
+    def _not_found(self, name: str, version: int | None = None) -> Exception:
+        return MappingError("mapping", f"no stored mapping named {name!r}" if version is None else
+                            f"mapping {name!r} has no version {version}")
+
+    def _prepare(self, name: str, payload: Any) -> NodeMap:
+        return self.check(name, payload)
+
+    def _prepare_stored(self, name: str, payload: Any) -> NodeMap:
+        return node_map_from_spec(payload, "mapping", resolve=self.mapper.mappings, prefixes=self.mapper.prefixes)
+
+    def _serve(self, name: str, payload: dict[str, Any], prepared: NodeMap, version: int, seq: int) -> None:
         if not self._served.set(name, version, seq):
             return
-        self.mapper.mappings[name] = node
-        self._specs[name] = spec
+        self.mapper.mappings[name] = prepared
+        self._specs[name] = payload
 
-    def _drop(self, name: str, seq: int) -> None:
-        if not self._served.set(name, None, seq):
-            return
-        self._specs.pop(name, None)
-        self.mapper.mappings.pop(name, None)
-
-    def sync(self, name: str) -> None:
+    def _withdraw(self, name: str, seq: int) -> None:
         with self._lock:
-            head = self.catalog.head(MAPPING, name)
-            if head is None or not head.live:
-                self._drop(name, head.seq if head else 1 << 62)
+            if not self._served.set(name, None, seq):
                 return
-            if self._served.is_current(name, head):
-                return
-            spec = self.catalog.load(MAPPING, name, head.current).payload  # type: ignore[arg-type]
-            node = node_map_from_spec(spec, "mapping", resolve=self.mapper.mappings, prefixes=self.mapper.prefixes)
-            self._serve(name, spec, node, head.current, head.seq)  # type: ignore[arg-type]
+            self._specs.pop(name, None)
+            self.mapper.mappings.pop(name, None)
 
-    def reconcile(self) -> None:
-        for name in sorted({h.name for h in self.catalog.heads(MAPPING)} | set(self._served.names())):
-            try:
-                self.sync(name)
-            except MappingError as exc:
-                log.error("mapping %s not served: %s", name, exc)
+    # ---- the seed folder ------------------------------------------------------------------------
+    def _seed_paths(self, folder: Path) -> list[Path]:
+        return sorted(folder.glob("*.yaml"))
 
-    def load(self) -> None:
-        self.reconcile()
+    def _read_seed(self, path: Path) -> tuple[str, None]:
+        return path.stem, None  # the file is read only when the catalog lacks the mapping
 
-    def seed(self, folder: str | Path | None) -> dict[str, str]:
-        report: dict[str, str] = {}
-        if not folder or not Path(folder).is_dir():
-            return report
-        for path in sorted(Path(folder).glob("*.yaml")):
-            name = path.stem
-            if self.catalog.head(MAPPING, name) is not None:
-                report[name] = "kept"
-                continue
-            try:
-                spec = yaml.safe_load(path.read_text(encoding="utf-8"))
-                self.check(name, spec)
-                self.catalog.save(MAPPING, name, spec, author="seed", comment=f"seeded from {path.name}",
-                                  hash=_hash(spec), base_version=0)
-                report[name] = "seeded v1"
-            except CatalogConflict:
-                report[name] = "kept (seeded by another process)"
-            except (OSError, yaml.YAMLError, MappingError) as exc:
-                log.error("mapping file %s not seeded: %s", path, exc)
-                report[name] = f"failed: {exc}"
-        return report
+    def _store_seed(self, name: str, item: None, path: Path) -> int:
+        spec = yaml.safe_load(path.read_text(encoding="utf-8"))
+        self.check(name, spec)
+        return self._save_seed(name, spec, _hash(spec), path)

@@ -5,18 +5,19 @@ disturbing a run in progress. ``get`` hands out an immutable snapshot; ``replace
 new text completely, then stores it as a new version in the catalog (:mod:`gateway.base.versions`),
 which every gateway process follows. Rollback moves the current pointer back, as for rule sets.
 The ``workflows/`` folder is the seed: a workflow the catalog has never had is imported from it
-at start (author "seed"); one the catalog has is never overwritten by files.
+at start (author "seed"); one the catalog has is never overwritten by files. Seeding, loading and
+following other processes are the shared life cycle of :mod:`gateway.base.lifecycle`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import logging
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from gateway.base.versions import Catalog, CatalogConflict, MemoryCatalog, VersionInfo, VersionMissing
+from gateway.base.lifecycle import CatalogLifecycle
+from gateway.base.versions import Catalog, CatalogConflict, Version, VersionInfo, VersionMissing
 from gateway.workflow.loader import Problem, WorkflowInvalid, parse
 from gateway.workflow.model import Workflow
 
@@ -51,55 +52,41 @@ class Entry:
     info: VersionInfo
 
 
-class WorkflowRegistry:
+class WorkflowRegistry(CatalogLifecycle):
     """Workflow versions in a catalog, parsed once per version and kept for runs to use."""
 
-    def __init__(self, catalog: Catalog | None = None, source_dir: str | Path | None = None) -> None:
-        self.catalog: Catalog = catalog if catalog is not None else MemoryCatalog()
-        self.source_dir = Path(source_dir) if source_dir else None
+    kind = KIND
+    failures = (WorkflowInvalid, OSError, UnicodeDecodeError)
+    seed_races = (WorkflowConflict,)
+
+    def __init__(self, catalog: Catalog | None = None) -> None:
+        super().__init__(catalog)
         self._parsed: dict[tuple[str, int], Entry] = {}
-        self._current: dict[str, tuple[int, int]] = {}  # name -> (version, catalog seq): what this process serves
-        self._lock = threading.RLock()
 
     # ------------------------------------------------------------ the seed folder
 
-    def seed(self) -> list[Problem]:
-        """Import the source folder's workflows the catalog has never had; returns file problems.
-        An invalid file is reported and skipped: the gateway starts with the others."""
-        problems: list[Problem] = []
-        if self.source_dir is None or not self.source_dir.is_dir():
-            return problems
-        for path in sorted(self.source_dir.glob("*.yaml")):
-            try:
-                wf = parse(path.read_text(encoding="utf-8"), file=str(path))
-            except WorkflowInvalid as exc:
-                problems.extend(exc.problems)
-                continue
-            if self.catalog.head(KIND, wf.name) is not None:
-                continue
-            try:  # already parsed and checked above: stored as it is, not parsed a second time
-                self._save(wf.name, wf, author="seed", comment=f"seeded from {path.name}", base_version=0)
-            except WorkflowConflict:
-                pass  # another process seeded it at the same moment
-        return problems
+    def _seed_paths(self, folder: Path) -> list[Path]:
+        return sorted(folder.glob("*.yaml"))
+
+    def _read_seed(self, path: Path) -> tuple[str, Workflow]:
+        """An invalid file is reported and skipped: the gateway starts with the others."""
+        wf = parse(path.read_text(encoding="utf-8"), file=str(path))
+        return wf.name, wf
+
+    def _store_seed(self, name: str, item: Workflow, path: Path) -> int:
+        # already parsed and checked: stored as it is, not parsed a second time
+        return self._save(name, item, author="seed", comment=f"seeded from {path.name}", base_version=0).version
 
     # ------------------------------------------------------------ reading
 
-    def load(self) -> None:
-        """Take the current version of every workflow from the catalog (at start)."""
-        self.reconcile()
-
     def names(self) -> list[str]:
-        with self._lock:
-            return sorted(self._current)
+        return self._served.names()
 
     def current(self, name: str) -> Entry:
-        with self._lock:
-            served = self._current.get(name)
+        served = self.served(name)
         if served is None:
             self.sync(name)  # made by another process a moment ago, perhaps
-            with self._lock:
-                served = self._current.get(name)
+            served = self.served(name)
             if served is None:
                 raise WorkflowNotFound(name)
         return self.version(name, served[0])
@@ -124,9 +111,17 @@ class WorkflowRegistry:
             stored = self.catalog.load(KIND, name, int(version))
         except VersionMissing:
             raise WorkflowNotFound(name, version) from None
-        entry = Entry(parse(stored.payload["text"], file=f"{name}.yaml"), stored.info)
+        return self._parse(stored)
+
+    def _parse(self, stored: Version) -> Entry:
+        """Parse a stored version once and keep it (a version never changes)."""
+        key = (stored.info.name, stored.info.version)
         with self._lock:
-            self._parsed[key] = entry
+            entry = self._parsed.get(key)
+        if entry is None:
+            entry = Entry(parse(stored.payload["text"], file=f"{stored.info.name}.yaml"), stored.info)
+            with self._lock:
+                self._parsed[key] = entry
         return entry
 
     def history(self, name: str) -> list[dict]:
@@ -180,31 +175,17 @@ class WorkflowRegistry:
 
     def _serve(self, name: str, version: int | None, seq: int) -> None:
         """Serve ``version`` (None: stop) unless a newer catalog change is served already."""
-        with self._lock:
-            served = self._current.get(name)
-            if served is not None and served[1] > seq:
-                return
-            if version is None:
-                self._current.pop(name, None)
-            else:
-                self._current[name] = (version, seq)
+        self._served.set(name, version, seq)
 
-    # ------------------------------------------------------------ following other processes
+    # ------------------------------------------------------------ the shared life cycle's hooks
 
-    def sync(self, name: str) -> None:
-        """Converge to the catalog's head (parsing the new version now, not on the next run)."""
-        head = self.catalog.head(KIND, name)
-        if head is None or not head.live:
-            self._serve(name, None, head.seq if head else 1 << 62)
-            return
-        self.version(name, head.current)  # type: ignore[arg-type]
-        self._serve(name, head.current, head.seq)
+    def _apply(self, name: str, stored: Version, seq: int, *, elsewhere: bool) -> None:
+        """Parse the new version now, not on the next run, then serve it."""
+        self._parse(stored)
+        self._serve(name, stored.info.version, seq)
 
-    def reconcile(self) -> None:
-        with self._lock:
-            known = set(self._current)
-        for name in sorted(known | {h.name for h in self.catalog.heads(KIND)}):
-            self.sync(name)
+    def _withdraw(self, name: str, seq: int) -> None:
+        self._serve(name, None, seq)
 
 
 def _hash(text: str) -> str:

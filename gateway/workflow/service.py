@@ -165,9 +165,8 @@ def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, sto
 
         recorder = FanOutRecorder(memory, CallableRecorder(to_store))
     executor = Executor(adapters, recorder, default_timeout=cfg.default_timeout_s)
-    registry = WorkflowRegistry(catalog, cfg.source_dir)
+    registry = WorkflowRegistry(catalog)
     if seed:
-        for problem in registry.seed():
-            log.error("workflow not loaded: %s", problem)
+        registry.seed(cfg.source_dir)  # a file that is no valid workflow is logged and skipped
     registry.load()
     return WorkflowService(registry, executor, manual, robots, runs_kept=cfg.runs_kept, recorder=memory)

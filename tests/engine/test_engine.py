@@ -364,13 +364,13 @@ def test_rules_dir_only_seeds_what_the_catalog_never_had(tmp_path, simple_files)
     (rules / "bad").mkdir()
     (rules / "bad" / "rules.drl").write_text("rule broken when then")
     engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine={"rules_dir": str(rules)}))
-    report = engine.seed_from()
+    report = engine.seed(rules)
     assert report["good"] == "seeded v1" and report["bad"].startswith("failed")
     (rules / "good" / "rules.drl").write_text(RULES.replace("Welcome. Two seats?", "changed on disk"))
-    assert engine.seed_from()["good"] == "kept v1"  # files never overwrite what the store has
+    assert engine.seed(rules)["good"] == "kept v1"  # files never overwrite what the store has
     assert engine.fire("good", FIVE_FACTS).version == 1
     engine.delete("good")
-    assert engine.seed_from()["good"] == "kept (deleted)"
+    assert engine.seed(rules)["good"] == "kept (deleted)"
 
 
 def test_listener_sees_deploys_and_fires(engine, simple_files):

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from gateway.engine.explain import _sentences, _wants, split_conditions
+from gateway.engine.explain_plan import _sentences, split_conditions
+from gateway.engine.explain_reasons import _wants
 from gateway.engine.replay import not_replayable, same_outcome
 
 LHS = '''

@@ -605,7 +605,7 @@ def test_the_compile_time_limit_is_a_resource_error_and_leaves_serving_alone(tmp
     engine = Engine(Settings(data_dir=str(tmp_path / "data"), engine=settings), catalog)
     engine.deploy("limited", growth_rules.drl_files(10))
     strict = Engine(Settings(data_dir=str(tmp_path / "data"), engine={**settings, "compile_timeout_s": 0.001}), catalog)
-    strict.load_all()
+    strict.load()
     with pytest.raises(CompileResourceError) as error:
         strict.deploy("limited", growth_rules.drl_files(300))
     assert error.value.reason == "time" and "PRINTEPS_COMPILE_TIMEOUT" in error.value.setting

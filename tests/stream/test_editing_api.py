@@ -61,6 +61,8 @@ def test_saves_carry_a_comment_and_refuse_a_stale_base_version(client):
     one = client.get("/api/queries/EditCount/versions/1").json()
     assert one["text"] == COUNT_QUERY and one["current"] is False and one["report"] is None
     assert client.get("/api/queries/EditCount/versions/9").status_code == 404
+    missing = client.post("/api/queries/EditCount/rollback", json={"version": 9})  # as for mappings: 404, named
+    assert missing.status_code == 404 and "has no version 9" in missing.text
     assert client.post("/api/queries/EditCount/rollback", json={"version": 1}).status_code == 200
     assert client.get("/api/queries/EditCount/versions/1").json()["current"] is True
     assert [q["version"] for q in client.get("/api/queries").json()["queries"] if q["name"] == "EditCount"] == [1]

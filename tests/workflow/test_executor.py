@@ -210,7 +210,7 @@ def test_teahouse_workflows_run_with_simulated_robots_and_humans(executor, robot
     from gateway.workflow.loader import load
 
     engine = Engine(Settings(data_dir=str(tmp_path / "data")))
-    assert engine.seed_from(engine.settings.engine.rules_dir)["reception"] == "seeded v1"
+    assert engine.seed(engine.settings.engine.rules_dir)["reception"] == "seeded v1"
     executor.adapters["fire_rules"] = RulesAdapter(engine)
     fired_rules = []
     for path in sorted(teahouse_dir.glob("*.yaml")):

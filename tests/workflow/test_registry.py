@@ -90,15 +90,17 @@ def test_versions_survive_a_restart_and_rollback(store):
 def test_source_folder_only_seeds_what_the_catalog_never_had(tmp_path, teahouse_dir):
     source = tmp_path / "workflows"
     shutil.copytree(teahouse_dir, source)
-    registry = WorkflowRegistry(source_dir=source)
-    assert registry.seed() == []
+    registry = WorkflowRegistry()
+    report = registry.seed(source)
+    assert len(report) == 8 and set(report.values()) == {"seeded v1"}
     assert len(registry.names()) == 8  # the seven business processes + clearing a table
     registry.replace("thanking", registry.get("thanking").source.replace("Please come again.", "See you!"))
     path = source / "7_thanking.yaml"
     path.write_text(path.read_text().replace("Thank you very much.", "Thank you!"))
     (source / "broken.yaml").write_text("workflow: broken\nmodules: {}\n")
-    problems = registry.seed()
-    assert problems and all(p.file.endswith("broken.yaml") for p in problems)
+    report = registry.seed(source)
+    assert report["broken.yaml"].startswith("failed: ") and "broken.yaml" in report["broken.yaml"]
+    assert report["thanking"] == "kept v2" and report["greeting"] == "kept v1"
     assert "See you!" in registry.get("thanking").source  # the live edit is kept over the changed file
     assert "Thank you!" not in registry.get("thanking").source
     assert registry.current("thanking").info.author == "anonymous"

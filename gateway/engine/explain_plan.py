@@ -1,0 +1,440 @@
+"""Explain, part 1: a rule set's rules read as conditions, and the diagnostic queries asked about them.
+
+Why the gateway reads the conditions itself: Drools answers "what fired" but not "why not", and a
+rule's conditions are text the gateway owns (DRL, the DRL a .dslr expands to, the DRL a decision
+table becomes). Each rule becomes a :class:`RulePlan` — its top-level conditions, each classified
+(a pattern, ``not``, ``exists``, ``or``, ``forall``, ``from``, an accumulate, an ``eval``) and
+put in the author's words (the .dslr lines or the decision table cell it came from) — and the
+plans become DRL queries (:func:`query_files`): ``C1 … Ck`` for each k, the candidates of a
+pattern with its first j constraints, the alternatives of an ``or``, the violators of a
+``forall``. :mod:`gateway.engine.explain` compiles them; :mod:`gateway.engine.explain_reasons`
+reads their rows back as reasons.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from gateway.engine import compiler
+from gateway.engine.errors import CompileError
+
+QUERY_FILE = "zz_explain_{n}.drl"
+FACT = "$__f"
+QUERIES_PER_PACKAGE = 40
+_PACKAGE = re.compile(r"^\s*package\s+[\w.]+\s*;?")
+_STRING_OR_COMMENT = re.compile(r'"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'|//[^\n]*|/\*.*?\*/', re.DOTALL)
+_PATTERN = re.compile(r"^\s*(?:(\$?[\w$]+)\s*:\s*)?([A-Za-z_$][\w$.]*)\s*\(", re.DOTALL)
+
+
+# --------------------------------------------------------------------------- reading the rules
+
+
+def _masked(text: str) -> str:
+    """``text`` with strings and comments blanked (same length): keywords and brackets in them vanish."""
+    return _STRING_OR_COMMENT.sub(lambda m: m.group(0)[0] + " " * (len(m.group(0)) - 2) + m.group(0)[-1]
+                                  if m.group(0)[0] in "\"'" else re.sub(r"[^\n]", " ", m.group(0)), text)
+
+
+def _close_paren(masked: str, open_at: int) -> int:
+    """Index of the bracket closing the one at ``open_at`` (-1 if none)."""
+    depth = 0
+    for pos in range(open_at, len(masked)):
+        ch = masked[pos]
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+            if depth == 0:
+                return pos
+    return -1
+
+
+def _split_top(text: str, separators: str) -> list[str]:
+    """``text`` split at the ``separators`` characters (and ``&&``) that are outside brackets and strings."""
+    masked = _masked(text)
+    parts, depth, start, pos = [], 0, 0, 0
+    while pos < len(text):
+        ch = masked[pos]
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif depth == 0 and (ch in separators or masked.startswith("&&", pos)):
+            parts.append(text[start:pos])
+            pos += 2 if masked.startswith("&&", pos) else 1
+            start = pos
+            continue
+        pos += 1
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
+@dataclass
+class Condition:
+    """One top-level condition of a rule, as DRL and as its author wrote it."""
+
+    index: int  # 1-based
+    drl: str
+    line: int  # in the DRL text
+    kind: str  # pattern, not, exists, accumulate, from, eval, or, forall, other
+    written: str = ""
+    file: str = ""
+    source_line: int = 0
+    cell: str = ""
+    sheet: str = ""
+    # a pattern's parts (for pattern, exists, from, accumulate, and the inside of not)
+    binding: str | None = None
+    type: str | None = None
+    constraints: list[str] = field(default_factory=list)
+    suffix: str = ""  # "from …", "over window:…"
+    branches: list[Condition] = field(default_factory=list)  # an "or"'s alternatives, a "forall"'s patterns
+
+    def where(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"index": self.index, "kind": self.kind, "drl": self.drl, "written": self.written,
+                               "file": self.file, "line": self.source_line}
+        if self.cell:
+            out.update(sheet=self.sheet, cell=self.cell)
+        return out
+
+    def candidate(self, constraints: int | None = None) -> str:
+        """The condition's pattern with ``constraints`` of its constraints, binding ``$__f``."""
+        kept = self.constraints if constraints is None else self.constraints[:constraints]
+        return f"{FACT} : {self.type}( {', '.join(kept)} ) {self.suffix}".rstrip()
+
+
+def _parse_pattern(cond: Condition, text: str) -> None:
+    """Fill ``cond``'s pattern parts from ``text`` (``[$v :] Type( … ) [from …]``), if it is one."""
+    match = _PATTERN.match(text)
+    if not match:
+        return
+    masked = _masked(text)
+    close = _close_paren(masked, match.end() - 1)
+    if close < 0:
+        return
+    cond.binding, cond.type = match.group(1), match.group(2)
+    cond.constraints = _split_top(text[match.end():close], ",")
+    cond.suffix = text[close + 1:].strip()
+
+
+def _unwrap(text: str) -> str:
+    """``( X )`` -> ``X`` when the brackets hold all of it."""
+    text = text.strip()
+    if text.startswith("(") and _close_paren(_masked(text), 0) == len(text) - 1:
+        return text[1:-1].strip()
+    return text
+
+
+def _split_or(text: str) -> list[str]:
+    """``text`` split at its top-level ``or`` / ``||`` (outside brackets and strings)."""
+    masked = _masked(text)
+    parts, depth, start = [], 0, 0
+    for match in re.finditer(r"[()\[\]{}]|\bor\b|\|\|", masked):
+        tok = match.group()
+        if tok in "([{":
+            depth += 1
+        elif tok in ")]}":
+            depth -= 1
+        elif depth == 0:
+            parts.append(text[start:match.start()])
+            start = match.end()
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
+def _classify_forall(cond: Condition, inner: str) -> None:
+    """``forall( P0 P1 … )``: its patterns (P0 chooses the elements, the others must hold for each)."""
+    cond.branches = split_conditions(inner, cond.line)
+    cond.kind = "forall" if cond.branches and all(b.kind == "pattern" for b in cond.branches) else "other"
+
+
+def classify(cond: Condition) -> None:
+    """Set the condition's kind and pattern parts from its DRL."""
+    text = cond.drl.strip()
+    head = re.match(r"^(not|exists|eval|forall|accumulate)\b", text)
+    if head and head.group(1) == "forall":
+        _classify_forall(cond, _unwrap(text[head.end():]))
+        return
+    alternatives = _split_or(_unwrap(text)) if not head or head.group(1) not in ("eval", "accumulate") else []
+    if len(alternatives) > 1:
+        cond.kind = "or"
+        cond.branches = [Condition(b, alt, cond.line, "other") for b, alt in enumerate(alternatives, start=1)]
+        for branch in cond.branches:
+            classify(branch)
+        return
+    if head:
+        cond.kind = head.group(1)
+        if cond.kind in ("not", "exists"):
+            _parse_pattern(cond, _unwrap(text[head.end():]))
+            if cond.type is None:
+                cond.kind = "other"
+        return
+    _parse_pattern(cond, text)
+    if cond.type is None:
+        cond.kind = "other"
+    elif re.match(r"^from\s+(accumulate|acc)\b", cond.suffix):
+        cond.kind = "accumulate"
+    elif cond.suffix.startswith("from"):
+        cond.kind = "from"
+    else:
+        cond.kind = "pattern"
+    if cond.type is not None and re.search(r"\b(or|\|\|)\b", _masked(cond.suffix)):
+        cond.kind = "other"
+
+
+_TOKEN = re.compile(r"\$?[\w$.]+|&&|\|\||\S")
+_NOT_AFTER = {"from", "over", "or", "and", "&&", "||", "not", "exists", "forall", ":", ",", "accumulate", "acc",
+              "collect", "window", "entry-point", "."}
+_NOT_BEFORE = {"from", "over", "or", "and", "&&", "||", ")", "]", "}", ".", ",", ":", "(", "[", "{", "-"}
+
+
+def split_conditions(lhs: str, first_line: int) -> list[Condition]:
+    """A rule's ``when`` part as its top-level conditions, each with the DRL line it starts on.
+
+    A condition ends after a closing bracket at the top level (``Guest( … )``) or at a line end
+    after a word (``from $order.items``) when the next word cannot continue it (``from``, ``or``,
+    ``over`` …): a DSL sentence that expands to two conditions on one line gives two."""
+    masked = _masked(lhs)
+    starts: list[int] = []
+    depth, prev, prev_end = 0, None, 0
+    for match in _TOKEN.finditer(masked):
+        tok = match.group()
+        if depth == 0:
+            if tok == ";":
+                prev = None
+                continue
+            fresh = prev is None or (tok not in _NOT_BEFORE and prev not in _NOT_AFTER
+                                     and (prev == ")" or "\n" in masked[prev_end:match.start()]))
+            if fresh:
+                starts.append(match.start())
+        if tok in "([{":
+            depth += 1
+        elif tok in ")]}":
+            depth -= 1
+        if depth == 0:
+            prev, prev_end = (")" if tok in ")]}" else tok), match.end()
+    out = []
+    for index, begin in enumerate(starts, start=1):
+        stop = starts[index] if index < len(starts) else len(lhs)
+        text = lhs[begin:stop].strip().rstrip(";").strip()
+        cond = Condition(index, text, first_line + lhs[:begin].count("\n"), "other")
+        classify(cond)
+        out.append(cond)
+    return out
+
+
+@dataclass
+class RulePlan:
+    """One rule: where it is, its conditions, and the names of its diagnostic queries."""
+
+    name: str
+    number: int  # position in the rule set (query names use it: rule names may hold anything)
+    file: str
+    line: int
+    conditions: list[Condition]
+    broken: str = ""  # why it cannot be explained (its queries did not compile)
+    _names: dict[int, list[str]] = field(default_factory=dict, repr=False)
+
+    def condition_names(self, k: int) -> list[str]:
+        """The names of :func:`_condition_queries` of condition ``k`` (kept: every explanation asks them)."""
+        if k not in self._names:
+            self._names[k] = [name for name, _body in _condition_queries(self, k)]
+        return self._names[k]
+
+    def prefix_name(self, k: int) -> str:
+        return f"why__{self.number}__{k}"
+
+    def prefix_query(self, k: int) -> str:
+        """The query ``C1 … Ck``: for a pattern, its candidate query with all its constraints."""
+        cond = self.conditions[k - 1]
+        if has_candidates(cond) and cond.kind != "not":
+            return self.candidate_query(k, len(cond.constraints))
+        return self.prefix_name(k)
+
+    def candidate_query(self, k: int, j: int) -> str:
+        return f"why__{self.number}__{k}__c{j}"
+
+    def branch_query(self, k: int, b: int, j: int | None = None) -> str:
+        """Alternative ``b`` of the "or" condition ``k``: its candidates (``j`` constraints), or itself."""
+        return f"why__{self.number}__{k}__o{b}" + ("" if j is None else f"__c{j}")
+
+    def violators_query(self, k: int, j: int | None = None) -> str:
+        """The elements that break the "forall" condition ``k`` (``j``: those failing its j-th constraint)."""
+        return f"why__{self.number}__{k}__v" + ("" if j is None else str(j))
+
+
+def _rule_lhs(text: str) -> tuple[int, int] | None:
+    """(start, end) of the ``when`` part of one rule's text."""
+    masked = _masked(text)
+    when = re.search(r"\bwhen\b", masked)
+    if when is None:
+        return None
+    then = re.search(r"\bthen\b", masked[when.end():])
+    if then is None:
+        return None
+    return when.end(), when.end() + then.start()
+
+
+def _sentences(original: str, rule: str) -> list[tuple[int, list[str]]]:
+    """The when-part of rule ``rule`` in a .dslr as its sentences: (line, [the sentence, its "- " lines])."""
+    head = re.search(r'^\s*rule\s+"?' + re.escape(rule) + r'"?', original, re.MULTILINE)
+    if head is None:
+        return []
+    lines = original[head.start():].split("\n")
+    first = original[:head.start()].count("\n") + 1
+    out: list[tuple[int, list[str]]] = []
+    inside = False
+    for offset, line in enumerate(lines):
+        text = line.strip()
+        if not inside:
+            inside = bool(re.match(r"^when\b", text))
+            continue
+        if re.match(r"^then\b", text):
+            break
+        if not text or text.startswith(("//", "#")):
+            continue
+        if text.startswith("-") and out:
+            out[-1][1].append(text)
+        else:
+            out.append((first + offset, [text]))
+    return out
+
+
+def _author_words(source: Any, conditions: list[Condition], lhs: str, first_line: int, rule: str,
+                  original: str | None) -> None:
+    """Fill each condition's file, line and written text: the .dslr sentence (with its "- " lines)
+    it was expanded from — the expander turns each sentence into one DRL line, in order —, the
+    decision table cell its DRL line came from, or the DRL itself."""
+    sentences = _sentences(original, rule) if original is not None else []
+    drl_lines = [first_line + n for n, line in enumerate(lhs.split("\n"))
+                 if line.strip() and not line.strip().startswith(("//", "#"))]
+    for cond in conditions:
+        cond.file = source.file
+        cond.source_line = source.source_line(cond.line)
+        cond.written = cond.drl
+        if source.table is not None:
+            located = source.table.locate(CompileError(source.file, cond.line, 0, ""))
+            cond.sheet, cond.cell = located.sheet, located.cell
+            cond.written = _table_words(source.table, cond) or cond.drl
+        elif sentences and cond.line in drl_lines and drl_lines.index(cond.line) < len(sentences):
+            line, words = sentences[drl_lines.index(cond.line)]
+            cond.source_line, cond.written = line, "\n".join(words)
+
+
+def _table_words(table: Any, cond: Condition) -> str:
+    """A decision table condition in the table's words: the texts of the cells its DRL lines came
+    from, each value with its column's label (``$g: Group`` / ``Kind: pair`` / ``At least: 2``)."""
+    seen, words = set(), []
+    for line in range(cond.line, cond.line + cond.drl.count("\n") + 1):
+        cell = table.cells[line - 1] if 0 < line <= len(table.cells) else None
+        if cell is None or (cell.row, cell.col) in seen:
+            continue
+        seen.add((cell.row, cell.col))
+        text = table.cell_words(cell)
+        if text:
+            words.append(text)
+    return "\n".join(words)
+
+
+def plan_rules(files: dict[str, str]) -> tuple[list[RulePlan], list[tuple[Any, Any]]]:
+    """Every rule of ``files`` with its conditions, and the DRL sources (with items) they are in."""
+    plans: list[RulePlan] = []
+    sources = compiler.rule_sources(files)
+    for source, items in sources:
+        if items is None:
+            continue
+        original = files.get(source.file) if source.line_map is not None else None
+        for item in items.rules:
+            text = items.item_text(item)
+            lhs = _rule_lhs(text)
+            if lhs is None:
+                continue
+            first_line = item.line + text[:lhs[0]].count("\n")
+            conditions = split_conditions(text[lhs[0]:lhs[1]], first_line)
+            _author_words(source, conditions, text[lhs[0]:lhs[1]], first_line, item.name, original)
+            plans.append(RulePlan(item.name, len(plans) + 1, source.file, source.source_line(item.line), conditions))
+    return plans, sources
+
+
+# --------------------------------------------------------------------------- the queries
+
+
+def has_candidates(cond: Condition) -> bool:
+    return cond.type is not None and cond.kind != "other"
+
+
+def _queries(plan: RulePlan) -> list[tuple[str, str]]:
+    """(name, DRL) of a rule's diagnostic queries: per condition k, ``C1 … Ck`` and what
+    explaining condition k needs (:func:`_condition_queries`)."""
+    out = []
+    for k, cond in enumerate(plan.conditions, start=1):
+        if plan.prefix_query(k) == plan.prefix_name(k):
+            before = [c.drl for c in plan.conditions[:k - 1]]
+            out.append((plan.prefix_query(k), "\n    ".join(before + [cond.drl])))
+        out.extend(_condition_queries(plan, k))
+    return out
+
+
+def _condition_queries(plan: RulePlan, k: int) -> list[tuple[str, str]]:
+    """(name, DRL) of the queries that explain condition ``k`` once ``C1 … Ck`` has no row:
+
+    - a pattern: ``C1 … Ck-1, $__f : Type(c1 … cj)`` for each j (the last one is ``C1 … Ck``);
+    - an "or": the same for each alternative that is a pattern (or its blockers for a "not"), and
+      ``C1 … Ck-1, alternative`` for any other;
+    - a "forall": its violators ``C1 … Ck-1, P0, not( P1 and … )`` (for one pattern: the facts of
+      its type that do not match it, and those failing each of its constraints)."""
+    cond = plan.conditions[k - 1]
+    before = [c.drl for c in plan.conditions[:k - 1]]
+
+    def query(*parts: str) -> str:
+        return "\n    ".join(before + list(parts))
+
+    out: list[tuple[str, str]] = []
+    if has_candidates(cond):
+        out.extend((plan.candidate_query(k, j), query(cond.candidate(j))) for j in range(len(cond.constraints) + 1))
+    elif cond.kind == "or":
+        for branch in cond.branches:
+            if has_candidates(branch):
+                first = len(branch.constraints) if branch.kind == "not" else 0
+                out.extend((plan.branch_query(k, branch.index, j), query(branch.candidate(j)))
+                           for j in range(first, len(branch.constraints) + 1))
+            else:
+                out.append((plan.branch_query(k, branch.index), query(branch.drl)))
+    elif cond.kind == "forall":
+        first, rest = cond.branches[0], cond.branches[1:]
+        if rest:
+            chosen = first.drl if first.binding else f"{FACT} : {first.drl}"
+            out.append((plan.violators_query(k), query(chosen, "not( " + " and ".join(r.drl for r in rest) + " )")))
+        else:
+            every = f"{FACT} : {first.type}( )"
+            out.append((plan.violators_query(k),
+                        query(every, f"not( {first.type}( this == {FACT}, {', '.join(first.constraints)} ) )")))
+            out.extend((plan.violators_query(k, j), query(every, f"not( {first.type}( this == {FACT}, {c} ) )"))
+                       for j, c in enumerate(first.constraints))
+    return out
+
+
+def query_files(plans: list[RulePlan], sources: list[tuple[Any, Any]], skip: set[int] = frozenset()) -> dict[str, str]:
+    """The diagnostic queries as DRL files, each its own package of at most QUERIES_PER_PACKAGE
+    queries (one package of hundreds of queries exceeds the JVM's method size limit), importing
+    every declared type and keeping the rule's file's imports and globals."""
+    declared = sorted({f"{items.package}.{item.name.rsplit('.', 1)[-1]}" for _src, items in sources if items is not None
+                       for item in items.items if item.kind in ("type", "enum")})
+    headers = {src.file: (items.package, _PACKAGE.sub("", items.header()))
+               for src, items in sources if items is not None}
+    chunks: list[tuple[str, list[str]]] = []
+    for plan in plans:
+        if plan.number in skip or plan.broken:
+            continue
+        package, header = headers.get(plan.file, ("defaultpkg", ""))
+        texts = [f'query "{name}"\n    {body}\nend\n' for name, body in _queries(plan)]
+        if not chunks or chunks[-1][0] != plan.file or len(chunks[-1][1]) + len(texts) > QUERIES_PER_PACKAGE:
+            chunks.append((plan.file, []))
+        chunks[-1][1].extend(texts)
+    out = {}
+    for n, (fname, texts) in enumerate(chunks, start=1):
+        package, header = headers.get(fname, ("defaultpkg", ""))
+        imports = "\n".join(f"import {name};" for name in declared if name.rsplit(".", 1)[0] != f"{package}.why{n}")
+        out[QUERY_FILE.format(n=n)] = (f"package {package}.why{n};\n{imports}\n{header}\n\n" + "\n".join(texts))
+    return out
