@@ -51,7 +51,7 @@ from gateway.stream.query_state import QueryRuntime
 from gateway.stream.results import ResultEvent, to_sparql_json
 from gateway.stream.rules import BindingError, RuleBinding, check_binding
 from gateway.stream.scheduler import Pass, Scheduler
-from gateway.stream.subscriber import BindingSubscriber
+from gateway.stream.subscriber import BindingSubscriber, same_session
 from gateway.stream.windows import StreamBuffer
 
 log = logging.getLogger(__name__)
@@ -161,8 +161,8 @@ class StreamEngine:
             if binding is not None:
                 self._check_binding(runtime, binding)
             old = self._queries.get(query.name)
-            if old is not None:
-                self.bindings.stop(old)
+            if old is not None:  # a new version of the query: a stateful binding to the same rules keeps its session
+                self.bindings.stop(old, keep=same_session(old.binding, binding))
             self._queries[query.name] = runtime
             self._reorder()
             return runtime.info()
@@ -222,7 +222,7 @@ class StreamEngine:
         """Bind (or with None, unbind) a query's (or a stream's) results to a rule set."""
         with self._lock:
             runtime = self._get(name)
-            self.bindings.stop(runtime)
+            self.bindings.stop(runtime, keep=same_session(runtime.binding, binding))
             runtime.binding = None
             runtime.relevant = relevant_predicates(runtime.query.sparql)
             if binding is not None:
@@ -357,9 +357,11 @@ class StreamEngine:
         return run.report["evaluated"]
 
     def close(self) -> None:
+        """Stops the bindings; their durable sessions are put away, not disposed (a restart or
+        another process rebuilds them)."""
         with self._lock:
             for runtime in self._queries.values():
-                self.bindings.stop(runtime)
+                self.bindings.stop(runtime, keep=True)
 
 
 def _with_attributes(relevant: frozenset[NamedNode] | None, binding: RuleBinding) -> frozenset[NamedNode] | None:

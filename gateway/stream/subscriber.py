@@ -15,17 +15,29 @@ ROS callbacks behind them. So the work is cut in two:
 
 Every fire is recorded as a decision (:func:`record_stateful` for a session's fire; a stateless
 fire is recorded by the rules engine itself) and published as an ``actions`` event.
+
+A stateful binding's session is a durable session of the rules engine's session manager
+(:mod:`gateway.engine.sessions`) under a stable id, :func:`binding_session_id` (``stream.<query>``):
+each window's fire is one command batch (clock to the window's instant, insert, fire) journalled
+before it is answered, snapshotted like a REST session's, rebuilt after a restart and taken over
+from a dead process on the binding's next fire. The session lives with its binding: removing the
+binding disposes it (its log goes); a process that stops puts it away (its log stays).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from gateway.config import StreamSettings
+from gateway.engine.durable import Rebuilding
+from gateway.engine.results import FireResult
+from gateway.engine.sessions import SessionElsewhere
 from gateway.stream.binding_fire import BindingFirer, Job
 from gateway.stream.evaluate import WindowData
 from gateway.stream.query_state import QueryRuntime
@@ -47,6 +59,17 @@ class PreparedFire:
     facts: list[dict[str, Any]]
     instant: int
     window: dict[str, int]
+
+
+def binding_session_id(query: str) -> str:
+    """The stable id of a stateful binding's session: the same in every process and after a restart."""
+    return "stream." + re.sub(r"[^A-Za-z0-9_.:-]", "_", query)[:120]
+
+
+def same_session(old: RuleBinding | None, new: RuleBinding | None) -> bool:
+    """Whether a binding replaced by ``new`` keeps its session (stateful both, the same rule set)."""
+    return (old is not None and new is not None and old.mode == new.mode == "stateful"
+            and old.ruleset == new.ruleset)
 
 
 def record_stateful(rules_engine: Any, result: Any, facts: list[dict[str, Any]], query: str, window: dict[str, int],
@@ -98,14 +121,28 @@ class BindingSubscriber:
             self._tickets += 1
             return self._tickets - 1
 
-    def stop(self, runtime: QueryRuntime) -> None:
-        """Stops the binding's thread (after its fire in flight) and closes its session."""
+    def stop(self, runtime: QueryRuntime, keep: bool = False) -> None:
+        """Stops the binding's thread (after its fire in flight) and closes its session: disposed
+        (its log deleted: the binding is gone), or with ``keep`` put away (its log stays: the
+        process stops, or the binding is replaced by one that keeps the session)."""
         if runtime.firer is not None:
             runtime.firer.close()
             runtime.firer = None
-        if runtime.session is not None:
-            self._close_session(runtime.session)
-            runtime.session = None
+        session, runtime.session = runtime.session, None
+        manager = getattr(self.rules_engine, "session_manager", None)
+        binding = runtime.binding
+        if manager is not None and binding is not None and binding.mode == "stateful":
+            # by its id: the live session may be one a REST read rebuilt here, not the one the binding held
+            session = manager.find(binding.ruleset, binding_session_id(runtime.query.name)) or session
+        if session is None:
+            return
+        try:
+            if keep and manager is not None:
+                manager.put_away(session.ruleset, session.id)
+            else:
+                session.close()
+        except Exception:  # closing a dead session must not hide the real work
+            log.debug("closing the session of a stream binding failed", exc_info=True)
 
     # -- after the stream lock -----------------------------------------------------------------------
     def deliver(self, ticket: int, fires: list[PreparedFire]) -> None:
@@ -146,17 +183,32 @@ class BindingSubscriber:
         runtime, binding, window = fire.runtime, fire.binding, fire.window
         name = runtime.query.name
         if binding.mode == "stateful":
-            if runtime.session is None:
-                if runtime.binding is not binding:  # unbound meanwhile: open no session for it
-                    raise BindingError(f"the binding of {name!r} to {binding.ruleset!r} was removed")
-                runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
-            # insert stamped with the evaluation instant (the clock moves there first) and fire: one JVM call
-            result = runtime.session.push(fire.facts, fire.instant)
+            session = self._session(runtime, binding)
+            result = _push(session, fire.facts, fire.instant)
             result.decision_id = record_stateful(self.rules_engine, result, fire.facts, name, window,
-                                                 runtime.session.id)  # not replayable alone
+                                                 session.id)  # not replayable alone
             return result
         return self.rules_engine.fire(binding.ruleset, fire.facts, origin="stream",
                                       correlation_id=f"{name}@{window['end']}", context={"query": name, "window": window})
+
+    def _session(self, runtime: QueryRuntime, binding: RuleBinding) -> Any:
+        """The binding's session: this process's, rebuilt from its log, or opened (on first use)."""
+        if runtime.session is not None and not runtime.session.closed:
+            return runtime.session
+        if runtime.binding is not binding:  # unbound meanwhile: open no session for it
+            raise BindingError(f"the binding of {runtime.query.name!r} to {binding.ruleset!r} was removed")
+        manager = getattr(self.rules_engine, "session_manager", None)
+        if manager is None:  # a rules engine without a session registry (a test's)
+            runtime.session = self.rules_engine.open_session(binding.ruleset, on_deploy=binding.on_deploy)
+            return runtime.session
+        session_id = binding_session_id(runtime.query.name)
+        try:
+            runtime.session = _rebuilt(manager, binding, session_id)
+        except SessionElsewhere as exc:
+            raise BindingError(f"the session {session_id} of {binding.ruleset!r} is held by gateway process "
+                               f"{exc.owner.get('process')}: a stateful binding fires in one process; send the "
+                               "stream's messages to that one (docs/streams.md)") from None
+        return runtime.session
 
     # -- reporting -----------------------------------------------------------------------------------
     def _publish_actions(self, fire: PreparedFire, result: Any, late: bool = False) -> None:
@@ -198,9 +250,31 @@ class BindingSubscriber:
             runtime.last_error = f"rules {binding.ruleset!r}: {exc}"
             self.publish({"kind": "error", "query": name, "error": runtime.last_error})
 
-    def _close_session(self, session: Any) -> None:
-        closer = getattr(self.rules_engine, "close_session", None)
+
+
+def _rebuilt(manager: Any, binding: RuleBinding, session_id: str) -> Any:
+    """The binding's session from the session manager, waiting (on the binding's thread, newer
+    windows coalescing meanwhile) while it is being rebuilt, up to ``sessions.rebuild_timeout_s``:
+    a window is not lost to a rebuild that a REST read started a moment before."""
+    deadline = time.monotonic() + float(getattr(manager.settings, "rebuild_timeout_s", 30.0))
+    while True:
         try:
-            closer(session.id) if closer is not None and hasattr(session, "id") else session.close()
-        except Exception:  # closing a dead session must not hide the real work
-            log.debug("closing a rules session failed", exc_info=True)
+            return manager.binding_session(binding.ruleset, session_id, on_deploy=binding.on_deploy)
+        except Rebuilding as exc:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(min(max(float(exc.retry_after_s), 0.05), 1.0))
+
+
+def _push(session: Any, facts: list[dict[str, Any]], instant: int) -> FireResult:
+    """Insert stamped with the window's instant (the clock moves there first, never back) and fire.
+    A durable session takes it as one command batch, journalled before it is answered; any other
+    in one JVM call through the session's buffers."""
+    if getattr(session, "durability", None) is None:
+        return session.push(facts, instant)
+    started = time.perf_counter()
+    answer = session.execute([{"op": "advance_to", "to": int(instant)}, {"op": "insert", "facts": facts, "ret": False},
+                              {"op": "fire", "max": -1}])
+    fire = next(r["fire"] for r in reversed(answer.results) if "fire" in r)
+    return FireResult(session.ruleset, answer.version, fire["actions"], fire["fired"], [], int(fire["fireCount"]),
+                      (time.perf_counter() - started) * 1000)
