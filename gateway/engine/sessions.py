@@ -8,7 +8,10 @@ what happens to it on a deploy, after idling, or at a limit must be the same who
 - **Declared sessions** (a rule set's ``kmodule.xml`` ksessions, or KIE's defaults): a stateful one
   has one live instance per rule set, created on first use and addressed by its name
   (``defaultKieSession``); a stateless one is a fresh session per call (nothing kept here).
-- **Opened sessions** (``POST …/sessions``, stream bindings): addressed by a generated id.
+- **Opened sessions** (``POST …/sessions``): addressed by a generated id (or the client's).
+- **Stream bindings' sessions** (:meth:`SessionManager.binding_session`): a stateful binding's
+  session under the stable id ``stream.<query>``, durable and claimed like a conversation, living
+  as long as its binding (no idle TTL); a process that stops puts it away (:meth:`put_away`).
 - **Deploy policy**: ``follow`` (the default, ``sessions.on_deploy``) moves a session to each new
   version with its facts and fact handles, like ``KieContainer.updateToVersion`` (see
   :meth:`StatefulSession.move_to`); ``pin`` keeps it on the version it was opened on. A session
@@ -43,6 +46,7 @@ from gateway.engine.session import CommandFailed, StatefulSession
 log = logging.getLogger(__name__)
 
 CONVERSATION_KINDS = ("kie", "rest")  # sessions clients hold: counted in limits, reaped when idle
+STREAM_KIND = "stream"  # a stream binding's session: durable and claimed like a conversation, lives with its binding
 ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")
 _ids = itertools.count(1)
 
@@ -118,6 +122,7 @@ class SessionManager:
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()
         self._creating: dict[tuple[str, str], threading.Lock] = {}
+        self._keeping: set[tuple[str, str]] = set()  # closed by put_away: their logs stay
         self._follow_lock = threading.Lock()  # a deploy and the follower's sync of it move a session once
         self._reaper: threading.Thread | None = None
         self._stop = threading.Event()
@@ -167,7 +172,10 @@ class SessionManager:
         sid = session_id or self._new_id()
         clock = clock or (declared.clock if declared else "pseudo")
         policy = on_deploy or (declared.on_deploy if declared and declared.on_deploy else self.settings.on_deploy)
-        if self.directory is not None and kind in CONVERSATION_KINDS:
+        # claimed (and durable when sessions are): conversations, and a stream binding's session under
+        # its stable id (binding_session); a stream session opened without an id (open_session) stays ours
+        claims = kind in CONVERSATION_KINDS or (kind == STREAM_KIND and session_id is not None)
+        if self.directory is not None and claims:
             owner = self.directory.claim(ruleset, sid, {"kind": kind, "clock": clock, "on_deploy": policy})
             if owner.get("process") != self.directory.process:
                 raise SessionElsewhere(ruleset, sid, owner)
@@ -176,10 +184,10 @@ class SessionManager:
                                               record_facts=record_facts,
                                               on_close=lambda _id, r=ruleset, s=sid: self._forget(r, s))
         except Exception:
-            if self.directory is not None and kind in CONVERSATION_KINDS:
+            if self.directory is not None and claims:
                 self.directory.release(ruleset, sid)  # claimed, never made
             raise
-        if kind in CONVERSATION_KINDS:
+        if claims:
             session.fact_limit = self.settings.max_facts
             keep = self.settings.durable if durable_ is None else durable_
             if keep and self.log is not None:
@@ -344,6 +352,40 @@ class SessionManager:
                 return stored
             return self.open(ruleset, session_id=name, kind="kie")
 
+    def binding_session(self, ruleset: str, session_id: str, *, on_deploy: str | None = None) -> StatefulSession:
+        """A stream binding's session under its stable id: this process's, else rebuilt here from
+        its log (after a restart, or taken over from a dead owner), else opened (durable when
+        sessions are). :class:`SessionElsewhere` while another live process holds it."""
+        key = (ruleset, session_id)
+        session = self.find(ruleset, session_id)
+        if session is not None:
+            return session
+        with self._lock:
+            gate = self._creating.setdefault(key, threading.Lock())
+        with gate:  # the binding's thread and a REST read at once make (or rebuild) one session
+            session = self.find(ruleset, session_id)
+            if session is not None:
+                return session
+            stored = self._stored(ruleset, session_id)
+            if stored is not None:
+                return stored
+            return self.open(ruleset, session_id=session_id, kind=STREAM_KIND, clock="pseudo", on_deploy=on_deploy)
+
+    def put_away(self, ruleset: str, session_id: str) -> None:
+        """Closes this process's session but keeps its log and snapshots (a stream binding stopping
+        with its process, or replaced by one with the same session): a restart or another process
+        rebuilds it. A session that is not durable is simply closed."""
+        session = self.find(ruleset, session_id)
+        if session is None:
+            return
+        with self._lock:
+            self._keeping.add((ruleset, session_id))
+        try:
+            session.close()
+        finally:
+            with self._lock:
+                self._keeping.discard((ruleset, session_id))
+
     def _check_session_limit(self, ruleset: str) -> None:
         open_here = sum(1 for (r, _), s in self._sessions.items() if r == ruleset and s.kind in CONVERSATION_KINDS)
         limit = self.settings.max_per_ruleset
@@ -408,7 +450,9 @@ class SessionManager:
         with self._lock:
             session = self._sessions.pop((ruleset, session_id), None)
             self._creating.pop((ruleset, session_id), None)
-        if session is not None and session.durability is not None and self.log is not None and not self._stop.is_set():
+            keep = (ruleset, session_id) in self._keeping
+        if session is not None and session.durability is not None and self.log is not None and not self._stop.is_set() \
+                and not keep:
             # disposed (or reaped): its log goes; closed at shutdown: it stays, for a restart or a takeover
             self.log.delete(ruleset, session_id, session.durability.epoch)
         if self.directory is not None:
@@ -483,6 +527,8 @@ class SessionManager:
         gone = []
         for opening in self.log.sessions():
             key = (str(opening["ruleset"]), str(opening["session"]))
+            if opening.get("session_kind") == STREAM_KIND:
+                continue  # lives as long as its binding (gateway.stream.subscriber), idle or not
             if key in self._sessions or time.time() - self.log.last_activity(opening) <= ttl:
                 continue
             owner = self.directory.owner(*key) if self.directory is not None else None

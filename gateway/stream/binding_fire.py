@@ -58,7 +58,10 @@ class BindingFirer:
         """``(True, result)`` when ``job`` ran in time (raises its error); ``(False, None)`` when
         it goes on, or waits, and will publish itself."""
         with self._cond:
-            if self._current is not None:  # a fire is in flight: wait as the one pending fire
+            if self._closed:  # the binding was removed after this window was prepared
+                replaced = job
+                job.late = True
+            elif self._current is not None:  # a fire is in flight: wait as the one pending fire
                 replaced, self._pending = self._pending, job
                 job.late = True  # nobody waits for it: it publishes itself
                 if replaced is not None:

@@ -211,3 +211,47 @@ def test_a_slow_binding_skips_windows_and_never_holds_up_the_stream(settings, ru
         gate.touch()
         system.clearProperty("printeps.test.gate")
         engine.close()
+
+
+def test_a_binding_fires_outside_the_stream_lock(settings, rules_engine, tmp_path):
+    """While a binding's fire runs (blocked in its then-part, well within streams.binding_wait_s),
+    the stream engine stays usable from another thread: its queries can be read and messages pushed.
+    (When the fire ran under the stream lock, both waited for the fire.) When the fire ends, the
+    pushing thread publishes its actions in time, not late."""
+    import threading
+    import time
+
+    import jpype
+
+    from gw_testing import wait_for
+
+    rules_engine.deploy("slowdetect", {"slow.drl": SLOW_DRL}, author="test")
+    gate = tmp_path / "gate"
+    system = jpype.JClass("java.lang.System")
+    system.setProperty("printeps.test.gate", str(gate))
+    engine = StreamEngine(settings.model_copy(update={"binding_wait_s": 120.0}), rules_engine=rules_engine)
+    pusher: threading.Thread | None = None
+    try:
+        binding = RuleBinding("slowdetect", "CustomerEntered", {"id": "s", "count": "cnt", "distance": "distance"})
+        engine.register(CUSTOMER_QUERY, binding=binding)
+        events: list[dict] = []
+        engine.subscribe(events.append)
+        first = list(messages({"c1": approaching(4.0, 0.3)}, hz=1, seconds=5, t0_ms=500))  # closes 1000..4000
+        pusher = threading.Thread(target=replay, args=(engine, first), daemon=True)
+        pusher.start()
+        assert wait_for(lambda: (tmp_path / "gate.started").exists(), 60)  # the fire is in flight
+        started = time.monotonic()
+        assert engine.query_info("CustomerDetectionQuery")["stats"]["results"] >= 1
+        replay(engine, [(4700, first[-1][1])])  # a message within the open window: no fire of its own
+        assert time.monotonic() - started < 10.0 and pusher.is_alive()  # the fire is still blocked
+        gate.touch()
+        pusher.join(60)
+        assert not pusher.is_alive()
+        actions = [e for e in events if e["kind"] == "actions"]
+        assert actions and not actions[0].get("late") and actions[0]["window"]["end"] == 4000
+    finally:
+        gate.touch()
+        system.clearProperty("printeps.test.gate")
+        if pusher is not None:
+            pusher.join(60)
+        engine.close()
