@@ -39,6 +39,7 @@ export const searchMethods = {
         return view.state.doc.lineAt(end + gap.length + text.indexOf("rule ")).number;
       },
       goTo: (file, line) => this.goTo({ file, line, column: 1 }),
+      deploy: () => this.deploy(),
     });
     return { host, buttons: tools.buttons };
   },

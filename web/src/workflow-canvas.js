@@ -131,8 +131,17 @@ export const canvasMethods = {
 
   stepList(listPath, steps) {
     const label = listName(this.doc, listPath);
-    const slotActive = this.slot && samePath(this.slot.list, listPath);
-    return h("div", { class: "wf-list" },
+    const slotActive = this.slot && samePath(this.slot.list, listPath) && !this.slot.start;
+    const startActive = this.slot && samePath(this.slot.list, listPath) && this.slot.start;
+    // a list with steps is also entered at its start (a step before its first one, in one click)
+    const start = steps.length ? h("button", {
+      class: `wf-slot wf-slot-start${startActive ? " active" : ""}`, "aria-pressed": String(!!startActive),
+      "data-slot-start": pathKey(listPath), "aria-label": `Add new steps at the start of the ${label}`,
+      onclick: () => this.chooseSlot(listPath, 0, { start: true }),
+      ondragover: (e) => this.dragOver(e), ondragleave: (e) => e.currentTarget.classList.remove("drop"),
+      ondrop: (e) => this.drop(e, listPath, 0),
+    }, `+ add at the start of the ${label}`) : null;
+    return h("div", { class: "wf-list" }, start,
       h("ol", { class: "wf-steps", "aria-label": `Steps of ${label}` }, steps.map((step, i) => this.stepItem([...listPath, i], step))),
       h("button", {
         class: `wf-slot${slotActive ? " active" : ""}`, "aria-pressed": String(!!slotActive), "data-slot": pathKey(listPath),
@@ -260,12 +269,12 @@ export const canvasMethods = {
     }
   },
 
-  chooseSlot(listPath, index) {
-    this.slot = { list: listPath, index };
+  chooseSlot(listPath, index, { start = false } = {}) {
+    this.slot = start ? { list: listPath, index, start } : { list: listPath, index };
     this.selected = null;
     this.renderProcessView();
     this.renderSide();
-    const slot = this.panelEl.querySelector(`[data-slot="${CSS.escape(pathKey(listPath))}"]`);
+    const slot = this.panelEl.querySelector(`[data-slot${start ? "-start" : ""}="${CSS.escape(pathKey(listPath))}"]`);
     if (slot) slot.focus();
   },
 
@@ -295,7 +304,7 @@ export const canvasMethods = {
   },
 
   insertionText() {
-    if (this.slot) return `at the end of the ${listName(this.doc, this.slot.list)}`;
+    if (this.slot) return `at the ${this.slot.start ? "start" : "end"} of the ${listName(this.doc, this.slot.list)}`;
     if (this.selected && getIn(this.doc, this.selected)) return `${this.where === "before" ? "before" : "after"} step “${getIn(this.doc, this.selected).id}”`;
     return "at the end of the first process";
   },

@@ -2,7 +2,8 @@
 // module forms, a set step's variables, a rule module's actions, and each problem next to its
 // field. Mixed into WorkflowEditor (workflow-view.js).
 
-import { h } from "./dom.js";
+import { h, fill } from "./dom.js";
+import { describeReferences, insertReference, valueChoices } from "./workflow-values.js";
 import {
   getIn, allSteps, listName, moduleFor, addModule, locateProblem, samePath, renameModule, variableValue,
   variableText, renameVariable, newVariableName, pathKey,
@@ -49,14 +50,53 @@ export const formMethods = {
         oninput: (e) => {
           this.coalesce = `${pathKey(this.selected || [])}|${this.editingModule || ""}|${key}`;
           set(convert(param.type, e.target.value));
+          this.showReferences(usesEl, e.target.value);
         },
       });
     }
+    const usesEl = h("span", { class: "hint wf-uses", "aria-live": "polite" });
+    const picker = input.tagName === "INPUT" && input.type === "text" && key.startsWith("with.") && this.selected
+      ? this.valuePicker(id, param, input, (text) => { set(convert(param.type, text)); this.showReferences(usesEl, text); }) : null;
+    if (picker) this.showReferences(usesEl, input.value);
     return h("div", { class: "field wf-field", "data-field-box": key },
       h("label", { for: id }, param.name, param.required ? h("span", { class: "req", "aria-hidden": "true" }, " *") : null),
-      input,
+      input, picker, usesEl,
       h("span", { class: "hint", id: `${id}-help` }, param.description || ""),
       h("span", { class: "wf-field-error", id: errId, role: "alert" }));
+  },
+
+  /** "Pick a value for location": what the run is given and what earlier steps found, in words;
+   *  the chosen one goes into the field as its reference (at the cursor, or as the whole value). */
+  valuePicker(id, param, input, changed) {
+    const choices = valueChoices(this.doc, this.selected);
+    if (!choices.length) return null;
+    let caret = null;
+    input.addEventListener("blur", () => { caret = input.selectionStart; });
+    const groups = [["given", "What the run is given"], ["found", "What earlier steps found"]]
+      .map(([group, label]) => [label, choices.map((c, i) => [c, i]).filter(([c]) => c.group === group)])
+      .filter(([, mine]) => mine.length);
+    const option = ([c, i]) => h("option", { value: String(i) }, c.label);
+    const select = h("select", { id: `${id}-pick`, class: "wf-pick", onchange: () => {
+      const picked = choices[Number(select.value)];
+      select.value = "";
+      if (!picked) return;
+      input.value = insertReference(input.value, picked.ref, caret);
+      caret = null;
+      this.coalesce = null;
+      changed(input.value);
+      this.say(`${param.name}: ${picked.label}.`);
+    } }, h("option", { value: "" }, "Pick a value…"),
+    groups.length === 1 ? groups[0][1].map(option) : groups.map(([label, mine]) => h("optgroup", { label }, mine.map(option))));
+    return h("div", { class: "wf-pick-row" }, h("label", { for: `${id}-pick` }, `Pick a value for ${param.name}`), select);
+  },
+
+  /** Under a field: the values it refers to in words, and a name that is neither given nor found. */
+  showReferences(el, text) {
+    const { known, unknown } = describeReferences(text, valueChoices(this.doc, this.selected));
+    const given = Object.keys(this.doc.inputs || {});
+    fill(el, known.length ? `Uses ${known.join(", ")}.` : "",
+      unknown.length ? h("span", { class: "wf-unknown" }, ` “${unknown.join("”, “")}” is not among what the run is given`
+        + `${given.length ? ` (${given.join(", ")})` : ""} or what earlier steps found: the run must be given it, or pick a value from the menu.`) : "");
   },
 
   /** A set step's variables: a name and a value each (text, number, true/false or ``${…}``). */
