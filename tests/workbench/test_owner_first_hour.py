@@ -179,6 +179,41 @@ def test_layout_at_desktop_and_tablet_width(browser, gateway, screenshots):
             page.context.close()
 
 
+LINES_JS = """e => { const r = document.createRange(); r.selectNodeContents(e);
+    return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size; }"""
+#: The character before each line break of an element's text (a word boundary: "-" in a name).
+BREAKS_JS = """e => { const text = e.firstChild; const out = []; let top = null;
+    for (let i = 0; i < text.length; i++) { const r = document.createRange(); r.setStart(text, i); r.setEnd(text, i + 1);
+      const t = Math.round(r.getBoundingClientRect().top); if (top !== null && t > top) out.push(text.data[i - 1]); top = t; }
+    return out; }"""
+
+
+def test_long_names_wrap_at_word_boundaries_and_the_palette_shows_it_scrolls(browser, gateway):
+    name = deploy_forced(gateway, folder_files(RECEPTION), "reception-for-the-long-weekend-tea-ceremony-families")
+    for width, height in ((1280, 800), (820, 1180)):
+        page = new_page(browser, gateway, AUTHOR_TOKEN)
+        try:
+            page.set_viewport_size({"width": width, "height": height})
+            open_ruleset(page, name)
+            # the narrow column wraps the name: in the list of rule sets at desktop width, the title at tablet width
+            wrapped = page.locator(f"[data-ruleset='{name}'] .name") if width > 900 \
+                else page.get_by_role("heading", name=name, exact=True)
+            assert wrapped.evaluate(LINES_JS) >= 2, width
+            assert set(wrapped.evaluate(BREAKS_JS)) == {"-"}, width  # each line ends at a word boundary
+            assert wrapped.evaluate("e => e.scrollWidth <= e.clientWidth"), width
+            assert page.evaluate("document.documentElement.scrollWidth <= innerWidth")
+
+            page.goto("/workbench#/workflows/greeting")
+            side = page.locator(".wf-side")
+            expect(side).to_be_visible()
+            if width > 1000:  # beside the steps, the palette scrolls on its own, and its scrollbar is always shown
+                assert side.evaluate("s => getComputedStyle(s).overflowY") == "scroll"
+                assert side.evaluate("s => s.scrollHeight > s.clientHeight"), width  # more entries than fit: it scrolls
+            assert page.js_errors == []
+        finally:
+            page.context.close()
+
+
 def page_height(page) -> int:
     return page.evaluate("document.documentElement.scrollHeight")
 
