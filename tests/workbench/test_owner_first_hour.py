@@ -75,6 +75,35 @@ def test_the_list_follows_the_edit_and_a_copy_is_fed_by_nothing(author_page, rul
     expect(page.get_by_test_id("rule-list")).to_contain_text("Greet a pair")
 
 
+def test_a_new_rule_from_grouped_menus_brings_the_party_and_is_named_after_what_it_does(author_page, ruleset):
+    page = author_page
+    open_ruleset(page, ruleset)
+    page.get_by_role("button", name="+ New rule", exact=True).click()
+    conditions = page.get_by_label("Add a condition")
+    assert conditions.locator("optgroup").evaluate_all("gs => gs.map((g) => g.label)") == [
+        "Most used", "Customers and their type", "The party at the entrance and its group",
+        "Greeting the party: what Pepper says and does", "Narrowing the sentence above"]
+    assert conditions.locator("optgroup[label='Most used'] option").all_inner_texts() == [
+        "There is a party at the entrance", "Pepper is at the entrance", "Everyone in the party has a type"]
+    conditions.select_option(label="Everyone in the party has a type")
+    when = page.get_by_role("list", name="When")
+    expect(when.get_by_role("listitem")).to_have_count(2)
+    assert when.get_by_role("listitem").all_inner_texts()[0].startswith("There is a party at the entrance")
+    expect(page.get_by_role("region", name="A new rule")).to_contain_text(
+        "Added “There is a party at the entrance” under When: “Everyone in the party has a type” is about it.")
+
+    page.get_by_label("Add an action").select_option(label='Pepper says "…"')
+    page.get_by_role("button", name="Add the rule", exact=True).click()  # the blank is still empty
+    expect(page.get_by_role("alert")).to_contain_text("“Pepper says \"…\"”: fill in the text.")
+    page.get_by_label('text in: Pepper says "…"').fill("A blanket?")
+    page.get_by_role("button", name="Add the rule", exact=True).click()
+    expect(page.get_by_role("status").filter(has_text="✓ Rule “Pepper says “A blanket?”” added")).to_be_visible()
+    expect(page.get_by_test_id("rule-list").locator(".rule-item[data-rule='Pepper says “A blanket?”']")).to_be_visible()
+    expect(page.locator(EDITOR)).to_contain_text('rule "Pepper says “A blanket?”"')
+    # the compiler takes the rule as written (a loaded machine compiles slowly)
+    expect(page.get_by_test_id("check-status")).to_have_text("✓ No problems", timeout=120_000)
+
+
 def test_update_the_tests_too_then_deploy(author_page, gateway, screenshots):
     page = author_page
     files = folder_files(RECEPTION)
