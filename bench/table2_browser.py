@@ -6,9 +6,11 @@ a headless Chromium driven by Playwright; the owner's steps are those of the acc
 starting the change until the running gateway shows the new behaviour, and a screenshot
 (docs/img/table2/NN.png, 1280x800).
 
-    .venv/bin/python bench/table2_browser.py [--write docs/agile-loop.md] [--shots docs/img/table2]
+    .venv/bin/python bench/table2_browser.py [--write FILE.md] [--shots docs/img/table2]
 
-``--write`` replaces the table between the ``<!-- browser-table -->`` markers of the given file.
+``--write`` replaces the table between the ``<!-- browser-table -->`` markers of the given file
+(docs/agile-loop.md no longer keeps this table: a person's time is the newcomer measure's,
+tests/workbench/test_newcomer_table2.py).
 The seconds are those of a scripted owner (no thinking time): what the workbench and the gateway
 take, the floor of what a person needs.
 """
@@ -119,6 +121,10 @@ def main() -> int:
     if args.write:
         image_dir = Path(os.path.relpath(args.shots.resolve(), args.write.resolve().parent)).as_posix()
         doc = args.write.read_text(encoding="utf-8")
+        if MARK_START not in doc or MARK_END not in doc:
+            print(f"{args.write} has no {MARK_START} … {MARK_END} markers: put them where the table goes "
+                  "(docs/agile-loop.md no longer keeps it: the newcomer measure is what a person needs)", file=sys.stderr)
+            return 2
         start, end = doc.index(MARK_START) + len(MARK_START), doc.index(MARK_END)
         args.write.write_text(doc[:start] + "\n" + section(done, image_dir) + "\n" + doc[end:], encoding="utf-8")
         print(f"table written to {args.write}")

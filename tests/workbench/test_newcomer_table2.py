@@ -3,8 +3,7 @@ reads the screen — every control found by its words, no keyboard shortcuts, no
 URLs, nothing typed but the sentence, name or value being changed — each checked on the running
 gateway (the robots' behaviour changed), and each estimated for a person (clicks, typing, the words
 the step reads at 200 words a minute, 2 s per new screen; :mod:`newcomer_steps`) and held under a
-minute — except the two the model prices over it (``OVER_A_MINUTE``: #7 and #10, documented),
-which are held under two minutes and must stay over one until the docs say otherwise.
+minute, every one of them.
 
 With PRINTEPS_SCREENSHOTS=1 the screenshots go to docs/img/newcomer/ and the table printed is the
 one in docs/agile-loop.md. The session's gateway is shared, so every change is rolled back after.
@@ -21,7 +20,7 @@ from playwright.sync_api import Page
 
 from gateway.config import PROJECT_ROOT
 from agile_harness import OwnerClient
-from newcomer_steps import ONE_MINUTE, OVER_A_MINUTE, OVER_BOUND_S, make_all, markdown, steps_markdown
+from newcomer_steps import ONE_MINUTE, make_all, markdown, steps_markdown
 from table2_steps import Setup, prepare, restore, snapshot
 from test_table2_browser import teahouse_behaviour
 from wb_helpers import AUTHOR_TOKEN, CALLER_TOKEN, REFUSED_REQUEST, console_errors, new_page
@@ -72,7 +71,4 @@ def test_a_newcomer_makes_each_table2_change_in_under_a_minute(page: Page, gatew
         assert m.before != m.after, f"#{m.id}: the behaviour did not change"
         assert m.actions > 0 and m.words > 0 and (shots / m.screenshot).is_file()
         assert not any("press" in step for step in m.log), f"#{m.id} used a key: {m.log}"
-        if m.id in OVER_A_MINUTE:  # documented as over a minute: under the bound, and still over (else fix the docs)
-            assert ONE_MINUTE <= m.person_s < OVER_BOUND_S, f"#{m.id} takes a person {m.person_s:.0f} s: {m.log}"
-        else:
-            assert m.person_s < ONE_MINUTE, f"#{m.id} takes a person {m.person_s:.0f} s: {m.log}"
+        assert m.person_s < ONE_MINUTE, f"#{m.id} takes a person {m.person_s:.0f} s: {m.log}"

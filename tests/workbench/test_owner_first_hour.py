@@ -75,6 +75,35 @@ def test_the_list_follows_the_edit_and_a_copy_is_fed_by_nothing(author_page, rul
     expect(page.get_by_test_id("rule-list")).to_contain_text("Greet a pair")
 
 
+def test_a_new_rule_from_grouped_menus_brings_the_party_and_is_named_after_what_it_does(author_page, ruleset):
+    page = author_page
+    open_ruleset(page, ruleset)
+    page.get_by_role("button", name="+ New rule", exact=True).click()
+    conditions = page.get_by_label("Add a condition")
+    assert conditions.locator("optgroup").evaluate_all("gs => gs.map((g) => g.label)") == [
+        "Most used", "Customers and their type", "The party at the entrance and its group",
+        "Greeting the party: what Pepper says and does", "Narrowing the sentence above"]
+    assert conditions.locator("optgroup[label='Most used'] option").all_inner_texts() == [
+        "There is a party at the entrance", "Pepper is at the entrance", "Everyone in the party has a type"]
+    conditions.select_option(label="Everyone in the party has a type")
+    when = page.get_by_role("list", name="When")
+    expect(when.get_by_role("listitem")).to_have_count(2)
+    assert when.get_by_role("listitem").all_inner_texts()[0].startswith("There is a party at the entrance")
+    expect(page.get_by_role("region", name="A new rule")).to_contain_text(
+        "Added “There is a party at the entrance” under When: “Everyone in the party has a type” is about it.")
+
+    page.get_by_label("Add an action").select_option(label='Pepper says "…"')
+    page.get_by_role("button", name="Add the rule", exact=True).click()  # the blank is still empty
+    expect(page.get_by_role("alert")).to_contain_text("“Pepper says \"…\"”: fill in the text.")
+    page.get_by_label('text in: Pepper says "…"').fill("A blanket?")
+    page.get_by_role("button", name="Add the rule", exact=True).click()
+    expect(page.get_by_role("status").filter(has_text="✓ Rule “Pepper says “A blanket?”” added")).to_be_visible()
+    expect(page.get_by_test_id("rule-list").locator(".rule-item[data-rule='Pepper says “A blanket?”']")).to_be_visible()
+    expect(page.locator(EDITOR)).to_contain_text('rule "Pepper says “A blanket?”"')
+    # the compiler takes the rule as written (a loaded machine compiles slowly)
+    expect(page.get_by_test_id("check-status")).to_have_text("✓ No problems", timeout=120_000)
+
+
 def test_update_the_tests_too_then_deploy(author_page, gateway, screenshots):
     page = author_page
     files = folder_files(RECEPTION)
@@ -174,6 +203,41 @@ def test_layout_at_desktop_and_tablet_width(browser, gateway, screenshots):
             else:  # desktop: the side column stays beside the editor
                 expect(page.get_by_test_id("deploy")).to_be_in_viewport()
             assert page.evaluate("document.documentElement.scrollWidth <= innerWidth")  # nothing scrolls sideways
+            assert page.js_errors == []
+        finally:
+            page.context.close()
+
+
+LINES_JS = """e => { const r = document.createRange(); r.selectNodeContents(e);
+    return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size; }"""
+#: The character before each line break of an element's text (a word boundary: "-" in a name).
+BREAKS_JS = """e => { const text = e.firstChild; const out = []; let top = null;
+    for (let i = 0; i < text.length; i++) { const r = document.createRange(); r.setStart(text, i); r.setEnd(text, i + 1);
+      const t = Math.round(r.getBoundingClientRect().top); if (top !== null && t > top) out.push(text.data[i - 1]); top = t; }
+    return out; }"""
+
+
+def test_long_names_wrap_at_word_boundaries_and_the_palette_shows_it_scrolls(browser, gateway):
+    name = deploy_forced(gateway, folder_files(RECEPTION), "reception-for-the-long-weekend-tea-ceremony-families")
+    for width, height in ((1280, 800), (820, 1180)):
+        page = new_page(browser, gateway, AUTHOR_TOKEN)
+        try:
+            page.set_viewport_size({"width": width, "height": height})
+            open_ruleset(page, name)
+            # the narrow column wraps the name: in the list of rule sets at desktop width, the title at tablet width
+            wrapped = page.locator(f"[data-ruleset='{name}'] .name") if width > 900 \
+                else page.get_by_role("heading", name=name, exact=True)
+            assert wrapped.evaluate(LINES_JS) >= 2, width
+            assert set(wrapped.evaluate(BREAKS_JS)) == {"-"}, width  # each line ends at a word boundary
+            assert wrapped.evaluate("e => e.scrollWidth <= e.clientWidth"), width
+            assert page.evaluate("document.documentElement.scrollWidth <= innerWidth")
+
+            page.goto("/workbench#/workflows/greeting")
+            side = page.locator(".wf-side")
+            expect(side).to_be_visible()
+            if width > 1000:  # beside the steps, the palette scrolls on its own, and its scrollbar is always shown
+                assert side.evaluate("s => getComputedStyle(s).overflowY") == "scroll"
+                assert side.evaluate("s => s.scrollHeight > s.clientHeight"), width  # more entries than fit: it scrolls
             assert page.js_errors == []
         finally:
             page.context.close()

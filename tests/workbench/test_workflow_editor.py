@@ -197,6 +197,43 @@ def test_table2_7_visit_and_speak_before_the_bill(author_page: Page, gateway):
     expect(page.locator("[data-testid=wf-trace] li[data-step=go_to_table]")).to_contain_text("(3.5, 2)")
 
 
+def test_a_place_is_picked_from_what_the_run_is_given_and_told_in_words(author_page: Page, gateway):
+    """#7 without typing an expression: "+ add at the start", then the place picked in words."""
+    name, _ = copy_workflow(gateway, "6_settle_bill.yaml")
+    page = author_page
+    open_workflow(page, name)
+    form = page.get_by_test_id("wf-form")
+    step_button(page, "settle_bill").click()  # a staff task whose prompt already names the table
+    expect(form.get_by_text("Uses the table (table1).")).to_be_visible()
+
+    page.get_by_role("button", name="Add new steps at the start of the process settle").click()
+    expect(page.get_by_test_id("wf-insertion")).to_have_text("Inserting at the start of the process settle.")
+    page.get_by_role("button", name="Insert: Pepper: move to").click()
+    picker = form.get_by_label("Pick a value for location")
+    assert picker.locator("option").all_inner_texts() == [
+        "Pick a value…", "the table (table1)", "the table's x (4)", "the table's y (2)"]
+    picker.select_option(label="the table (table1)")
+    location = form.locator("[data-field='with.location']")
+    expect(location).to_have_value("${input.table.id}")
+    expect(form.get_by_text("Uses the table (table1).")).to_be_visible()
+
+    # A name the run is not given is named, in words, with what it is given (a note: nothing is refused).
+    location.fill("${input.tabel.id}")
+    expect(form).to_contain_text("“tabel” is not among what the run is given (table) or what earlier steps found")
+    location.fill("")
+    picker.select_option(label="the table (table1)")
+    page.get_by_role("button", name="Insert: Pepper: say").click()  # after the move (new steps go after it)
+    text = form.locator("[data-field='with.text']")
+    text.fill("Thank you. Your bill for ")
+    form.get_by_label("Pick a value for text").select_option(label="the table (table1)")
+    expect(text).to_have_value("Thank you. Your bill for ${input.table.id}")
+    assert steps_of(page, "settle") == ["move_to", "say", "settle_bill"]
+    save(page, "visit the table first", 2)
+    assert run_in_editor(page) == ["move_to", "say", "settle_bill"]
+    expect(page.locator("[data-testid=wf-trace] li[data-step=move_to]")).to_contain_text("table1")
+    expect(page.locator("[data-testid=wf-trace] li[data-step=say]")).to_contain_text("Your bill for table1")
+
+
 def test_unsaved_edits_can_be_tried_without_going_live(author_page: Page, gateway):
     name, _ = copy_workflow(gateway, "7_thanking.yaml")
     page = author_page

@@ -8,13 +8,16 @@
 
 const ENTRY = /^\s*\[(when|condition|then|consequence|keyword|\*)\](\[[^\]]*\])?(.*)$/i;
 
-/** Entries of one .dsl text: [{scope, sentence, pattern, code, holes, line}], plus problems for bad lines. */
+/** Entries of one .dsl text: [{scope, sentence, pattern, code, holes, line, topic}], plus problems for bad lines. */
 export function parseDsl(file, text) {
   const entries = [];
   const problems = [];
+  let topic = ""; // the heading above ("# --- The party at the entrance ---"): what the entries are about
   text.split("\n").forEach((raw, index) => {
     const line = raw.replace(/\r$/, "");
     const trimmed = line.trim();
+    const heading = /^(?:#|\/\/)\s*-{2,}\s*(.*?)\s*-*\s*$/.exec(trimmed);
+    if (heading && heading[1]) topic = heading[1];
     if (!trimmed || trimmed.startsWith("#") || trimmed.startsWith("//")) return;
     const match = ENTRY.exec(line);
     const split = match ? splitEntry(match[3]) : null;
@@ -38,7 +41,7 @@ export function parseDsl(file, text) {
       });
       return;
     }
-    entries.push({ scope, sentence, pattern, code: split.code.trim(), holes: sentenceHoles(sentence), line: index + 1 });
+    entries.push({ scope, sentence, pattern, code: split.code.trim(), holes: sentenceHoles(sentence), line: index + 1, topic });
   });
   return { entries, problems };
 }

@@ -29,3 +29,10 @@ export function paletteRows(doc, entries, moduleFor) {
   for (const entry of rest) (groups[entry.group] = groups[entry.group] || []).push(entry);
   return { mine, groups };
 }
+
+/** Module kinds in the owner's words (the badges of the steps and the palette). */
+const KIND_WORDS = {
+  ros_service: "robot", ros_topic: "message", fire_rules: "rules", ontology_value: "knowledge", wait: "wait",
+  manual: "staff", branch: "branch", process: "process", set: "set", module: "module",
+};
+export const kindWord = (kind) => KIND_WORDS[kind] || String(kind).replace("_", " ");

@@ -8,8 +8,8 @@
 import { h, fill } from "./dom.js";
 import { dslEntries } from "./assist-core.js";
 import { CONDITION_SCOPES, CONSEQUENCE_SCOPES } from "./checks.js";
-import { fillSentence, findAll, holeProblem, isRuleText, newRuleProblems, ruleAt, ruleText, sentenceParts,
-  sentenceShown } from "./rule-words.js";
+import { defaultRuleName, fillSentence, findAll, holeProblem, isRuleText, neededConditions, newRuleProblems, ruleAt,
+  ruleText, sentenceGroups, sentenceParts, sentenceShown, sentenceUse } from "./rule-words.js";
 
 const MAX_LISTED = 8;
 
@@ -17,7 +17,8 @@ const MAX_LISTED = 8;
  * Mount the tools in `host`.
  * options: files() -> {name: text} (the draft), rules() -> the outline's rules ([{name, file, line}]),
  *          replace(file, [{from, to, insert}]) (edit an editor), append(file, text) -> first line of
- *          the appended text, goTo(file, line) (show it in the editor).
+ *          the appended text, goTo(file, line) (show it in the editor), deploy() (optional: deploy
+ *          the draft, offered as "Add the rule and deploy").
  */
 export function mountRuleTools(host, options) {
   const panelEl = h("div", { class: "rule-tool-panel" });
@@ -124,19 +125,21 @@ function sentenceRow(entry, onRemove) {
   };
 }
 
-function sentenceMenu(label, id, entries, onPick) {
-  const seen = new Set();
-  const options = entries.filter((e) => !seen.has(e.sentence) && seen.add(e.sentence));
+/** A menu of sentences in groups (most used, then the phrase book's sections); onPick(entry). */
+function sentenceMenu(label, id, groups, onPick) {
+  const options = groups.flatMap((g) => g.entries);
+  let index = 0;
   const select = h("select", { id, onchange: () => {
     const entry = options[Number(select.value)];
     select.value = "";
     if (entry) onPick(entry);
   } }, h("option", { value: "" }, "Choose a sentence…"),
-  options.map((e, i) => h("option", { value: String(i) }, sentenceShown(e.sentence))));
+  groups.map((g) => h("optgroup", { label: g.label },
+    g.entries.map((e) => h("option", { value: String(index++) }, sentenceShown(e.sentence))))));
   return h("div", { class: "field" }, h("label", { for: id }, label), select);
 }
 
-function newRulePanel({ files, rules, append, goTo }, close) {
+function newRulePanel({ files, rules, append, goTo, deploy }, close) {
   const current = files();
   const target = Object.keys(current).find((f) => /\.dslr$/i.test(f));
   if (!target) {
@@ -144,43 +147,63 @@ function newRulePanel({ files, rules, append, goTo }, close) {
       h("p", {}, "This rule set has no sentence file (.dslr) and no phrase book: a new rule here is written in the editor."));
   }
   const entries = dslEntries(current);
+  const use = sentenceUse(entries, current);
+  const conditions = entries.filter((e) => CONDITION_SCOPES.has(e.scope));
+  const actions = entries.filter((e) => CONSEQUENCE_SCOPES.has(e.scope));
   const rows = { when: [], then: [] };
   const lists = { when: h("ol", { class: "sentences", "aria-label": "When" }), then: h("ol", { class: "sentences", "aria-label": "Then" }) };
-  const nameEl = h("input", { type: "text", id: "new-rule-name", placeholder: "e.g. Offer blankets" });
+  const nameEl = h("input", { type: "text", id: "new-rule-name", placeholder: "e.g. Offer blankets (else named after its first action)" });
   const problemsEl = h("div", { "aria-live": "polite" });
+  const noteEl = h("p", { class: "hint", "aria-live": "polite" });
 
-  function pick(part, entry) {
+  function addRow(part, entry) {
     const row = sentenceRow(entry, () => { rows[part] = rows[part].filter((r) => r !== row); });
+    row.entry = entry;
     rows[part].push(row);
     lists[part].append(row.el);
-    row.inputs[0]?.focus();
+    return row;
   }
 
-  function add() {
+  /** Add a sentence, after the conditions it is about (found in the phrase book) when they are missing. */
+  function pick(part, entry) {
+    const needed = neededConditions(entry, rows.when.map((r) => r.entry), conditions);
+    for (const condition of needed) addRow("when", condition);
+    fill(noteEl, needed.length ? `Added “${needed.map((e) => sentenceShown(e.sentence)).join("”, “")}” under When: `
+      + `“${sentenceShown(entry.sentence)}” is about ${needed.length === 1 ? "it" : "them"}.` : "");
+    addRow(part, entry).inputs[0]?.focus();
+  }
+
+  function add({ andDeploy = false } = {}) {
     const when = rows.when.map((r) => r.line());
     const then = rows.then.map((r) => r.line());
-    const problems = newRuleProblems(nameEl.value, when, then, rules().map((r) => r.name));
+    const existing = rules().map((r) => r.name);
+    const name = nameEl.value.trim() || defaultRuleName(then.map((l) => l.text), existing); // the name is optional
+    const problems = newRuleProblems(name, when, then, existing);
     if (problems.length) {
       return fill(problemsEl, h("div", { class: "message error", role: "alert" }, h("p", {}, "The rule is not added yet:"),
         h("ul", {}, problems.map((p) => h("li", {}, p)))));
     }
-    const line = append(target, ruleText(nameEl.value, when.map((l) => l.text), then.map((l) => l.text)));
+    const line = append(target, ruleText(name, when.map((l) => l.text), then.map((l) => l.text)));
     goTo(target, line);
     const panel = problemsEl.closest(".rule-tool-panel");
     close();
-    fill(panel, h("p", { class: "message ok", role: "status" },
-      `✓ Rule “${nameEl.value.trim()}” added at the end of ${target} (line ${line}). Deploy when the checks are green.`));
+    fill(panel, h("p", { class: "message ok", role: "status" }, `✓ Rule “${name}” added at the end of ${target} (line ${line}). `
+      + (andDeploy ? "Deploying it (see Deploy)…" : "Deploy when the checks are green.")));
+    if (andDeploy) deploy();
   }
 
   return h("section", { class: "card rule-tool", "aria-label": "A new rule" },
     h("h3", {}, "A new rule"),
-    h("div", { class: "field" }, h("label", { for: "new-rule-name" }, "Name of the rule"), nameEl),
+    h("div", { class: "field" }, h("label", { for: "new-rule-name" }, "Name of the rule (optional)"), nameEl),
     h("h4", {}, "When"), lists.when,
-    sentenceMenu("Add a condition", "new-rule-when", entries.filter((e) => CONDITION_SCOPES.has(e.scope)), (e) => pick("when", e)),
+    sentenceMenu("Add a condition", "new-rule-when", sentenceGroups(conditions, use), (e) => pick("when", e)),
+    noteEl,
     h("h4", {}, "Then"), lists.then,
-    sentenceMenu("Add an action", "new-rule-then", entries.filter((e) => CONSEQUENCE_SCOPES.has(e.scope)), (e) => pick("then", e)),
+    sentenceMenu("Add an action", "new-rule-then", sentenceGroups(actions, use), (e) => pick("then", e)),
     problemsEl,
-    h("div", { class: "buttons" }, h("button", { class: "primary", onclick: () => add() }, "Add the rule"),
+    h("div", { class: "buttons" },
+      deploy ? h("button", { class: "primary", onclick: () => add({ andDeploy: true }) }, "Add the rule and deploy") : null,
+      h("button", { class: deploy ? "secondary" : "primary", onclick: () => add() }, "Add the rule"),
       h("button", { class: "secondary", onclick: (e) => {
         close();
         fill(e.target.closest(".rule-tool-panel"));

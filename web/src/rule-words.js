@@ -93,3 +93,75 @@ export function ruleText(name, when, then) {
   const lines = ["", `rule "${name.trim()}"`, "when", ...when.map((s) => `    ${s}`), "then", ...then.map((s) => `    ${s}`), "end", ""];
   return lines.join("\n");
 }
+
+/** How many sentence lines of the rule texts each entry stands for (a Map entry -> count). */
+export function sentenceUse(entries, files) {
+  const lines = [];
+  for (const [file, text] of Object.entries(files)) if (/\.dslr$/i.test(file)) lines.push(...text.split("\n").map((l) => l.trim()));
+  return new Map(entries.map((e) => [e, lines.filter((l) => l && e.pattern.test(l)).length]));
+}
+
+export const MOST_USED = 3;
+
+/**
+ * A sentence menu's groups, as a guided rule editor shows them: "Most used" first (the few the rules
+ * use most), then the phrase book's own sections (its "# --- heading ---" lines), and the lines that
+ * narrow the sentence above ("- of exactly … customers") last. Each sentence once per group:
+ * [{label, entries}].
+ */
+export function sentenceGroups(entries, use = new Map()) {
+  const seen = new Set();
+  const unique = entries.filter((e) => !seen.has(e.sentence) && seen.add(e.sentence));
+  const narrowing = (e) => e.sentence.startsWith("-");
+  const most = unique.filter((e) => !narrowing(e) && (use.get(e) || 0) > 1)
+    .sort((a, b) => (use.get(b) || 0) - (use.get(a) || 0)).slice(0, MOST_USED);
+  const groups = most.length ? [{ label: "Most used", entries: most }] : [];
+  const byTopic = new Map();
+  for (const e of unique.filter((x) => !narrowing(x))) {
+    const label = e.topic || "Other sentences";
+    if (!byTopic.has(label)) byTopic.set(label, []);
+    byTopic.get(label).push(e);
+  }
+  for (const [label, mine] of byTopic) groups.push({ label, entries: mine });
+  const narrow = unique.filter(narrowing);
+  if (narrow.length) groups.push({ label: "Narrowing the sentence above", entries: narrow });
+  return groups;
+}
+
+/** The `$names` a phrase-book entry's code binds (`$e: Entrance()`) and the ones it only uses. */
+function variables(entry) {
+  const bound = new Set([...entry.code.matchAll(/(\$\w+)\s*:(?!:)/g)].map((m) => m[1]));
+  const used = new Set([...entry.code.matchAll(/\$\w+/g)].map((m) => m[0]).filter((v) => !bound.has(v)));
+  return { bound, used };
+}
+
+/**
+ * The conditions a sentence needs before it (in order): for each `$name` its code uses that none of
+ * `chosen` binds, the one condition of the phrase book that binds it ("Everyone in the party has a
+ * type" is about the party that "There is a party at the entrance" finds). A name bound by several
+ * conditions is left to the author.
+ */
+export function neededConditions(entry, chosen, conditions) {
+  const out = [];
+  const have = new Set(chosen.flatMap((e) => [...variables(e).bound]));
+  const visit = (e) => {
+    for (const name of variables(e).used) {
+      if (have.has(name)) continue;
+      const binders = conditions.filter((c) => variables(c).bound.has(name));
+      if (binders.length !== 1) continue;
+      have.add(name);
+      visit(binders[0]);
+      out.push(binders[0]);
+    }
+  };
+  visit(entry);
+  return out;
+}
+
+/** A name for a rule left unnamed: what it does (its first action), unique among `existing`. */
+export function defaultRuleName(then, existing) {
+  const base = (then[0] || "New rule").replace(/"([^"]*)"/g, "“$1”").replace(/"/g, "”").replace(/\s+/g, " ").trim();
+  let name = base;
+  for (let n = 2; existing.includes(name); n++) name = `${base} (${n})`;
+  return name;
+}

@@ -1,23 +1,22 @@
 // The main view: a rule set's files in editors, checked as you type, with the DRL preview, the
 // "Try it" panel and Deploy. Edits are kept as a local draft (localStorage) until deployed, so a
-// reload, a conflict or a closed tab loses nothing.
+// reload, a conflict or a closed tab loses nothing. The rule list and search, the tests panel, Try it
+// and Deploy are methods of this view written in their own modules (rules-search.js,
+// rules-tests-panel.js, rules-try.js, rules-deploy.js).
 
-import { h, fill, when, debounce } from "./dom.js";
 import { api, rulesetPath } from "./api.js";
-import { createEditor, setText, showProblems, reveal, scrollToLine } from "./editor.js";
 import { localProblems } from "./checks.js";
-import { actionList, firedList } from "./actions.js";
+import { h, fill, when, debounce } from "./dom.js";
 import { assistFor, declaredTypes, dslEntries } from "./dsl-assist.js";
-import { mountTests } from "./tests-view.js";
-import { offerTestUpdate } from "./tests-update.js";
-import { mountRuleList } from "./rule-list.js";
-import { findHighlight, setFind } from "./find-highlight.js";
-import { mountRuleTools } from "./rule-tools.js";
+import { createEditor, setText, showProblems, reveal, scrollToLine } from "./editor.js";
+import { findHighlight } from "./find-highlight.js";
 import { reachBar } from "./reach-bar.js";
+import { normalizeErrors, draftKey } from "./rules-common.js";
 import { mountTableEditor } from "./table-editor.js";
-import { FollowStopped, deployOutcome, followJob, isCancelled, isJob, submitJob } from "./jobs.js";
-import { JobProgress, JobsList } from "./jobs-view.js";
-import { WhatWouldChange } from "./replay-panel.js";
+import { searchMethods } from "./rules-search.js";
+import { testsPanelMethods } from "./rules-tests-panel.js";
+import { tryMethods } from "./rules-try.js";
+import { deployMethods } from "./rules-deploy.js";
 
 const CHECK_DELAY_MS = 500;
 const ADDABLE = [".xlsx", ".csv", ".dslr", ".dsl", ".drl"];
@@ -64,10 +63,6 @@ function kindOf(fileName) {
 /** File names in the order a non-programmer should meet them: sentences first. */
 export function orderedFiles(names) {
   return [...names].sort((a, b) => kindOf(a).order - kindOf(b).order || a.localeCompare(b));
-}
-
-function draftKey(name) {
-  return `printeps.workbench.draft.${name}`;
 }
 
 function sameFiles(a, b) {
@@ -454,76 +449,7 @@ class RulesView {
     scrollToLine(this.previewView, target || line, target ? "start" : "center");
   }
 
-  // ---- Try it ---------------------------------------------------------------------------------
-
-  buildTry() {
-    this.tryResultEl = h("div", { class: "try-result", "data-testid": "try-result", "aria-live": "polite" });
-    const factsHost = h("div", { class: "facts-host" });
-    const initial = this.examples.length ? this.examples[0].facts : [];
-    this.factsView = createEditor(factsHost, { doc: JSON.stringify(initial, null, 2), fileName: "facts.json", label: "Facts (JSON)" });
-    const exampleButtons = this.examples.map((ex) => h("button", {
-      class: "chip", onclick: () => setText(this.factsView, JSON.stringify(ex.facts, null, 2)),
-    }, ex.name));
-    const typeButtons = Object.keys(this.types).sort().map((type) => h("button", {
-      class: "chip add", title: `Fields: ${Object.entries(this.types[type]).map(([f, t]) => `${f} (${t})`).join(", ")}`,
-      onclick: () => this.addFact(type),
-    }, `+ ${type}`));
-    return h("div", { class: "card try" },
-      h("h2", {}, "Try it"),
-      h("p", { class: "hint" }, "Pick a situation (or write facts), then press Try it. It uses the text in the editor; nothing is deployed."),
-      exampleButtons.length ? h("div", { class: "chips" }, h("span", { class: "label" }, "Situations:"), exampleButtons) : null,
-      typeButtons.length ? h("div", { class: "chips" }, h("span", { class: "label" }, "Add a fact:"), typeButtons) : null,
-      factsHost,
-      h("button", { class: "big primary", "data-testid": "try", onclick: () => this.tryIt() }, "▶ Try it"),
-      this.tryResultEl);
-  }
-
-  addFact(type) {
-    const template = { type };
-    for (const [field, javaType] of Object.entries(this.types[type] || {})) template[field] = sampleValue(field, javaType);
-    let facts;
-    try {
-      facts = JSON.parse(this.factsView.state.doc.toString() || "[]");
-    } catch {
-      facts = null;
-    }
-    if (!Array.isArray(facts)) facts = facts && typeof facts === "object" ? [facts] : [];
-    facts.push(template);
-    setText(this.factsView, JSON.stringify(facts, null, 2));
-  }
-
-  async tryIt() {
-    await this.flushTables();
-    const text = this.factsView.state.doc.toString();
-    let facts;
-    try {
-      facts = JSON.parse(text.trim() || "[]");
-    } catch (err) {
-      fill(this.tryResultEl, h("div", { class: "message error", role: "alert" }, `The facts are not valid JSON: ${jsonErrorWhere(text, err)}`));
-      return;
-    }
-    if (!Array.isArray(facts)) facts = [facts];
-    fill(this.tryResultEl, h("p", { class: "muted" }, "Trying…"));
-    try {
-      const result = await api("POST", rulesetPath(this.name, "/try"), { files: this.files(), facts });
-      fill(this.tryResultEl,
-        h("h3", {}, "The robot would:"), actionList(result.actions),
-        h("h3", {}, "Rules that fired, in order:"), firedList(result.fired),
-        h("details", {}, h("summary", {}, "Facts afterwards"), h("pre", {}, JSON.stringify(result.facts || [], null, 2))));
-    } catch (err) {
-      const compile = normalizeErrors(err.errors.filter((e) => e.file !== undefined || e.line !== undefined));
-      const factErrors = err.errors.filter((e) => e.file === undefined && e.line === undefined);
-      if (compile.length) {
-        this.server = compile;
-        this.renderProblems(false);
-      }
-      fill(this.tryResultEl, h("div", { class: "message error", role: "alert" },
-        compile.length ? "The rules have problems (see the list under the editor): fix them and try again." : err.message,
-        factErrors.length ? h("ul", {}, factErrors.map((e) => h("li", {}, describeFactError(e)))) : null));
-    }
-  }
-
-  // ---- Deploy ---------------------------------------------------------------------------------
+  // ---- Adding a file ---------------------------------------------------------------------------
 
   /** "Add a file": a spreadsheet decision table (.xlsx/.csv) or a rule file from the user's computer,
    * added to the draft as a new tab (deployed with the rest); nothing is sent until Deploy. */
@@ -562,239 +488,10 @@ class RulesView {
     this.changed();
     return h("span", { class: "message ok inline", role: "status" }, `Added ${name}: check it, then deploy.`);
   }
-
-  buildDeploy() {
-    if (!this.editable) return null;
-    this.commentEl = h("input", { type: "text", class: "comment", maxlength: "500", "aria-label": "What did you change?",
-      placeholder: "e.g. Friendlier greeting for groups" });
-    this.deployResultEl = h("div", { class: "deploy-result", "data-testid": "deploy-result", "aria-live": "polite" });
-    this.deployButton = h("button", { class: "big primary", "data-testid": "deploy", onclick: () => this.deploy() }, "Deploy to the robot");
-    this.replay = new WhatWouldChange(this.ctx, this.name, async () => {
-      await this.flushTables();
-      return this.files();
-    });
-    return h("div", { class: "card deploy" },
-      h("h2", {}, "Deploy"),
-      h("label", { class: "field" }, "What did you change? (shown in the history)", this.commentEl),
-      h("div", { class: "buttons" },
-        this.replay.button,
-        this.deployButton,
-        h("button", { class: "big secondary", onclick: () => this.discard() }, "Undo all my changes")),
-      this.replay.el,
-      this.deployResultEl);
-  }
-
-  /** The rule set's recent build jobs (collapsed until wanted). */
-  buildJobs() {
-    this.jobsList = new JobsList({ ruleset: this.name, editable: this.editable });
-    return this.jobsList.el;
-  }
-
-  // ---- The rules as a list ----------------------------------------------------------------------
-
-  /** The rule list, and under it (authors) the panels of its Replace… and + New rule buttons. */
-  buildRuleListAndTools() {
-    const host = h("div", { class: "rule-list-host" });
-    const tools = this.editable ? this.buildRuleTools() : null;
-    this.ruleList = mountRuleList(host, {
-      name: this.name,
-      files: () => this.files(),
-      goTo: (rule) => this.goTo(rule.row ? { file: rule.file, line: rule.row, column: 1, sheet: rule.sheet } : { file: rule.file, line: rule.line, column: 1 }),
-      onSearch: (text) => this.searchEditors(text),
-      tools: tools ? tools.buttons : null,
-    });
-    return [host, tools ? tools.host : null];
-  }
-
-  /** Replace… and + New rule: change words in every rule, or write a rule from chosen sentences. */
-  buildRuleTools() {
-    const host = h("div", { class: "rule-tools-host" });
-    const tools = mountRuleTools(host, {
-      files: () => this.files(),
-      rules: () => this.ruleList.all(),
-      replace: (file, changes) => this.views[file]?.dispatch({ changes }),
-      append: (file, text) => {
-        const view = this.views[file];
-        const end = view.state.doc.length;
-        const gap = end && view.state.doc.sliceString(end - 1) !== "\n" ? "\n" : "";
-        view.dispatch({ changes: { from: end, insert: gap + text } });
-        return view.state.doc.lineAt(end + gap.length + text.indexOf("rule ")).number;
-      },
-      goTo: (file, line) => this.goTo({ file, line, column: 1 }),
-    });
-    return { host, buttons: tools.buttons };
-  }
-
-  /** Mark the search words in every editor and bring the first rule that matches into view. */
-  searchEditors(text) {
-    for (const view of Object.values(this.views)) setFind(view, text);
-    if (!text || !this.ruleList) return;
-    const first = this.ruleList.visible().find((r) => r.line && this.views[r.file]);
-    if (!first) return;
-    if (first.file !== this.active) this.select(first.file);
-    scrollToLine(this.views[first.file], first.line, "start");
-  }
-
-  // ---- Tests ------------------------------------------------------------------------------------
-
-  buildTests() {
-    const host = h("div", { class: "tests-host" });
-    this.testsView = mountTests(host, {
-      name: this.name,
-      files: async () => {
-        await this.flushTables();
-        return this.files();
-      },
-      goTo: (file, line) => this.goTo({ file, line, column: 1 }),
-      onErrors: (errors) => {
-        this.server = normalizeErrors(errors);
-        this.renderProblems(false);
-      },
-    });
-    return host;
-  }
-
-  // ---- Deploy ---------------------------------------------------------------------------------
-
-  async deploy(force = false) {
-    if (this.building) return; // one build at a time from this page (the button is disabled meanwhile)
-    this.setBuilding(true);
-    fill(this.deployResultEl, h("p", { class: "muted" }, "Deploying…"));
-    try {
-      await this.flushTables();
-      const files = this.files();
-      const comment = this.replay ? this.replay.comment(this.commentEl.value.trim()) : this.commentEl.value.trim();
-      if (comment === null) {
-        fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "replay-comment-needed" },
-          `Your change would change ${this.replay.result.changed} recent decisions: say what you changed and why in the comment, then deploy.`));
-        this.commentEl.focus();
-        return;
-      }
-      const body = { files, comment, base_version: this.base };
-      if (force) body.force = true;
-      this.deployed(files, comment, await this.buildAndDeploy(body));
-    } catch (err) {
-      this.notDeployed(err);
-    } finally {
-      this.setBuilding(false);
-    }
-  }
-
-  /** While a build runs the Deploy button rests, and the result area is busy (screen readers then
-   * announce its end, not every step of the progress). */
-  setBuilding(on) {
-    this.building = on;
-    this.deployButton.disabled = on;
-    if (on) this.deployResultEl.setAttribute("aria-busy", "true");
-    else this.deployResultEl.removeAttribute("aria-busy");
-  }
-
-  /** Deploy `body` through a build job: its progress shows while it builds (after a moment, so a
-   * quick one flashes no bar) and its end becomes what the synchronous deploy answered or threw. */
-  async buildAndDeploy(body) {
-    this.progress = null;
-    const job = await submitJob("PUT", rulesetPath(this.name), body);
-    if (!isJob(job)) return job; // a gateway that deployed at once
-    const progress = new JobProgress(this.deployResultEl, job);
-    this.progress = progress;
-    this.jobsList.refresh();
-    try {
-      const done = await followJob(job, { onUpdate: (j) => progress.update(j), stopped: () => this.disposed });
-      return deployOutcome(done);
-    } finally {
-      progress.dispose();
-      this.jobsList.refresh();
-    }
-  }
-
-  /** The new version is live: the editor's text is now the deployed one. */
-  deployed(files, comment, result) {
-    this.original = files;
-    this.base = result.version;
-    this.info = { ...this.info, version: result.version, author: this.ctx.user?.name, comment, deployed_at: new Date().toISOString() };
-    localStorage.removeItem(draftKey(this.name));
-    this.commentEl.value = "";
-    this.replay?.reset();
-    this.renderLive();
-    this.updateDirty();
-    fill(this.deployResultEl, h("div", { class: "message ok", role: "status" }, `✓ Deployed. Version ${result.version} is now live.`),
-      this.progress?.cancelRequested ? h("p", { class: "hint" }, "The build was too far along to cancel, so it finished.") : null);
-    this.ctx.refreshRulesets();
-  }
-
-  /** Say why nothing was deployed: compile problems go under the editor, red scenarios and
-   * conflicts get their own choices, a cancelled build keeps the edits. */
-  notDeployed(err) {
-    if (err instanceof FollowStopped) return; // the view was closed while the build ran
-    if (isCancelled(err)) this.buildCancelled(err);
-    else if (err.body && err.body.kind === "untracked") this.lostTrack(err);
-    else if (err.status === 409) this.conflict(err.body && err.body.current);
-    else if (err.body && err.body.kind === "scenarios") this.redScenarios(err.body);
-    else if (err.errors && err.errors.length) {
-      this.server = normalizeErrors(err.errors);
-      this.renderProblems(false);
-      fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, err.body && err.body.kind === "policy"
-        ? `Not deployed: the rule policy refuses ${this.server.length} place(s) for your role (listed under the editor): `
-          + "an author's rules may use the rule set's own types, its actions and insert/modify/update/delete, not other "
-          + "Java. A developer may deploy such rules. Nothing was changed."
-        : `Not deployed: fix the ${this.server.length} problem(s) listed under the editor first. Nothing was changed.`));
-    } else fill(this.deployResultEl, h("div", { class: "message error", role: "alert" }, `Not deployed: ${err.message}`));
-  }
-
-  buildCancelled(err) {
-    const why = /^cancelled\b/.test(err.message) ? err.message : `cancelled (${err.message})`; // "cancelled by alice"
-    fill(this.deployResultEl, h("div", { class: "message info", role: "status", "data-testid": "build-cancelled" },
-      `Not deployed: the build was ${why}. Nothing was changed; your changes are still here.`));
-  }
-
-  /** Following the job failed (the gateway stopped answering): the build may still end either way. */
-  lostTrack(err) {
-    fill(this.deployResultEl, h("div", { class: "message warning", role: "alert" },
-      `Lost track of the build (${err.message}). It may still finish: see Build jobs, or reload the page in a moment.`));
-  }
-
-  /** The deploy was refused because test scenarios are red: say which, offer to update the tests
-   * when they only expect words the draft changed, or to deploy anyway. */
-  redScenarios(body) {
-    const red = ((body.report && body.report.results) || []).filter((r) => r.status !== "passed");
-    const updateHost = h("div", { class: "tests-update-host" });
-    fill(this.deployResultEl, h("div", { class: "message error", role: "alert", "data-testid": "red-scenarios" },
-      h("p", {}, `Not deployed: ${red.length} test scenario${red.length === 1 ? " fails" : "s fail"} with these rules. Nothing was changed.`),
-      h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name)))),
-      updateHost,
-      h("details", { class: "red-details" }, h("summary", {}, "What each test expected (details)"),
-        h("ul", {}, red.map((r) => h("li", {}, h("b", {}, r.name), ": ", (r.failures[0] && r.failures[0].message) || r.status)))),
-      h("p", {}, "Fix the rules (or the scenario, if the change is wanted), or deploy anyway."),
-      h("div", { class: "buttons" },
-        h("button", { class: "secondary", "data-testid": "show-tests", onclick: () => this.testsView.run({ reveal: true }) }, "Show the tests"),
-        h("button", { class: "danger", "data-testid": "deploy-anyway", onclick: () => this.deploy(true) }, "Deploy anyway"))));
-    offerTestUpdate(updateHost, { name: this.name, files: this.files(), apply: (files, { allFixed }) => this.updateTests(files, allFixed) });
-  }
-
-  /** Put the rewritten test files into their editors; deploy again when nothing else was red. */
-  updateTests(files, allFixed) {
-    for (const [file, text] of Object.entries(files)) {
-      if (this.views[file]) setText(this.views[file], text);
-    }
-    if (allFixed) this.deploy();
-    else this.testsView.run({ reveal: true });
-  }
-
-  conflict(current) {
-    const started = this.base;
-    const compare = `#/history/${encodeURIComponent(this.name)}?from=${started}&to=${current}`;
-    fill(this.deployResultEl, h("div", { class: "message warning", role: "alert", "data-testid": "conflict" },
-      h("p", {}, `Not deployed: someone else deployed version ${current} while you were editing (you started from version ${started}). `,
-        "Your changes are still here; nothing was lost."),
-      h("div", { class: "buttons" },
-        h("a", { class: "button secondary", href: compare, target: "_blank", rel: "noopener" }, `See what changed in version ${current}`),
-        h("button", { class: "secondary", onclick: () => {
-          this.base = current;
-          this.storeDraft();
-          this.deploy();
-        } }, `Deploy mine anyway (replaces version ${current}; it stays in the history)`))));
-  }
 }
+
+// The rule list and search, the tests panel, Try it and Deploy are the view's methods too, each in its module.
+Object.assign(RulesView.prototype, searchMethods, testsPanelMethods, tryMethods, deployMethods);
 
 /** The "rule ..." line of the rule that contains line `number` (trimmed), or "". */
 function ruleHeaderAbove(doc, number) {
@@ -814,40 +511,4 @@ function findLine(doc, text) {
 
 function plural(n, word) {
   return `${n} ${word}${n > 1 ? "s" : ""}`;
-}
-
-/** Server errors ({file, line, column, message}) as problems. */
-function normalizeErrors(errors) {
-  if (!Array.isArray(errors)) return [];
-  return errors.filter((e) => e && (e.message || e.msg)).map((e) => ({
-    file: e.file || "", line: Number(e.line) || 0, column: Number(e.column) || 0,
-    severity: e.severity === "warning" ? "warning" : "error", message: String(e.message || e.msg), source: "compiler",
-    sheet: e.sheet || "", cell: e.cell || "",
-  }));
-}
-
-function describeFactError(e) {
-  const where = [`Fact ${e.index !== undefined ? Number(e.index) + 1 : "?"}`];
-  if (e.type) where.push(`(${e.type})`);
-  if (e.field) where.push(`field “${e.field}”`);
-  return `${where.join(" ")}: ${e.message}`;
-}
-
-/** "line L, column C: message" for a JSON.parse error (browsers say "position N"). */
-function jsonErrorWhere(text, err) {
-  const position = /position (\d+)/.exec(err.message);
-  if (!position) return err.message;
-  const before = text.slice(0, Number(position[1]));
-  const line = before.split("\n").length;
-  const column = before.length - before.lastIndexOf("\n");
-  return `line ${line}, column ${column}: ${err.message.replace(/\s*\(line \d+ column \d+\)/, "")}`;
-}
-
-function sampleValue(field, javaType) {
-  const t = String(javaType).toLowerCase();
-  if (field === "id") return "new-1";
-  if (/int|long|short|byte/.test(t)) return 0;
-  if (/double|float|number|bigdecimal/.test(t)) return 0.0;
-  if (/bool/.test(t)) return false;
-  return "";
 }

@@ -265,3 +265,6 @@ export function renameModule(doc, from, to) {
   }
   return "";
 }
+
+/** A step's or list's path as one string (the data-path of its element). */
+export const pathKey = (path) => path.join("/");

@@ -49,3 +49,39 @@ test("a new rule is written as sentences, and refused with reasons", () => {
   assert.deepEqual(newRuleProblems("New", [], [{ shown: 'Pepper says "…"', problem: "fill in the text" }], []),
     ['“Pepper says "…"”: fill in the text.']);
 });
+
+test("sentence menus are grouped: most used first, then the phrase book's sections, narrowing lines last", async () => {
+  const { parseDsl } = await import("../src/checks.js");
+  const { sentenceGroups, sentenceUse } = await import("../src/rule-words.js");
+  const dsl = "# --- The party ---\n[condition][]There is a party=$e: Entrance()\n[condition][]- of {n:\\d+}=n == {n}\n"
+    + "[condition][]Everyone has a type=not Customer(entrance == $e.id, category == null)\n"
+    + "# --- Pepper ---\n[condition][]Pepper is here=$p: Robot()\n";
+  const { entries } = parseDsl("x.dsl", dsl);
+  const use = sentenceUse(entries, { "x.dslr": "rule a\nwhen\n There is a party\n Everyone has a type\nthen\nend\n"
+    + "rule b\nwhen\n There is a party\n Everyone has a type\n Pepper is here\nthen\nend\n" });
+  assert.deepEqual(sentenceGroups(entries, use).map((g) => [g.label, g.entries.map((e) => e.sentence)]), [
+    ["Most used", ["There is a party", "Everyone has a type"]],
+    ["The party", ["There is a party", "Everyone has a type"]],
+    ["Pepper", ["Pepper is here"]],
+    ["Narrowing the sentence above", ["- of {n:\\d+}"]],
+  ]);
+});
+
+test("a sentence brings the one condition it is about; a name bound by several is left alone", async () => {
+  const { parseDsl } = await import("../src/checks.js");
+  const { neededConditions } = await import("../src/rule-words.js");
+  const { entries } = parseDsl("x.dsl", "[condition][]There is a party=$e: Entrance()\n"
+    + "[condition][]Everyone has a type=not Customer(entrance == $e.id)\n"
+    + "[condition][]Pepper is here=$p: Robot(position == $e.id)\n[condition][]Pepper is away=$p: Robot()\n"
+    + "[consequence][]Pepper comes=actions.move($e.getId()); modify($p) \\{ \\};\n");
+  const [party, typed, , , comes] = entries;
+  assert.deepEqual(neededConditions(typed, [], entries).map((e) => e.sentence), ["There is a party"]);
+  assert.deepEqual(neededConditions(typed, [party], entries), []);
+  assert.deepEqual(neededConditions(comes, [], entries).map((e) => e.sentence), ["There is a party"]);
+});
+
+test("a rule left unnamed is named after its first action, uniquely", async () => {
+  const { defaultRuleName } = await import("../src/rule-words.js");
+  assert.equal(defaultRuleName(['Pepper says "Hello"'], []), "Pepper says “Hello”");
+  assert.equal(defaultRuleName(['Pepper says "Hello"'], ["Pepper says “Hello”"]), "Pepper says “Hello” (2)");
+});
