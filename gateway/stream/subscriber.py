@@ -14,7 +14,7 @@ ROS callbacks behind them. So the work is cut in two:
   sees its windows in order even when two threads push at once.
 
 Every fire is recorded as a decision through the rules engine's one recorder
-(:func:`record_window`) and published as an ``actions`` event.
+(:func:`window_decision` says what the stream knows of it) and published as an ``actions`` event.
 
 A stateful binding's session is a durable session of the rules engine's session manager
 (:mod:`gateway.engine.sessions`) under a stable id, :func:`binding_session_id` (``stream.<query>``):
@@ -72,15 +72,13 @@ def same_session(old: RuleBinding | None, new: RuleBinding | None) -> bool:
             and old.ruleset == new.ruleset)
 
 
-def record_window(rules_engine: Any, result: Any, facts: list[dict[str, Any]], query: str, window: dict[str, int],
-                  session_id: str | None = None) -> str:
-    """The decision of one binding fire, through the engine's one recorder: the one place the stream
-    says what it knows of a decision (a stateful one names its session: not replayable alone)."""
+def window_decision(query: str, window: dict[str, int], session_id: str | None = None) -> dict[str, Any]:
+    """What the stream knows of one binding fire's decision, passed to the engine's one recorder:
+    its correlation id and context (a stateful one names its session: not replayable alone)."""
     context: dict[str, Any] = {"query": query, "window": window}
     if session_id is not None:
         context["session"] = session_id
-    return rules_engine.recorder.record(result, facts, origin="stream", correlation_id=f"{query}@{window['end']}",
-                                        context=context)
+    return {"origin": "stream", "correlation_id": f"{query}@{window['end']}", "context": context}
 
 
 class BindingSubscriber:
@@ -187,11 +185,10 @@ class BindingSubscriber:
         name = runtime.query.name
         if binding.mode == "stateful":
             session = self._session(runtime, binding)
-            result = _push(session, fire.facts, fire.instant)
-            record_window(self.rules_engine, result, fire.facts, name, window, session.id)
-            return result
+            return _push(self.rules_engine.recorder, session, fire.facts, fire.instant,
+                         window_decision(name, window, session.id))
         result = self.rules_engine.fire(binding.ruleset, fire.facts, record=False)
-        record_window(self.rules_engine, result, fire.facts, name, window)
+        self.rules_engine.recorder.record(result, fire.facts, **window_decision(name, window))
         return result
 
     def _session(self, runtime: QueryRuntime, binding: RuleBinding) -> Any:
@@ -269,15 +266,18 @@ def _rebuilt(manager: Any, binding: RuleBinding, session_id: str) -> Any:
             time.sleep(min(max(float(exc.retry_after_s), 0.05), 1.0))
 
 
-def _push(session: Any, facts: list[dict[str, Any]], instant: int) -> FireResult:
-    """Insert stamped with the window's instant (the clock moves there first, never back) and fire.
-    A durable session takes it as one command batch, journalled before it is answered; any other
-    in one JVM call through the session's buffers."""
+def _push(recorder: Any, session: Any, facts: list[dict[str, Any]], instant: int,
+          decision: dict[str, Any]) -> FireResult:
+    """Insert stamped with the window's instant (the clock moves there first, never back), fire,
+    and record the decision. A durable session takes it as one command batch, journalled before it
+    is answered; any other in one JVM call through the session's buffers."""
     if getattr(session, "durability", None) is None:
-        return session.push(facts, instant)
+        result = session.push(facts, instant)
+        recorder.record(result, facts, **decision)
+        return result
     started = time.perf_counter()
-    answer = session.execute([{"op": "advance_to", "to": int(instant)}, {"op": "insert", "facts": facts, "ret": False},
-                              {"op": "fire", "max": -1}])
-    fire = next(r["fire"] for r in reversed(answer.results) if "fire" in r)
-    return FireResult(session.ruleset, answer.version, fire["actions"], fire["fired"], [], int(fire["fireCount"]),
-                      (time.perf_counter() - started) * 1000)
+    commands = [{"op": "advance_to", "to": int(instant)}, {"op": "insert", "facts": facts, "ret": False},
+                {"op": "fire", "max": -1}]
+    answer = session.execute(commands)
+    return recorder.session_fire(session.ruleset, commands, answer,
+                                 duration_ms=(time.perf_counter() - started) * 1000, **decision)
