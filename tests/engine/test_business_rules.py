@@ -21,7 +21,7 @@ from gateway.engine.results import encode_facts
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench" / "peers"))
-from business_rules import SHAPES, BusinessRules
+from business_rules import CALLS, SHAPES, BusinessRules
 
 RULES = 1000
 REQUESTS = 4
@@ -72,6 +72,7 @@ def test_a_random_thousand_rule_business_base_fires_as_its_model(seed, options):
     shapes = {r.shape for r in rules.rules()}
     attributes = {r.attribute for r in rules.rules()}
     assert shapes == set(SHAPES) and len(attributes) == 8  # every shape and attribute (and none) drawn
+    assert {r.p["call"] for r in rules.rules() if r.shape == "calls"} == set(range(len(CALLS)))  # every call form
     compiled = compiler.compile_files(rules.drl_files(), f"business{seed}", options)
     assert compiled.rule_count == RULES
     # every shape builds plain, the then-part calls with widening, boxing and varargs too (issue 30)
