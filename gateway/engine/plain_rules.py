@@ -9,15 +9,18 @@ compare a field with a literal, with a field of an earlier pattern or with a bou
 ``Number( … ) from accumulate( …, count( 1 ) | sum | min | max( $v ) )``), the attributes
 ``salience``, ``agenda-group``, ``activation-group``, ``auto-focus``, ``no-loop``,
 ``lock-on-active``, ``date-effective`` and ``date-expires``, and a then-part of calls on a global
-whose arguments are literals, bound variables, their getters, or texts joined from those with
-``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This module recognises exactly those,
+whose arguments are literals (``1L`` too), bound variables, their getters, static calls of a
+``java.lang`` class the rule policy allows (``String.format("%s|%d", $a.getId(),
+Math.max($a.getAge(), 1L))``; the Java side chooses each method as javac does), or texts joined
+from those with ``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This module recognises exactly those,
 strictly, and describes them as JSON for the Java side (``org.printeps.gateway.PlainRules``), which
 builds the same ``Rule`` objects the generated code would (same indexes, constraint ids, property
 reactivity, operators and accumulate functions). Anything else — another operator, a method call
 in a constraint, ``from`` a collection, ``eval``, another attribute, a then-part with Java beyond
 such calls, a string with escapes — is left to Drools' compiler, which also reports its errors with
 file, line and column. So is any rule the Java side cannot build exactly (an unknown field, a
-literal of another type, an ambiguous method). :func:`why_not` says why a rule is not plain.
+literal of another type, an ambiguous or generic method, a class name the rule's package or imports
+would hide). :func:`why_not` says why a rule is not plain.
 """
 
 from __future__ import annotations
