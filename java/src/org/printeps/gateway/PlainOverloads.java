@@ -85,6 +85,9 @@ final class PlainOverloads {
             }
             Method best = mostSpecific(applicable, args.length, phase == 3);
             if (statics && !Modifier.isStatic(best.getModifiers())) throw new Reject(best + " is not static");
+            if (!Modifier.isPublic(best.getDeclaringClass().getModifiers())) {
+                throw new Reject(best + " is declared in a class reflection may not call it through");
+            }
             return new Chosen(best, phase == 3);
         }
         throw new Reject("no method " + name + " of " + owner.getName() + " takes " + Arrays.toString(args));
