@@ -11,8 +11,9 @@ constants and its attributes from a seeded random generator:
 - ``not`` / ``exists`` over a joined pattern;
 - ``in``: ``region in ( "r1", "r5", "r9" )``;
 - ``matches``: a regular expression on a text field;
-- ``calls``: a then-part calling ``String.format`` (varargs, boxing) and ``Math.max(long, long)``
-  with an int (widening);
+- ``calls``: a then-part calling ``String.format`` and ``String.join`` (varargs, boxing),
+  ``Math.max(long, long)`` with an int and ``Math.max(double, double)`` with an int (widening)
+  (:data:`CALLS`);
 
 and attributes: ``salience``, ``agenda-group`` with ``auto-focus``, ``no-loop``,
 ``lock-on-active``, ``date-effective`` (in the past, or in the future: never fires) and
@@ -34,6 +35,15 @@ PACKAGE = "org.printeps.business"
 RULES_PER_FILE = 500
 SHAPES = ("multi", "join", "count", "sum", "min", "max", "not", "exists", "in", "matches", "calls")
 ATTRIBUTES = ("salience", "agenda-group", "no-loop", "lock-on-active", "date-effective", "date-future", "date-expires")
+
+#: The then-part expressions of ``calls`` rules: static calls javac resolves by widening (an int
+#: into ``Math.max(long, long)``, into ``max(double, double)``), boxing and variable arity
+#: (``String.format``, ``String.join``), with the texts :meth:`BusinessRules._text` expects.
+CALLS = (
+    'String.format("%s|%d", $a.getId(), Math.max($a.getAge(), 1L))',
+    'String.format("%s|%s", $a.getId(), Math.max($a.getIncome(), 0))',
+    'String.join("/", $a.getId(), Integer.toString($a.getScore()), String.valueOf($a.getAge()))',
+)
 
 TYPES_DRL = f"""package {PACKAGE};
 import org.printeps.gateway.Actions;
@@ -108,6 +118,7 @@ class BusinessRules:
             "group": f"g{rng.randrange(4)}",
         }
         attribute = ATTRIBUTES[rng.randrange(len(ATTRIBUTES))] if rng.random() < self.attribute_share else None
+        p["call"] = rng.randrange(len(CALLS))  # drawn last: the draws before it are those of older bases
         rule = Rule(i, name, shape, p, attribute)
         rule.drl = self._drl(rule)
         return rule
@@ -147,8 +158,7 @@ class BusinessRules:
     @staticmethod
     def _then(r: Rule) -> str:
         if r.shape == "calls":
-            return (f'    actions.say("bot", "{r.name}|" + String.format("%s|%d", $a.getId(), '
-                    f"Math.max($a.getAge(), 1L)));")
+            return f'    actions.say("bot", "{r.name}|" + {CALLS[r.p.get("call", 0)]});'
         return f'    actions.say("bot", "{r.name}");'
 
     @staticmethod
@@ -214,7 +224,13 @@ class BusinessRules:
 
     @staticmethod
     def _text(r: Rule, a: dict[str, Any]) -> str:
-        return f"{r.name}|{a['id']}|{max(a['age'], 1)}" if r.shape == "calls" else r.name
+        if r.shape != "calls":
+            return r.name
+        return f"{r.name}|" + {
+            0: lambda: f"{a['id']}|{max(a['age'], 1)}",
+            1: lambda: f"{a['id']}|{float(max(a['income'], 0))}",
+            2: lambda: f"{a['id']}/{a['score']}/{a['age']}",
+        }[r.p.get("call", 0)]()
 
     @staticmethod
     def _matches(r: Rule, applicants: list[dict[str, Any]], loans: list[dict[str, Any]]):

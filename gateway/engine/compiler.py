@@ -32,7 +32,7 @@ from collections import Counter, OrderedDict
 from typing import Any
 
 from gateway.base import jvm
-from gateway.engine import decision_table, drl_items, incremental, plain_rules, scenario_files
+from gateway.engine import decision_table, drl_items, incremental, plain_rules, rule_dates, scenario_files
 from gateway.engine.build import (
     DEFAULT_OPTIONS,
     CompiledRuleSet,
@@ -433,6 +433,7 @@ def compile_files(
                 described.append(info)
                 if on_progress is not None:
                     incremental._progress(on_progress, n + 1, len(sources), "parse")
+            errors.extend(rule_dates.errors(sources))  # a bad date fails here, not when its unit loads
             if errors:
                 raise CompileFailed(sorted_errors(_in_tables(errors, sources)))
             try:

@@ -9,15 +9,18 @@ compare a field with a literal, with a field of an earlier pattern or with a bou
 ``Number( … ) from accumulate( …, count( 1 ) | sum | min | max( $v ) )``), the attributes
 ``salience``, ``agenda-group``, ``activation-group``, ``auto-focus``, ``no-loop``,
 ``lock-on-active``, ``date-effective`` and ``date-expires``, and a then-part of calls on a global
-whose arguments are literals, bound variables, their getters, or texts joined from those with
-``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This module recognises exactly those,
+whose arguments are literals (``1L`` too), bound variables, their getters, static calls of a
+``java.lang`` class the rule policy allows (``String.format("%s|%d", $a.getId(),
+Math.max($a.getAge(), 1L))``; the Java side chooses each method as javac does), or texts joined
+from those with ``+`` (``actions.say("bot", "Welcome " + $c.getName())``). This module recognises exactly those,
 strictly, and describes them as JSON for the Java side (``org.printeps.gateway.PlainRules``), which
 builds the same ``Rule`` objects the generated code would (same indexes, constraint ids, property
 reactivity, operators and accumulate functions). Anything else — another operator, a method call
 in a constraint, ``from`` a collection, ``eval``, another attribute, a then-part with Java beyond
 such calls, a string with escapes — is left to Drools' compiler, which also reports its errors with
 file, line and column. So is any rule the Java side cannot build exactly (an unknown field, a
-literal of another type, an ambiguous method). :func:`why_not` says why a rule is not plain.
+literal of another type, an ambiguous or generic method, a class name the rule's package or imports
+would hide). :func:`why_not` says why a rule is not plain.
 """
 
 from __future__ import annotations
@@ -28,15 +31,21 @@ from collections import Counter
 from typing import Any
 
 from gateway.engine.drl_items import Item, SourceItems
+from gateway.engine.policy import REFLECTION_MEMBERS, RulePolicy
 
-FORMAT = 2  # org.printeps.gateway.PlainRules.FORMAT (2: not/exists, in, matches, from accumulate, attributes)
+FORMAT = 3  # org.printeps.gateway.PlainRules.FORMAT (2: not/exists, in, matches, from accumulate, attributes;
+#             3: static calls of the rule policy's java.lang classes and long literals in then-parts)
+
+#: The rule policy's allowed classes: a then-part's static call goes plain only on one of these
+#: (``String.format``, ``Math.max``…), never on a class an author could not name anyway.
+_POLICY = RulePolicy()
 
 _TOKEN = re.compile(
     r"""
      (?P<space>\s+)
     |(?P<comment>//[^\n]*|/\*.*?\*/)
     |(?P<string>"[^"\\\n]*")
-    |(?P<number>\d+(?:\.\d+)?(?![\w.]))
+    |(?P<number>\d+(?:\.\d+)?L?(?![\w.]))
     |(?P<name>\$?[A-Za-z_][A-Za-z0-9_]*)
     |(?P<punct>==|!=|>=|<=|[<>:;,().\-*+])
     """,
@@ -339,7 +348,9 @@ class _Parser:
         literal, text = self.literal()
         return {"field": field, "op": op, "literal": literal, "text": f"{field} {op} {text}"}
 
-    def literal(self) -> tuple[dict[str, Any], str]:
+    def literal(self, long_ok: bool = False) -> tuple[dict[str, Any], str]:
+        """A text, boolean or number literal; a long (``1L``) only where ``long_ok`` (a then-part's
+        arguments: a constraint's literal is typed by its field, not by a suffix)."""
         kind, tok = self.peek()
         if kind == "string":
             self.k += 1
@@ -352,8 +363,12 @@ class _Parser:
             self.k += 1
             sign = "-"
         digits = self.take(kind="number")
-        if len(digits) > 1 and digits[0] == "0" and digits[1] != ".":
+        if len(digits) > 1 and digits[0] == "0" and digits[1] not in ".L":
             raise NotPlain("a number with a leading zero (octal in Java)")
+        if digits.endswith("L"):
+            if not long_ok or "." in digits:
+                raise NotPlain("a number with a suffix, exponent or radix (1L, 1e3, 0x1)")
+            return {"l": sign + digits[:-1]}, sign + digits
         return {"n": sign + digits}, sign + digits
 
     def accumulate(self) -> dict[str, Any]:
@@ -438,8 +453,11 @@ class _Parser:
         return {"concat": terms}
 
     def term(self) -> dict[str, Any]:
-        if not self.peek()[1].startswith("$"):
-            return self.literal()[0]
+        kind, tok = self.peek()
+        if kind == "name" and not tok.startswith("$") and tok not in ("true", "false"):
+            return self.static_call()
+        if not tok.startswith("$"):
+            return self.literal(long_ok=True)[0]
         var = self.take(kind="name")
         if self.peek()[1] != ".":
             return {"var": var}
@@ -450,3 +468,28 @@ class _Parser:
         self.take("(")
         self.take(")")
         return {"var": var, "getter": getter}
+
+    def static_call(self) -> dict[str, Any]:
+        """``String.format( … )``, ``Math.max( $a.getAge(), 1L )``: a static method of a ``java.lang``
+        class the rule policy allows, named by its simple name, with arguments of the same forms.
+        The Java side resolves the method as javac does (widening, boxing, varargs, the most
+        specific one) and refuses a name the rule's package or imports would shadow."""
+        owner = self.name()
+        if not owner[:1].isupper():
+            raise NotPlain(f"a call on {owner}, not a class or a bound variable")
+        if not _POLICY.allows_class(f"java.lang.{owner}"):
+            raise NotPlain(f"a static call on {owner}, not a java.lang class the rule policy allows")
+        self.take(".")
+        method = self.name()
+        if method in REFLECTION_MEMBERS:
+            raise NotPlain(f"reflection ({owner}.{method})")
+        self.take("(")
+        args = []
+        while self.peek()[1] != ")":
+            if args:
+                self.take(",")
+            args.append(self.argument())
+        self.take(")")
+        if self.peek()[1] == ".":
+            raise NotPlain("a call on the result of a call")
+        return {"static": owner, "method": method, "args": args}

@@ -624,3 +624,49 @@ def test_doc_expires_over_rest(client):
         assert client.get(f"{base}/{sid}/facts").json()["facts"] == []
     finally:
         client.delete(f"{base}/{sid}")
+
+
+# --- every CEP example over the other transport too: KIE batches and REST sessions -------------------
+
+
+def test_doc_negative_pattern_sound_the_alarm_over_rest(kie, client):  # kie: the rule sets are deployed
+    base, sid = _docs_session(client)
+    try:
+        client.post(f"{base}/{sid}/facts", json={"facts": [{"type": "FireDetected", "room": "kitchen"},
+                                                            {"type": "FireDetected", "room": "hall"}]})
+        assert client.post(f"{base}/{sid}/fire").json()["fire_count"] == 0
+        assert client.post(f"{base}/{sid}/advance", json={"ms": 4_000, "fire": True}).json()["fire_count"] == 0
+        client.post(f"{base}/{sid}/facts", json={"facts": [{"type": "SprinklerActivated", "room": "kitchen"}]})
+        assert client.post(f"{base}/{sid}/fire").json()["fire_count"] == 0
+        fired = client.post(f"{base}/{sid}/advance", json={"ms": 7_000, "fire": True}).json()  # 11 s: as over KIE
+        assert _texts(fired) == ["alarm hall"]
+    finally:
+        client.delete(f"{base}/{sid}")
+
+
+def test_doc_sliding_window_of_length_over_a_kie_batch(kie):
+    D = f"{CEP}.docs"
+    reading = lambda t: {"insert": {"object": {f"{D}.LengthReading": {"temperature": t}}}}
+    for lookup in (None, "defaultKieSession"):
+        out = results(batch(kie, "cepdocs", [
+            {"insert": {"object": {f"{D}.TemperatureThreshold": {"max": 50.0}}}},
+            reading(90.0), reading(90.0), reading(10.0), {"fire-all-rules": {"out-identifier": "three"}},
+            reading(10.0), {"fire-all-rules": {"out-identifier": "cooled"}},  # the last 3: 90, 10, 10
+            reading(200.0), {"fire-all-rules": {"out-identifier": "hot"}},    # 10, 10, 200
+        ], lookup))
+        assert (out["three"], out["cooled"], out["hot"]) == (1, 0, 1)
+        assert _texts(out) == ["hot (last 3)", "hot (last 3)"]
+    dispose(kie, "cepdocs")
+
+
+def test_doc_after_and_before_with_an_interval_over_rest(kie, client):  # kie: the rule sets are deployed
+    base, sid = _docs_session(client)
+    try:
+        ev = lambda kind, flight, ts: {"type": kind, "flight": flight, "ts": ts}
+        client.post(f"{base}/{sid}/facts", json={"facts": [
+            ev("Boarding", "early", 0), ev("Departure", "early", 240_000),
+            ev("Boarding", "ok", 0), ev("Departure", "ok", 120_000),
+            ev("Boarding", "rushed", 0), ev("Departure", "rushed", 30_000)]})
+        assert sorted(_texts(client.post(f"{base}/{sid}/fire").json())) == ["boarded ok", "departed ok"]
+    finally:
+        client.delete(f"{base}/{sid}")

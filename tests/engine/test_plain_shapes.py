@@ -83,6 +83,29 @@ COMPILED = {
 }
 
 
+#: Then-parts with static calls of java.lang classes (issue 30), each resolved as javac resolves it:
+#: widening (max(long, long) for an int and a long), boxing (a bound Integer into an int), variable
+#: arity (format, join, the Actions global's call(String, Object...)), the most specific overload
+#: (valueOf(Object) for a String that may be null, not valueOf(char[])). The texts tell the
+#: overloads apart: an int, a long and a double print differently.
+STATIC = {
+    "format": ('when $c: Customer(age > 20)\nthen actions.say("bot", "f|" + String.format("%s|%d", $c.getId(), '
+               'Math.max($c.getAge(), 1L)));'),
+    "widen to double": 'when $c: Customer(age < 40)\nthen actions.say("bot", "w " + Math.max($c.getAge(), 2.5) + " " + Double.toString($c.getAge()));',
+    "boxed int": ('when Customer($age : age, $id : id, tier == "gold")\n'
+                  'then actions.say("bot", "b " + $id); actions.say("bot", "b " + Math.max($age, 7) + " " + Long.valueOf($age) + " " + Integer.toHexString($age));'),
+    "varargs boxing": ('when $c: Customer($id : id)\n $o: Order(customer == $id)\n'
+                       'then actions.say("bot", String.format("%s %s %.2f %s", $id, $c.getAge(), $o.getAmount(), 3));'),
+    "join": 'when $c: Customer(age > 50)\nthen actions.say("bot", String.join("/", $c.getId(), "x", String.valueOf($c.getAge())));',
+    "null text": 'when $c: Customer(age > 10)\nthen actions.say("bot", "t " + String.valueOf($c.getTier()) + " " + String.format("%s", $c.getTier()));',
+    "long literal": 'when $c: Customer(age > 60)\nthen actions.say("bot", "l " + Math.abs(-3L) + " " + Math.round(2.5) + " " + Long.toString(255L, 16) + " " + Math.floorMod($c.getAge(), 7));',
+    "compare": ('when $c: Customer($id : id)\n $o: Order(customer == $id)\n'
+                'then actions.say("bot", "c " + Double.compare($o.getAmount(), 100) + " " + Integer.compare($c.getAge(), 30));'),
+    "global varargs": ('when $c: Customer(age > 30)\nthen actions.call("note", "who", $c.getId(), "age", $c.getAge(), '
+                       '"big", Math.max($c.getAge(), 1L), "half", Math.max(0.5, 0));'),
+}
+
+
 def drl(rules: dict[str, str]) -> str:
     return "package org.printeps.shapes;\n\n" + "\n".join(f'rule "{name}"\n{body}\nend\n' for name, body in rules.items())
 
@@ -101,7 +124,7 @@ def compiled_only() -> CompileOptions:
 def fire(compiled, facts: list[dict]) -> dict:
     answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, True)))
     assert answer["ok"], answer
-    return {"actions": [(a["rule"], a["params"].get("text")) for a in answer["actions"]],
+    return {"actions": [(a["rule"], a.get("module"), json.dumps(a["params"], sort_keys=True)) for a in answer["actions"]],
             "fired": [f["rule"] for f in answer["fired"]]}
 
 
@@ -130,6 +153,63 @@ def test_each_new_shape_builds_plain_and_fires_as_compiled(options):
         assert "act 1" not in got["fired"] or "act 2" not in got["fired"]  # one of an activation group
     # the requests reached every shape that can fire; these never do
     assert seen == set(PLAIN) - {"future", "expired", "unfocused", "act 2"} | set(COMPILED)
+
+
+def test_then_part_static_calls_build_plain_and_fire_as_compiled(options):
+    """Static calls with widening, boxing, varargs and overloads: the same firings, order and texts
+    (the chosen overloads print differently) plain as compiled."""
+    files = {"types.drl": TYPES, "rules.drl": drl(STATIC)}
+    assert compiler.plain_split(files) == {"plain": len(STATIC)}
+    plain = compiler.compile_files(files, "static", options)
+    assert (plain.stats.rules_built, plain.stats.rules_compiled) == (len(STATIC), 0)
+    compiled = compiler.compile_files(files, "static", compiled_only())
+    rng = random.Random(31)
+    seen: set[str] = set()
+    for k in range(60):
+        facts = random_facts(rng)
+        got = fire(plain, facts)
+        assert got == fire(compiled, facts), (k, facts)
+        seen.update(got["fired"])
+    assert seen == set(STATIC)
+    texts = {text for _, _, text in fire(plain, [{"type": "Customer", "id": "c1", "age": 70, "tier": "gold"}])["actions"]}
+    assert '{"robot": "bot", "text": "f|c1|70"}' in texts  # format's %d took the long max(70, 1L)
+    assert '{"robot": "bot", "text": "l 3 3 ff 0"}' in texts
+    assert '{"age": 70, "big": 70, "half": 0.5, "who": "c1"}' in texts  # call(String, Object...) on the global
+
+
+@pytest.mark.parametrize("then, reason", [
+    ('actions.say("bot", System.getProperty("user.home"));', "System, not a java.lang class the rule policy allows"),
+    ('actions.say("bot", "x" + Thread.currentThread());', "Thread, not a java.lang class"),
+    ('actions.say("bot", "x" + String.class);', "class"),
+    ('actions.say("bot", "x" + Math.max(1, 2).toString());', "a call on the result of a call"),
+    ('actions.say("bot", "x" + java.lang.Math.max(1, 2));', "a call on java"),
+])
+def test_static_calls_the_rule_policy_refuses_are_never_plain(then, reason):
+    """A then-part's static call goes plain only on a java.lang class the rule policy allows an
+    author to name (and never a reflection member): anything else is the compiler's (and, for an
+    author, the policy's refusal)."""
+    files = {"types.drl": TYPES, "rules.drl": drl({"r": f"when $c: Customer()\nthen {then}"})}
+    split = compiler.plain_split(files)
+    assert "plain" not in split and reason in next(iter(split)), split
+
+
+@pytest.mark.parametrize("body", [
+    # an accumulate result's static type is the generated code's (a Number): not resolved here
+    ('when Customer($c : id)\n $t : Number( doubleValue > 1 ) from accumulate( Order( customer == $c, $a : amount ), sum( $a ) )\n'
+     'then actions.say("bot", String.valueOf($t));'),
+    # a declared type named like a java.lang class hides it
+    'when $c: Customer()\nthen actions.say("bot", "x" + Math.max(1, 2));',
+    # no method applies: javac's error, with file and line
+    'when $c: Customer()\nthen actions.say("bot", "x" + Math.max("a", 2));',
+])
+def test_static_calls_javac_would_type_otherwise_go_to_the_compiler(body, options):
+    types = TYPES + "\ndeclare Math\n    id: String\nend\n" if "Math.max(1, 2)" in body else TYPES
+    files = {"types.drl": types, "rules.drl": drl({"r": body})}
+    try:
+        built = compiler.compile_files(files, "refused", options)
+    except compiler.CompileFailed:
+        return  # the compiler refuses it too (with file, line and column): never a plain rule
+    assert (built.stats.rules_built, built.stats.rules_compiled) == (0, 1)
 
 
 def test_a_null_field_fails_in_and_matches_and_passes_their_negations(options):

@@ -498,4 +498,14 @@ public final class DroolsInternals {
         }
         return GregorianCalendar.from(LocalDate.parse(text, f).atStartOfDay(ZoneId.systemDefault()));
     }
+
+    /** The mask {@link #ruleDate} reads ({@code drools.dateformat}, by default {@code dd-MMM-yyyy}). */
+    static String ruleDateFormat() {
+        return org.drools.util.DateUtils.getDateFormatMask();
+    }
+
+    /** 1 January 2020 written in that mask: the example an error about a bad date shows. */
+    static String ruleDateExample() {
+        return LocalDate.of(2020, 1, 1).format(DateTimeFormatter.ofPattern(ruleDateFormat(), Locale.ENGLISH));
+    }
 }

@@ -1,0 +1,324 @@
+package org.printeps.gateway;
+
+import java.util.ArrayList;
+import java.util.Collections;
+import java.util.HashMap;
+import java.util.HashSet;
+import java.util.LinkedHashMap;
+import java.util.List;
+import java.util.Map;
+import java.util.Set;
+
+import org.drools.model.AlphaIndex;
+import org.drools.model.BetaIndex;
+import org.drools.model.DSL;
+import org.drools.model.Declaration;
+import org.drools.model.Index;
+import org.drools.model.PatternDSL;
+import org.drools.model.Rule;
+import org.drools.model.RuleItemBuilder;
+import org.drools.model.functions.Function1;
+import org.drools.model.functions.Predicate1;
+import org.drools.model.functions.Predicate2;
+
+import org.printeps.gateway.PlainRules.Context;
+import org.printeps.gateway.PlainRules.Reject;
+
+import static org.printeps.gateway.PlainValues.*;
+
+/**
+ * One plain rule built from its description: its patterns and their constraints, bindings,
+ * {@code not}/{@code exists} and attributes here; its accumulates in {@link PlainAccumulates}; its
+ * then-part in {@link PlainThen}. The variables bound so far (and their static types, as the
+ * executable model declares them) are what the later parts read.
+ */
+final class PlainRule {
+    final Context context;
+    final Map<String, Object> spec;
+    final String pkg;
+    final List<String> imports;
+    final Map<String, Declaration<Object>> vars = new HashMap<String, Declaration<Object>>();
+    final Map<String, Class<?>> varTypes = new HashMap<String, Class<?>>();
+    /** Variables whose static type in the generated code is not known here (accumulate results). */
+    final Set<String> uncertain = new HashSet<String>();
+    final PlainAccumulates accumulates = new PlainAccumulates(this);
+    int unnamed = 0;
+
+    @SuppressWarnings("unchecked")
+    PlainRule(Context context, Map<String, Object> spec) {
+        this.context = context;
+        this.spec = spec;
+        this.pkg = (String) spec.get("package");
+        Object imports = spec.get("imports");
+        this.imports = imports == null ? Collections.<String>emptyList() : (List<String>) imports;
+    }
+
+    @SuppressWarnings("unchecked")
+    Rule build() {
+        List<RuleItemBuilder<?>> items = new ArrayList<RuleItemBuilder<?>>();
+        for (Object element : (List<Object>) spec.get("lhs")) {
+            Map<String, Object> e = (Map<String, Object>) element;
+            if (e.containsKey("pattern")) {
+                items.add(pattern((Map<String, Object>) e.get("pattern"), null));
+            } else if (e.containsKey("accumulate")) {
+                accumulates.accumulate((Map<String, Object>) e.get("accumulate"), items);
+            } else if (e.containsKey("not") || e.containsKey("exists")) {
+                items.add(negation(e));
+            } else if (e.containsKey("fromAccumulate")) {
+                accumulates.fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), items);
+            } else {
+                throw new Reject("unknown condition " + e.keySet());
+            }
+        }
+        items.add(new PlainThen(this).consequence((List<Object>) spec.get("rhs")));
+        Object salience = spec.get("salience");
+        Map<Rule.Attribute, Object> attributes = new LinkedHashMap<Rule.Attribute, Object>();
+        if (salience != null) attributes.put(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
+        attributes(attributes, (Map<String, Object>) spec.get("attributes"));
+        return DroolsInternals.rule(pkg, (String) spec.get("name"), attributes, items.toArray(new RuleItemBuilder<?>[0]));
+    }
+
+    Class<?> resolve(String name) {
+        List<String> candidates = new ArrayList<String>();
+        if (name.contains(".")) {
+            candidates.add(name);
+        } else {
+            for (String imp : imports) {
+                if (imp.endsWith("." + name)) candidates.add(imp);
+            }
+            candidates.add(pkg.isEmpty() ? name : pkg + "." + name);
+            for (String imp : imports) {
+                if (imp.endsWith(".*")) candidates.add(imp.substring(0, imp.length() - 1) + name);
+            }
+        }
+        for (String c : candidates) {
+            try {
+                return Class.forName(c, false, context.loader);
+            } catch (ClassNotFoundException | LinkageError e) {
+                // the next candidate
+            }
+        }
+        throw new Reject("type " + name + " not found");
+    }
+
+    /**
+     * The class a then-part's static call names by its simple name, if javac reads it as
+     * {@code java.lang.<name>}: no single-type import, type of the rule's package or on-demand
+     * import of that name shadows it (or makes it ambiguous). Anything else goes to the compiler.
+     */
+    Class<?> javaLang(String name) {
+        for (String imp : imports) {
+            if (imp.endsWith("." + name) && !imp.equals("java.lang." + name)) throw new Reject("the import " + imp);
+        }
+        List<String> shadows = new ArrayList<String>();
+        shadows.add(pkg.isEmpty() ? name : pkg + "." + name);
+        for (String imp : imports) {
+            if (imp.endsWith(".*") && !imp.equals("java.lang.*")) shadows.add(imp.substring(0, imp.length() - 1) + name);
+        }
+        for (String c : shadows) {
+            try {
+                Class.forName(c, false, context.loader);
+                throw new Reject("the class " + c + " hides java.lang." + name);
+            } catch (ClassNotFoundException | LinkageError e) {
+                // not there: java.lang's stays visible
+            }
+        }
+        try {
+            return Class.forName("java.lang." + name, false, context.loader);
+        } catch (ClassNotFoundException | LinkageError e) {
+            throw new Reject("no class java.lang." + name);
+        }
+    }
+
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    PatternDSL.PatternDef<Object> pattern(Map<String, Object> p, List<Object> binds) {
+        Class<?> type = resolve((String) p.get("type"));
+        String var = (String) p.get("var");
+        String name = var != null ? var : "$pattern_" + type.getSimpleName() + "$" + (++unnamed) + "$";
+        if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
+        Declaration<Object> decl = (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name);
+        PatternDSL.PatternDef<Object> def = PatternDSL.pattern(decl);
+        for (Object c : (List<Object>) p.get("constraints")) {
+            def = constraint(def, type, (Map<String, Object>) c);
+        }
+        vars.put(name, decl);
+        varTypes.put(name, type);
+        if (binds != null) {
+            for (Object b : (List<Object>) p.get("binds")) binds.add(b);
+        } else {
+            for (Object b : (List<Object>) p.get("binds")) def = bindField(def, type, (Map<String, Object>) b);
+        }
+        return def;
+    }
+
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    PatternDSL.PatternDef<Object> constraint(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> c) {
+        Property field = context.property(type, (String) c.get("field"));
+        String operator = (String) c.get("op");
+        if (operator.endsWith("in") || operator.endsWith("matches")) return operatorConstraint(def, type, field, c);
+        if (c.containsKey("ref") && !c.containsKey("refField")) return boundFieldConstraint(def, type, field, c);
+        Index.ConstraintType ct = constraintType((String) c.get("op"));
+        Kind kind = comparable(kindOf(field.type), ct);
+        if (c.containsKey("literal")) {
+            Object value = literal(c.get("literal"), field.type);
+            Predicate1<Object> test = fact -> compare(kind, ct, field.apply(fact), value);
+            String exprId = exprId(type, field, kind, ct, javaText(c.get("literal"), field.type));
+            AlphaIndex index = PatternDSL.alphaIndexedBy((Class) field.type, ct, field.index, (Function1) field, value);
+            return def.expr(exprId, test, index, PatternDSL.reactOn(field.name));
+        }
+        String ref = (String) c.get("ref");
+        Declaration<Object> bound = vars.get(ref);
+        if (bound == null) throw new Reject("variable " + ref + " is not a pattern bound before");
+        Property other = context.property(varTypes.get(ref), (String) c.get("refField"));
+        if (kindOf(other.type) != kind) {
+            throw new Reject("comparing " + field.type.getName() + " with " + other.type.getName());
+        }
+        Predicate2<Object, Object> test = (fact, joined) -> compare(kind, ct, field.apply(fact), other.apply(joined));
+        String exprId = exprId(type, field, kind, ct, ref + "." + other.getter.getName() + "()");
+        BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
+                                                   (Function1) other, other.type);
+        return def.expr(exprId, bound, test, index, PatternDSL.reactOn(field.name));
+    }
+
+
+    // ---- shapes of format 2: bound fields, in/matches, not/exists, from accumulate, attributes
+
+    /** The field each variable bound to a field ({@code $id : id}) reads, and its declared type. */
+    final Map<String, Property> boundFields = new HashMap<String, Property>();
+
+    /** {@code $id : id}: a variable of the field's boxed type, as the executable model declares it. */
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    PatternDSL.PatternDef<Object> bindField(PatternDSL.PatternDef<Object> def, Class<?> type, Map<String, Object> b) {
+        String name = (String) b.get("var");
+        if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
+        Property field = context.property(type, (String) b.get("field"));
+        Class<?> box = boxed(field.type);
+        Declaration<Object> decl = (Declaration<Object>) (Declaration) DSL.declarationOf(box, context.metadata(box), name);
+        vars.put(name, decl);
+        varTypes.put(name, box);
+        boundFields.put(name, field);
+        return def.bind(decl, (Function1) field, PatternDSL.reactOn(field.name));
+    }
+
+    /**
+     * {@code applicant == $id} with {@code $id} bound to a field: a beta constraint indexed as the
+     * executable model indexes it. Its generated code also reacts to a property of this pattern's
+     * class that has the bound field's name ({@code $id : id} makes {@code Loan( applicant == $id )}
+     * react to {@code Loan.id} too); the same mask is given here.
+     */
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    PatternDSL.PatternDef<Object> boundFieldConstraint(PatternDSL.PatternDef<Object> def, Class<?> type, Property field,
+                                                       Map<String, Object> c) {
+        String ref = (String) c.get("ref");
+        Property source = boundFields.get(ref);
+        Declaration<Object> bound = vars.get(ref);
+        if (bound == null || source == null) throw new Reject("variable " + ref + " is not a field bound before");
+        Index.ConstraintType ct = constraintType((String) c.get("op"));
+        Kind kind = comparable(kindOf(field.type), ct);
+        if (kindOf(source.type) != kind) {
+            throw new Reject("comparing " + field.type.getName() + " with " + source.type.getName());
+        }
+        Predicate2<Object, Object> test = (fact, value) -> compare(kind, ct, field.apply(fact), value);
+        String exprId = exprId(type, field, kind, ct, ref);
+        BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
+                                                   (Function1) IDENTITY, source.type);
+        List<String> react = new ArrayList<String>();
+        if (!source.name.equals(field.name) && isProperty(type, source.name)) react.add(source.name);
+        react.add(field.name);
+        return def.expr(exprId, bound, test, index, PatternDSL.reactOn(react.toArray(new String[0])));
+    }
+
+    boolean isProperty(Class<?> type, String name) {
+        try {
+            context.metadata(type).getPropertyIndex(name);
+            return true;
+        } catch (RuntimeException e) {
+            return false;
+        }
+    }
+
+    /**
+     * {@code region in ( "a", "b" )}, {@code not in}, {@code matches "re"}, {@code not matches}:
+     * the executable model's operator objects, with its constraint id, and no index (so never a
+     * hashed alpha node). {@code in} only on text and int fields with literals of their type: the
+     * operator compares with {@code equals}, so other pairings depend on the compiler's boxing.
+     */
+    @SuppressWarnings("unchecked")
+    PatternDSL.PatternDef<Object> operatorConstraint(PatternDSL.PatternDef<Object> def, Class<?> type, Property field,
+                                                     Map<String, Object> c) {
+        String op = (String) c.get("op");
+        boolean negated = op.startsWith("not ");
+        Kind kind = kindOf(field.type);
+        org.drools.model.functions.Operator<Object, Object> operator;
+        String operatorName;
+        List<Object> literals;
+        if (op.endsWith("matches")) {
+            if (kind != Kind.TEXT) throw new Reject("matches on a " + field.type.getName() + " field");
+            operator = (org.drools.model.functions.Operator<Object, Object>) (Object) org.drools.model.operators.MatchesOperator.INSTANCE;
+            operatorName = "MatchesOperator";
+            literals = Collections.singletonList(c.get("literal"));
+        } else if (op.endsWith("in")) {
+            if (kind != Kind.TEXT && kind != Kind.INTEGRAL) throw new Reject("in on a " + field.type.getName() + " field");
+            operator = (org.drools.model.functions.Operator<Object, Object>) (Object) org.drools.model.operators.InOperator.INSTANCE;
+            operatorName = "InOperator";
+            literals = (List<Object>) c.get("literals");
+        } else {
+            throw new Reject("operator " + op);
+        }
+        Object[] values = new Object[literals.size()];
+        StringBuilder java = new StringBuilder(negated ? "!" : "").append("D.eval(org.drools.model.operators.")
+                .append(operatorName).append(".INSTANCE, _this.").append(field.getter.getName()).append("()");
+        for (int i = 0; i < values.length; i++) {
+            values[i] = literal(literals.get(i), field.type);
+            java.append(", ").append(javaText(literals.get(i), field.type));
+        }
+        java.append(")");
+        String exprId = DroolsInternals.generatedExprId(type, java);
+        Predicate1<Object> test = negated
+                ? fact -> !DSL.eval(operator, field.apply(fact), values)
+                : fact -> DSL.eval(operator, field.apply(fact), values);
+        return def.expr(exprId, test, PatternDSL.reactOn(field.name));
+    }
+
+    /** {@code not Type( … )} / {@code exists Type( … )}: nothing bound inside is visible after it. */
+    @SuppressWarnings("unchecked")
+    RuleItemBuilder<?> negation(Map<String, Object> e) {
+        boolean not = e.containsKey("not");
+        java.util.Set<String> before = new java.util.HashSet<String>(vars.keySet());
+        PatternDSL.PatternDef<Object> def = pattern((Map<String, Object>) e.get(not ? "not" : "exists"), null);
+        vars.keySet().retainAll(before);
+        varTypes.keySet().retainAll(before);
+        return (RuleItemBuilder<?>) (not ? DSL.not(def) : DSL.exists(def));
+    }
+
+
+    /** A rule date as the generated code computes it; a bad one is refused with what is expected
+     *  (the build checks every date before it gets here: {@code gateway.engine.rule_dates}). */
+    static Object date(String text) {
+        String problem = PlainRules.ruleDateProblem(text);
+        if (problem != null) throw new Reject(problem);
+        return DroolsInternals.ruleDate(text);
+    }
+
+    /** The attributes besides salience, as the executable model sets them. */
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    void attributes(Map<Rule.Attribute, Object> into, Map<String, Object> attributes) {
+        if (attributes == null) return;
+        for (Map.Entry<String, Object> a : attributes.entrySet()) {
+            Object v = a.getValue();
+            Rule.Attribute attribute;
+            switch (a.getKey()) {
+                case "agenda-group": attribute = Rule.Attribute.AGENDA_GROUP; break;
+                case "activation-group": attribute = Rule.Attribute.ACTIVATION_GROUP; break;
+                case "auto-focus": attribute = Rule.Attribute.AUTO_FOCUS; break;
+                case "no-loop": attribute = Rule.Attribute.NO_LOOP; break;
+                case "lock-on-active": attribute = Rule.Attribute.LOCK_ON_ACTIVE; break;
+                case "date-effective": attribute = Rule.Attribute.DATE_EFFECTIVE; v = date((String) v); break;
+                case "date-expires": attribute = Rule.Attribute.DATE_EXPIRES; v = date((String) v); break;
+                default: throw new Reject("attribute " + a.getKey());
+            }
+            into.put(attribute, v);
+        }
+    }
+
+}

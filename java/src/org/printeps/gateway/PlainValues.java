@@ -1,0 +1,225 @@
+package org.printeps.gateway;
+
+import java.lang.reflect.InvocationTargetException;
+import java.lang.reflect.Method;
+import java.lang.reflect.Modifier;
+import java.util.Map;
+
+import org.drools.model.DomainClassMetadata;
+import org.drools.model.Index;
+import org.drools.model.functions.Function1;
+
+import org.printeps.gateway.PlainRules.Reject;
+
+/**
+ * The values plain rules read and compare ({@link PlainRules}): a fact's fields, literals typed as
+ * the executable model types them, constraint ids, and comparisons that are null-safe as its
+ * generated code. Why apart: every part of a plain rule (patterns, accumulates, then-parts) reads
+ * values the same way; one place keeps them identical to what the compiler would generate.
+ */
+final class PlainValues {
+    private PlainValues() {}
+
+    /** A readable field of a fact class: its getter, type and property index. */
+    static final class Property implements Function1<Object, Object> {
+        final String name;
+        final Method getter;
+        final Class<?> type;  // as declared (a primitive stays primitive)
+        final int index;
+
+        private Property(String name, Method getter, int index) {
+            this.name = name;
+            this.getter = getter;
+            this.type = getter.getReturnType();
+            this.index = index;
+        }
+
+        static Property of(Class<?> owner, String name, DomainClassMetadata meta) {
+            Method getter = getter(owner, "get" + capitalize(name));
+            if (getter == null) {
+                Method is = getter(owner, "is" + capitalize(name));
+                if (is != null && (is.getReturnType() == boolean.class)) getter = is;
+            }
+            if (getter == null) throw new Reject("no readable field '" + name + "' in " + owner.getName());
+            int index;
+            try {
+                index = meta.getPropertyIndex(name);
+            } catch (RuntimeException e) {
+                throw new Reject("'" + name + "' is not a property of " + owner.getName());
+            }
+            return new Property(name, getter, index);
+        }
+
+        private static Method getter(Class<?> owner, String name) {
+            try {
+                Method m = owner.getMethod(name);
+                return Modifier.isStatic(m.getModifiers()) || m.getReturnType() == void.class ? null : m;
+            } catch (NoSuchMethodException e) {
+                return null;
+            }
+        }
+
+        public Object apply(Object fact) {
+            try {
+                return getter.invoke(fact);
+            } catch (InvocationTargetException e) {
+                throw rethrow(e.getCause());
+            } catch (IllegalAccessException e) {
+                throw new IllegalStateException(e);
+            }
+        }
+    }
+
+    static RuntimeException rethrow(Throwable t) {
+        if (t instanceof RuntimeException) return (RuntimeException) t;
+        if (t instanceof Error) throw (Error) t;
+        return new RuntimeException(t);
+    }
+
+    static String capitalize(String s) {
+        return s.isEmpty() ? s : Character.toUpperCase(s.charAt(0)) + s.substring(1);
+    }
+
+    // ------------------------------------------------------------------ values and comparisons
+
+    /** How two values compare: by number for numeric types, by equals for the rest. */
+    enum Kind { INTEGRAL, DECIMAL, TEXT, BOOLEAN }
+
+    static Kind kindOf(Class<?> t) {
+        if (t == int.class || t == Integer.class) return Kind.INTEGRAL;
+        if (t == double.class || t == Double.class) return Kind.DECIMAL;
+        if (t == String.class) return Kind.TEXT;
+        if (t == boolean.class || t == Boolean.class) return Kind.BOOLEAN;
+        throw new Reject("fields of type " + t.getName() + " are left to the compiler");
+    }
+
+    static Class<?> boxed(Class<?> t) {
+        if (t == int.class) return Integer.class;
+        if (t == double.class) return Double.class;
+        if (t == boolean.class) return Boolean.class;
+        return t;
+    }
+
+    /** A literal of the description ({"s": text} | {"n": digits} | {"b": bool}) as a value of {@code type}. */
+    @SuppressWarnings("unchecked")
+    static Object literal(Object spec, Class<?> type) {
+        Map<String, Object> lit = (Map<String, Object>) spec;
+        Kind kind = kindOf(type);
+        Class<?> box = boxed(type);
+        if (lit.containsKey("s")) {
+            if (kind != Kind.TEXT) throw new Reject("a text literal compared with a " + type.getName() + " field");
+            return lit.get("s");
+        }
+        if (lit.containsKey("b")) {
+            if (kind != Kind.BOOLEAN) throw new Reject("a boolean literal compared with a " + type.getName() + " field");
+            return lit.get("b");
+        }
+        String digits = (String) lit.get("n");
+        if (digits == null) throw new Reject("unknown literal " + spec);
+        boolean decimal = digits.contains(".");
+        if (box == Integer.class && !decimal) return Integer.valueOf(digits);
+        if (box == Double.class) return Double.valueOf(javaText(lit, type));
+        throw new Reject("the number " + digits + " compared with a " + type.getName() + " field");
+    }
+
+    /**
+     * The literal as the executable model writes it in the generated Java expression: text quoted,
+     * integers as written, a number compared with a double field as a double literal. A literal
+     * whose written form the compiler may print otherwise (0.10, 1e3) is left to the compiler.
+     */
+    @SuppressWarnings("unchecked")
+    static String javaText(Object spec, Class<?> type) {
+        Map<String, Object> lit = (Map<String, Object>) spec;
+        if (lit.containsKey("s")) return "\"" + lit.get("s") + "\"";
+        if (lit.containsKey("b")) return String.valueOf(lit.get("b"));
+        String digits = (String) lit.get("n");
+        if (kindOf(type) != Kind.DECIMAL) return digits;
+        String text = digits.contains(".") ? digits : digits + ".0";
+        if (!Double.toString(Double.parseDouble(text)).equals(text)) throw new Reject("the number " + digits);
+        return text;
+    }
+
+    /**
+     * The id the executable model gives a constraint ({@link DroolsInternals#constraintExprId}).
+     * Constraints of equal id are one node to Drools, so a rule built here shares its nodes with a
+     * compiled rule of the same constraint; a different id would make two alpha nodes of one hashed
+     * value, and Drools' alpha hashing keeps only one of them.
+     */
+    static String exprId(Class<?> type, Property field, Kind kind, Index.ConstraintType op, String right) {
+        String id = DroolsInternals.constraintExprId(type, field.getter.getName(), kind == Kind.INTEGRAL || kind == Kind.DECIMAL, op, right);
+        if (id == null) throw new Reject("operator " + op);
+        return id;
+    }
+
+    static Index.ConstraintType constraintType(String op) {
+        switch (op) {
+            case "==": return Index.ConstraintType.EQUAL;
+            case "!=": return Index.ConstraintType.NOT_EQUAL;
+            case ">": return Index.ConstraintType.GREATER_THAN;
+            case ">=": return Index.ConstraintType.GREATER_OR_EQUAL;
+            case "<": return Index.ConstraintType.LESS_THAN;
+            case "<=": return Index.ConstraintType.LESS_OR_EQUAL;
+            default: throw new Reject("operator " + op);
+        }
+    }
+
+    /** {@code left op right}, null-safe as the executable model's EvaluationUtil: a null never orders.
+     *  (On the fire path: {@code op} is parsed once, when the rule is built.) */
+    static boolean compare(Kind kind, Index.ConstraintType op, Object left, Object right) {
+        if (op == Index.ConstraintType.EQUAL || op == Index.ConstraintType.NOT_EQUAL) {
+            boolean same;
+            if (left == null || right == null) {
+                same = left == right;
+            } else if (kind == Kind.INTEGRAL) {
+                same = ((Number) left).longValue() == ((Number) right).longValue();
+            } else if (kind == Kind.DECIMAL) {
+                same = ((Number) left).doubleValue() == ((Number) right).doubleValue();
+            } else {
+                same = left.equals(right);
+            }
+            return (op == Index.ConstraintType.EQUAL) == same;
+        }
+        if (left == null || right == null) return false;
+        int c;
+        if (kind == Kind.INTEGRAL) {
+            c = Long.compare(((Number) left).longValue(), ((Number) right).longValue());
+        } else if (kind == Kind.DECIMAL) {
+            double a = ((Number) left).doubleValue(), b = ((Number) right).doubleValue();
+            if (Double.isNaN(a) || Double.isNaN(b)) return false;
+            c = a < b ? -1 : a > b ? 1 : 0;
+        } else {
+            throw new IllegalStateException("operator " + op + " on " + kind);  // refused by comparable()
+        }
+        switch (op) {
+            case GREATER_THAN: return c > 0;
+            case GREATER_OR_EQUAL: return c >= 0;
+            case LESS_THAN: return c < 0;
+            case LESS_OR_EQUAL: return c <= 0;
+            default: throw new IllegalStateException("operator " + op);
+        }
+    }
+
+    /** {@code kind} if values of it can be compared by {@code op} (text and booleans only for equality). */
+    static Kind comparable(Kind kind, Index.ConstraintType op) {
+        if ((kind == Kind.TEXT || kind == Kind.BOOLEAN)
+                && op != Index.ConstraintType.EQUAL && op != Index.ConstraintType.NOT_EQUAL) {
+            throw new Reject("operator " + op + " on " + kind);
+        }
+        return kind;
+    }
+
+    static final Object[] NO_ARGS = new Object[0];
+
+    /** The right side of a beta index on a bound field: the variable's value itself. */
+    static final Function1<Object, Object> IDENTITY = v -> v;
+
+    static Object invoke(Method method, Object target, Object[] values) throws Exception {
+        try {
+            return method.invoke(target, values);
+        } catch (InvocationTargetException e) {
+            Throwable cause = e.getCause();
+            if (cause instanceof Exception) throw (Exception) cause;
+            throw rethrow(cause);
+        }
+    }
+}
