@@ -258,7 +258,7 @@ def test_rule_and_query_definitions_are_read_as_the_engine_expects(seam, module_
             ("from facts", "from the initial fact", "in a group", "on a calendar")}
     assert [bool(seam.hasCalendarAttributes(r)) for r in rule.values()] == [False, False, False, True], broken(
         "hasCalendarAttributes", "rules are RuleImpls with date-effective/date-expires")
-    assert [bool(seam.matchesOnlyFromFacts(r)) for r in rule.values()] == [True, False, False, True], broken(
+    assert [bool(seam.matchesOnlyFromFacts(r)) for r in rule.values()] == [True, False, True, True], broken(
         "matchesOnlyFromFacts", "rules are RuleImpls whose LHS opens with a Pattern (not/exists start from InitialFact)")
     query = next(q for q in kbase.getKiePackage(PACKAGE).getQueries() if str(q.getName()) == "olderThan")
     assert [str(t.getName()) for t in seam.queryParameterTypes(query)] == ["int"], broken(

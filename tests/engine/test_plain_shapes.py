@@ -128,6 +128,13 @@ def fire(compiled, facts: list[dict]) -> dict:
             "fired": [f["rule"] for f in answer["fired"]]}
 
 
+def fire_fresh(compiled, facts: list[dict]) -> dict:
+    """As :func:`fire`, in a session of its own (a new Runner's first session is a new one)."""
+    from gateway.base import jvm
+
+    return fire(type("Fresh", (), {"runner": jvm.helper_class("Runner")(compiled.kbase)}), facts)
+
+
 def random_facts(rng: random.Random) -> list[dict]:
     customers = [{"type": "Customer", "id": f"c{i}", "age": rng.randint(5, 80),
                   **({"tier": rng.choice(["gold", "silver", "vip"])} if rng.random() < 0.85 else {})}
@@ -141,6 +148,7 @@ def test_each_new_shape_builds_plain_and_fires_as_compiled(options):
     files = {"types.drl": TYPES, "rules.drl": drl({**PLAIN, **COMPILED})}
     plain = compiler.compile_files(files, "shapes", options)
     assert (plain.stats.rules_built, plain.stats.rules_compiled) == (len(PLAIN), len(COMPILED))
+    assert plain.runner.reusesSessions()  # agenda groups, auto-focus, activation groups, lock-on-active
     compiled = compiler.compile_files(files, "shapes", compiled_only())
     assert compiled.stats.rules_built == 0
     rng = random.Random(30)
@@ -149,6 +157,7 @@ def test_each_new_shape_builds_plain_and_fires_as_compiled(options):
         facts = random_facts(rng)
         got = fire(plain, facts)
         assert got == fire(compiled, facts), (k, facts)
+        assert got == fire_fresh(plain, facts), (k, facts)  # a reused session fires as a fresh one
         seen.update(got["fired"])
         assert "act 1" not in got["fired"] or "act 2" not in got["fired"]  # one of an activation group
     # the requests reached every shape that can fire; these never do

@@ -186,9 +186,11 @@ public final class DroolsInternals {
 
     /**
      * Whether nothing of a rule survives deleting every fact of a session (see
-     * {@code Runner.reusable}): a query, or a rule on the main agenda group, without timer, auto
-     * focus or rule-flow group, whose condition is an AND that opens with a plain pattern on a
-     * class (not {@code from}, not the initial fact that not/exists/eval/accumulate start from).
+     * {@code Runner.reusable}): a query, or a rule without timer or rule-flow group, whose
+     * condition is an AND that opens with a plain pattern on a class (not {@code from}, not the
+     * initial fact that not/exists/eval/accumulate start from). Agenda groups and auto-focus are
+     * allowed: once the deletions are propagated ({@code Runner.giveBack} fires the emptied
+     * session) the focus stack is back to MAIN and no group holds a match.
      * Assumes: rules are {@code RuleImpl}s (another kind: false) whose {@code getLhs()} is the
      * {@code GroupElement} tree of {@code Pattern}s the Rete is built from.
      */
@@ -196,8 +198,7 @@ public final class DroolsInternals {
         if (!(r instanceof RuleImpl)) return false;
         RuleImpl rule = (RuleImpl) r;
         if (rule.isQuery()) return true;
-        if (rule.getTimer() != null || rule.getAutoFocus()) return false;
-        if (rule.getAgendaGroup() != null && !"MAIN".equals(rule.getAgendaGroup())) return false;
+        if (rule.getTimer() != null) return false;
         if (rule.getRuleFlowGroup() != null && !rule.getRuleFlowGroup().isEmpty()) return false;
         GroupElement lhs = rule.getLhs();
         if (lhs == null || !lhs.isAnd() || lhs.getChildren().isEmpty()) return false;

@@ -228,7 +228,14 @@ public final class Json {
 
     public static void quote(StringBuilder b, String s) {
         b.append('"');
-        for (int k = 0; k < s.length(); k++) {
+        int plain = 0;  // most strings need no escape: copied in one append, not char by char
+        while (plain < s.length()) {
+            char c = s.charAt(plain);
+            if (c < 0x20 || c == '"' || c == '\\') break;
+            plain++;
+        }
+        b.append(s, 0, plain);
+        for (int k = plain; k < s.length(); k++) {
             char c = s.charAt(k);
             switch (c) {
                 case '"': b.append("\\\""); break;
