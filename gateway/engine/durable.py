@@ -78,9 +78,11 @@ class Rebuilding(EngineError):
 
 
 class JournalRefused(EngineError):
-    """The command ran but could not be journalled (the journal is full): it was rolled back."""
+    """The command ran but could not be journalled (the journal is full): it was rolled back, and
+    the caller may send it again once the journal has drained (``Retry-After``)."""
 
     kind = "journal"
+    retry_after_s = 5
 
 
 class NotYetShared(EngineError):
@@ -147,6 +149,10 @@ class SessionLog(Protocol):
 
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         """The openings of the durable sessions kept (for a restart that looks them up)."""
+
+    def stored(self, ruleset: str, session_id: str) -> bool:
+        """Whether a durable session by that id is kept (opened, not disposed); raises
+        :class:`Rebuilding` when that cannot be told now (the database is away)."""
 
     def last_activity(self, opening: dict[str, Any]) -> float:
         """When the session last changed (epoch seconds)."""

@@ -169,3 +169,44 @@ def test_ack_after_database_answers_once_the_command_is_in_the_information_state
                        ).status_code == 201
         assert db[LOG].count_documents({"session": sid, "kind": "batch"}) == k + 1  # there as soon as it is answered
     assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
+
+
+def test_a_create_naming_a_stored_session_is_a_conflict_naming_it(rs, api_gateway):
+    made = rs.post(f"{PREFIX}/sessions", json={"id": "kept-1", "facts": [{"type": "Customer", "id": "k", "age": 30}]})
+    assert made.status_code == 201, made.text
+    _crash(api_gateway, "kept-1")  # as after a restart: only the stored session is left
+    api_gateway.store.flush()
+    again = rs.post(f"{PREFIX}/sessions", json={"id": "kept-1"})
+    assert again.status_code == 409, again.text
+    assert "kept-1" in again.json()["error"] and "durable" in again.json()["error"]
+    assert _facts(rs, "kept-1") == [("k", None)]  # the stored one is untouched, and rebuilt on its next call
+    assert rs.delete(f"{PREFIX}/sessions/kept-1").status_code == 200
+    assert rs.post(f"{PREFIX}/sessions", json={"id": "kept-1"}).status_code == 201  # disposed: the id is free again
+    assert rs.delete(f"{PREFIX}/sessions/kept-1").status_code == 200
+
+
+def test_a_ksession_disposed_here_is_made_anew_without_waiting_for_the_journal(rs, api_gateway, monkeypatch):
+    """bench/session_bench.py's fault: after a load phase the journal is behind; a KIE `dispose` of
+    `defaultKieSession` then a new `lookup` of it waited for the journal to learn the session was
+    disposed (503 "the journal has not yet reached the Information State"). This process knows it."""
+    import time
+
+    kie = "/kie-server/services/rest/server/containers/instances/durable"
+    insert = {"lookup": "defaultKieSession", "commands": [
+        {"insert": {"object": {"org.printeps.apitest.Customer": {"id": "z", "age": 30}}, "out-identifier": "z"}}]}
+    assert rs.post(kie, json=insert).status_code == 200
+    journal = api_gateway.store.journal
+    ship = journal.ship
+
+    def behind(database, collection, lines):  # the real database, reached late: the journal lags as under load
+        time.sleep(1.0)
+        ship(database, collection, lines)
+
+    monkeypatch.setattr(journal, "ship", behind)
+    monkeypatch.setattr(api_gateway.engine.session_manager.log, "catch_up_s", 0.3)
+    assert rs.post(kie, json={"lookup": "defaultKieSession", "commands": [{"dispose": ""}]}).status_code == 200
+    again = rs.post(kie, json=insert)
+    assert again.status_code == 200, again.text
+    facts = rs.get(f"{PREFIX}/sessions/defaultKieSession/facts").json()["facts"]
+    assert [f["fact"]["id"] for f in facts] == ["z"]  # a new session: only the insert just made
+    assert rs.post(kie, json={"lookup": "defaultKieSession", "commands": [{"dispose": ""}]}).status_code == 200
