@@ -130,6 +130,9 @@ class StatefulSession:
         # from that log (to roll back a batch that failed half-way); None: it dies with its process.
         self.durability: durable.Durability | None = None
         self.rebuilder: Callable[[], durable.Rebuilt] | None = None
+        # A fresh Java session of a version of this session's rule set (with its clock and kind):
+        # a snapshot taken with matches pending replaces the live one by one restored from it.
+        self.fresh_java: Callable[[int], Any] | None = None
         # One call at a time, and none while the session moves to a new version.
         self._lock = threading.RLock()
         # push() shares these with the Java session (see Session.attachBuffers): the facts go in
@@ -302,11 +305,42 @@ class StatefulSession:
             self._roll_back(f"not journalled: {exc}")
             raise durable.JournalRefused(f"session {self.id} of {self.ruleset}: the command was not kept ({exc}) and "
                                          "was undone; retry later") from None
-        if state.due() and durable.quiescent(commands, answer["results"], self._fire_limit):
+        if state.due():
             try:
-                state.snapshot(java, self.version)
+                self._snapshot(durable.quiescent(commands, answer["results"], self._fire_limit))
             except Exception:  # the log keeps everything meanwhile: a rebuild replays more
                 log.warning("session %s of %s: snapshot failed", self.id, self.ruleset, exc_info=True)
+
+    def _snapshot(self, quiet: bool) -> None:
+        """(Under the lock) Writes a snapshot at this command boundary. Right after a full fire of
+        rules that name no agenda group nothing is pending: the state is only read. Otherwise the
+        snapshot carries the pending matches of every agenda group; taking them consumes them, so
+        the state is first restored into a fresh session (a state that does not fit changes
+        nothing), the pending matches taken, and the fresh session, which fires exactly what this
+        one would have (see Carry.java), replaces this one."""
+        state, java = self.durability, self._java
+        assert state is not None
+        if quiet and not bool(java.hasAgendaGroups()):
+            state.snapshot(java, self.version)
+            return
+        if self.fresh_java is None:
+            return
+        text = str(java.snapshot())
+        if not text.startswith('{"ok":true'):
+            state.refused(str(orjson.loads(text).get("message")))
+            return
+        fresh = self.fresh_java(self.version)
+        restored = orjson.loads(str(fresh.restoreFacts(text)))
+        if not restored.get("ok"):
+            fresh.dispose()
+            state.refused(f"its state does not restore: {restored.get('message')}")
+            return
+        pending = str(java.takePending())
+        fresh.refract(pending)
+        self._java = fresh
+        self._attach(fresh)
+        java.dispose()
+        state.save(text[:-1] + ',"pending":' + pending + "}", self.version)
 
     def _roll_back(self, why: str) -> bool:
         """(Under the lock) Rebuilds the session from its log, without the batch that just failed

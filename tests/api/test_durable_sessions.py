@@ -7,6 +7,8 @@ tests/cluster/test_durable_takeover.py."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from api_helpers import files
 from gw_testing import wait_for
@@ -22,10 +24,10 @@ def rs(client):
     yield client
 
 
-def _crash(gateway, sid: str) -> None:
+def _crash(gateway, sid: str, ruleset: str = "durable") -> None:
     """What a killed process leaves: the session gone from memory, its log and record kept."""
     manager = gateway.engine.session_manager
-    session = manager._sessions.pop(("durable", sid))
+    session = manager._sessions.pop((ruleset, sid))
     session._java.dispose()  # not close(): nothing is released or deleted
     session.closed = True
 
@@ -210,3 +212,88 @@ def test_a_ksession_disposed_here_is_made_anew_without_waiting_for_the_journal(r
     facts = rs.get(f"{PREFIX}/sessions/defaultKieSession/facts").json()["facts"]
     assert [f["fact"]["id"] for f in facts] == ["z"]  # a new session: only the insert just made
     assert rs.post(kie, json={"lookup": "defaultKieSession", "commands": [{"dispose": ""}]}).status_code == 200
+
+
+GROUPS = PREFIX.replace("durable", "groups")
+GROUP_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+rule "Hello"
+when
+    $c : Customer()
+then
+    actions.say("pepper", "Hello " + $c.getId());
+end
+
+rule "Seat" agenda-group "seating"
+when
+    $c : Customer( age >= 18 )
+then
+    actions.say("pepper", "Seat " + $c.getId());
+end
+"""
+
+
+@pytest.fixture(scope="module")
+def groups(rs):
+    from api_helpers import TYPES
+
+    assert rs.put(GROUPS, json={"files": {"types.drl": TYPES, "groups.drl": GROUP_RULES}}).status_code == 201
+    return rs
+
+
+def _run(gateway, sid: str, *commands: dict) -> list[str]:
+    """A batch on the gateway's live session (the KIE verbs REST has no route for, as set-focus)."""
+    answer = gateway.engine.session_manager.get("groups", sid).execute(list(commands))
+    return sorted(a["params"]["text"] for a in answer.actions())
+
+
+def _customer(rs, sid: str, name: str, age: int = 30) -> None:
+    r = rs.post(f"{GROUPS}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": name, "age": age}]})
+    assert r.status_code == 201, r.text
+
+
+def test_a_session_never_fully_fired_gets_snapshots_and_fires_exactly_what_was_pending(groups, api_gateway):
+    sid = groups.post(f"{GROUPS}/sessions", json={}).json()["id"]
+    api_gateway.engine.session_manager.find("groups", sid).durability.every = 2
+    _customer(groups, sid, "a")
+    _customer(groups, sid, "b")
+    info = groups.get(f"{GROUPS}/sessions/{sid}").json()
+    assert info["last_snapshot"] is not None and info["commands_since_snapshot"] == 0  # no fire, still a snapshot
+    first = _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire", json={"max": 1}))  # one of the two greetings
+    assert len(first) == 1
+    _customer(groups, sid, "c")  # the fourth command: a snapshot with two greetings still pending
+    assert groups.get(f"{GROUPS}/sessions/{sid}").json()["commands_since_snapshot"] == 0
+    api_gateway.store.flush()
+    newest = api_gateway.store.db[SNAPSHOTS].find_one({"key": {"$regex": f"^groups/{sid}/"}, "seq": 4})
+    assert newest is not None and len(json.loads(newest["state"])["pending"]) == 5  # a greeting, c's greeting, three seats
+    _crash(api_gateway, sid, "groups")
+    rebuilt = groups.get(f"{GROUPS}/sessions/{sid}").json()
+    assert rebuilt["commands_since_snapshot"] == 0  # from the snapshot: nothing replayed
+    rest = _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire"))
+    assert sorted(first + rest) == ["Hello a", "Hello b", "Hello c"]  # each greeting once
+    assert _run(api_gateway, sid, {"op": "set_focus", "group": "seating"}, {"op": "fire", "max": -1}) == ["Seat a", "Seat b", "Seat c"]
+    assert groups.delete(f"{GROUPS}/sessions/{sid}").status_code == 200
+
+
+def test_an_unfocused_agenda_groups_matches_still_fire_after_a_rebuild_and_fired_ones_do_not(groups, api_gateway):
+    sid = groups.post(f"{GROUPS}/sessions", json={}).json()["id"]
+    api_gateway.engine.session_manager.find("groups", sid).durability.every = 1
+    _customer(groups, sid, "x")
+    _customer(groups, sid, "y")
+    assert _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire")) == ["Hello x", "Hello y"]  # "seating" has no focus
+    assert _run(api_gateway, sid, {"op": "set_focus", "group": "seating"}, {"op": "fire", "max": 1}) in (["Seat x"], ["Seat y"])
+    _crash(api_gateway, sid, "groups")  # snapshot after every command: one seat fired, one pending in "seating"
+    assert groups.get(f"{GROUPS}/sessions/{sid}").json()["commands_since_snapshot"] == 0
+    assert _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire")) in (["Seat x"], ["Seat y"])  # "seating" kept its focus
+    _crash(api_gateway, sid, "groups")
+    assert _run(api_gateway, sid, {"op": "set_focus", "group": "seating"}, {"op": "fire", "max": -1}) == []  # both seated: none again
+    assert _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire")) == []
+    _customer(groups, sid, "z")
+    _crash(api_gateway, sid, "groups")
+    assert _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire")) == ["Hello z"]
+    assert _run(api_gateway, sid, {"op": "set_focus", "group": "seating"}, {"op": "fire", "max": -1}) == ["Seat z"]
+    assert groups.delete(f"{GROUPS}/sessions/{sid}").status_code == 200
