@@ -151,6 +151,10 @@ class SessionLog(Protocol):
     def wait_shipped(self, timeout_s: float) -> bool:
         """Wait until everything journalled so far is in the shared database; False on timeout."""
 
+    def has_room(self, writes: int = 1) -> bool:
+        """Whether the journal takes ``writes`` more now (a batch is refused before it runs when
+        not: undoing one after it ran needs a rebuild, which needs the database)."""
+
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         """The openings of the durable sessions kept (for a restart that looks them up)."""
 
@@ -221,6 +225,12 @@ class Durability:
 
     def open(self, opening: dict[str, Any]) -> None:
         self.log.append(self.ruleset, self.session_id, self.epoch, {"kind": "open", "seq": 0, "at": time.time(), **opening})
+
+    def check_room(self, commands: list[dict[str, Any]]) -> None:
+        """Refuses (:class:`JournalRefused`, nothing run) a changing batch the journal has no room for."""
+        if changes(commands) and not self.log.has_room(2):  # the entry, and a snapshot it may make due
+            raise JournalRefused(f"session {self.session_id} of {self.ruleset}: the journal is full (store.spool_max_docs "
+                                 "writes not yet in the Information State): the command was not run; retry later")
 
     def record(self, commands: list[dict[str, Any]], results: list[dict[str, Any]], clock_ms: int | None,
                current: Callable[[str], str | None]) -> None:

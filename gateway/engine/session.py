@@ -269,6 +269,8 @@ class StatefulSession:
             java = self._live()
             self.last_used = time.monotonic()
             self._check_fact_limit(java, commands)
+            if self.durability is not None:
+                self.durability.check_room(commands)
             answer = orjson.loads(str(java.execute(payload, self._fire_limit)))
             version = self.version
             rolled_back = False
@@ -302,9 +304,11 @@ class StatefulSession:
         except durable.NotYetShared:
             raise  # journalled and applied: not undone
         except Exception as exc:
-            self._roll_back(f"not journalled: {exc}")
+            undone = self._roll_back(f"not journalled: {exc}")
             raise durable.JournalRefused(f"session {self.id} of {self.ruleset}: the command was not kept ({exc}) and "
-                                         "was undone; retry later") from None
+                                         + ("was undone; retry later" if undone else
+                                            "could not be undone (the Information State is away): the session holds it "
+                                            "until its process ends")) from None
         if state.due():
             try:
                 self._snapshot(durable.quiescent(commands, answer["results"], self._fire_limit))

@@ -121,6 +121,9 @@ class StoredSessionLog:
     def close(self) -> None:
         self._deletions.put(None)
 
+    def has_room(self, writes: int = 1) -> bool:
+        return self.store.journal.room() >= writes
+
     def wait_shipped(self, timeout_s: float) -> bool:
         return bool(self.store.flush(timeout_s))
 

@@ -35,6 +35,9 @@ class MemoryLog:
         self.waits.append(timeout_s)
         return self.shared
 
+    def has_room(self, writes: int = 1) -> bool:
+        return not self.refuse
+
 
 class Java:
     """Records what a rebuild does to a Java session; answers like the real one."""
