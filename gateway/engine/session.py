@@ -130,9 +130,6 @@ class StatefulSession:
         # from that log (to roll back a batch that failed half-way); None: it dies with its process.
         self.durability: durable.Durability | None = None
         self.rebuilder: Callable[[], durable.Rebuilt] | None = None
-        # A fresh Java session of a version of this session's rule set (with its clock and kind):
-        # a snapshot taken with matches pending replaces the live one by one restored from it.
-        self.fresh_java: Callable[[int], Any] | None = None
         # One call at a time, and none while the session moves to a new version.
         self._lock = threading.RLock()
         # push() shares these with the Java session (see Session.attachBuffers): the facts go in
@@ -327,13 +324,11 @@ class StatefulSession:
         if quiet and not bool(java.hasAgendaGroups()):
             state.snapshot(java, self.version)
             return
-        if self.fresh_java is None:
-            return
         text = str(java.snapshot())
         if not text.startswith('{"ok":true'):
             state.refused(str(orjson.loads(text).get("message")))
             return
-        fresh = self.fresh_java(self.version)
+        fresh = java.twin()
         restored = orjson.loads(str(fresh.restoreFacts(text)))
         if not restored.get("ok"):
             fresh.dispose()

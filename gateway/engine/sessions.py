@@ -234,8 +234,6 @@ class SessionManager:
                                          f"({exc}): not opened; retry later") from None
         session.durability = state
         session.rebuilder = lambda r=session.ruleset, s=session.id: self._rebuild(r, s)[1]
-        session.fresh_java = _Builder(self.engine, session.ruleset, {"clock": session.clock, "session_kind": session.kind,
-                                                                     "record_facts": record_facts}).java_session
 
     def _shared_within(self) -> float | None:
         """``sessions.ack_after: database``: how long a command may wait to reach the database."""
@@ -341,7 +339,6 @@ class SessionManager:
                                                 snapshot_seq=rebuilt.snapshot_seq, last_snapshot=rebuilt.last_snapshot,
                                                 shared_within_s=self._shared_within())
         session.rebuilder = lambda: self._rebuild(ruleset, session_id)[1]
-        session.fresh_java = _Builder(self.engine, ruleset, opening).java_session
         return session
 
     def lookup(self, ruleset: str, lookup: str | None) -> tuple[SessionDeclaration, StatefulSession | None]:

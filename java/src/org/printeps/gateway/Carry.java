@@ -328,7 +328,7 @@ final class Carry {
         return b.toString();
     }
 
-    /** See {@link Session#restoreFacts}: checks the snapshot against {@code into}'s version, then restores it. */
+    /** See {@link Session#restoreFacts}: checks the snapshot against {@code into}'s version; changes nothing. */
     static Plan restoreFacts(Session into, String snapshotJson, StringBuilder answer) {
         Map<?, ?> snap;
         try {
@@ -366,47 +366,94 @@ final class Carry {
         plan.now = ((Number) snap.get("time")).longValue();
         plan.focus = snap.get("focus") == null ? "MAIN" : String.valueOf(snap.get("focus"));
         plan.pending = snap.get("pending");
-        // the state fits: from here on nothing can refuse
-        applyClockAndGlobals(into, plan);
-        TypeRegistry mine = into.runner.types();
-        for (int k = 0; k < plan.built.size(); k++) {
-            Object fact = plan.built.get(k);
-            FactHandle nh = plan.targets.get(k).insert(fact);
-            plan.restored.add(fact);
-            String id = mine.idOf(fact);
-            if (id != null && !mine.isEvent(fact)) into.byId.put(id, nh);
-            if (into.handles != null && plan.keys.get(k) instanceof List) {
-                for (Object key : (List<?>) plan.keys.get(k)) {
-                    String[] idHash = String.valueOf(key).split(":");
-                    if (idHash.length != 2) continue;
-                    try {
-                        into.handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
-                    } catch (NumberFormatException e) {
-                        // a key that is no "id:hash" names no handle a client can hold
-                    }
-                }
-            }
-        }
-        trackUnchanged(into, plan.restored);
-        setFocus(into.session, plan.focus);
-        into.recorder.reset();
         answer.append("{\"ok\":true,\"facts\":").append(plan.built.size()).append('}');
         return plan;
     }
 
+    /** Inserts the plan's fact {@code k} into {@code into}, with the handle texts clients hold for it as aliases. */
+    private static void insert(Session into, Plan plan, int k) {
+        TypeRegistry mine = into.runner.types();
+        Object fact = plan.built.get(k);
+        FactHandle nh = plan.targets.get(k).insert(fact);
+        plan.restored.add(fact);
+        String id = mine.idOf(fact);
+        if (id != null && !mine.isEvent(fact)) into.byId.put(id, nh);
+        if (into.handles == null || !(plan.keys.get(k) instanceof List)) return;
+        for (Object key : (List<?>) plan.keys.get(k)) {
+            String[] idHash = String.valueOf(key).split(":");
+            if (idHash.length != 2) continue;
+            try {
+                into.handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
+            } catch (NumberFormatException e) {
+                // a key that is no "id:hash" names no handle a client can hold
+            }
+        }
+    }
+
+    private static final java.util.regex.Pattern PLACE = java.util.regex.Pattern.compile("[|\\[,]#(\\d+)");
+
+    /** The places of the facts the pending keys name; null if a key names none (a match over values only). */
+    private static Set<Integer> pendingPlaces(List<?> pending) {
+        Set<Integer> out = new HashSet<Integer>();
+        for (Object key : pending) {
+            java.util.regex.Matcher m = PLACE.matcher(String.valueOf(key));
+            boolean any = false;
+            while (m.find()) {
+                out.add(Integer.valueOf(m.group(1)));
+                any = true;
+            }
+            if (!any) return null;
+        }
+        return out;
+    }
+
     /**
-     * See {@link Session#refract}: every match of the restored facts (in every agenda group) had
-     * fired but the {@code pending} ones (a list of keys; null: none was pending).
+     * See {@link Session#refract}: restores the checked plan (clock, globals, facts, handles, focus)
+     * so that every match of the restored facts, in every agenda group, counts as fired but the
+     * {@code pending} ones (a list of keys; null: none was pending).
+     *
+     * <p>How: the facts no pending match names go in first (in their order), and the agenda is
+     * walked at once, every match dropped: those had all fired (no filter is left for them, so a
+     * later modify that their rules do not react to leaves them fired, as in the original). Then
+     * the facts the pending matches name go in; of the matches they make, the ones that are not
+     * pending are dropped by a filter as they come up (a probe session lists them). Why not leave
+     * everything to the filter: the restored facts' matches are only evaluated at the next fire, so
+     * the first fire after a rebuild evaluated and dropped every one of them (2.8 s for 11,000
+     * facts), and a fired match left on the agenda would fire again after a modify of its fact.
      */
     static void refract(Session into, Plan plan, Object pending) {
-        Set<String> rules = ruleNames(into.session);
-        Map<Object, Integer> places = Refraction.places(plan.built);
-        Map<String, Integer> fired = probe(into, plan, rules, plan.restored, places);
-        if (pending instanceof List) {
-            Map<String, Integer> waiting = Refraction.emptyKeys();
-            for (Object key : (List<?>) pending) Refraction.add(waiting, String.valueOf(key));
-            Refraction.subtract(fired, waiting);
+        List<?> waiting = pending instanceof List ? (List<?>) pending : Collections.emptyList();
+        Set<Integer> late = pendingPlaces(waiting);
+        applyClockAndGlobals(into, plan);
+        boolean walked = late != null;
+        for (int k = 0; k < plan.built.size(); k++) if (late == null || !late.contains(k)) insert(into, plan, k);
+        if (walked) {
+            try {
+                walkAll(into.session, match -> { });
+            } catch (RuntimeException e) {
+                walked = false;  // an agenda that cannot be walked here: the probe and the filter below, for all
+            }
         }
-        into.refraction = fired.isEmpty() ? null : new Refraction(rules, plan.restored, fired, places);
+        for (int k = 0; late != null && k < plan.built.size(); k++) if (late.contains(k)) insert(into, plan, k);
+        trackUnchanged(into, plan.restored);
+        into.refraction = null;
+        if (!walked || !late.isEmpty()) {
+            Set<String> rules = ruleNames(into.session);
+            Map<Object, Integer> places = Refraction.places(plan.built);
+            Map<String, Integer> fired = probe(into, plan, rules, plan.restored, places);
+            if (walked) fired.keySet().removeIf(key -> !namesAny(key, late));  // the others were dropped by the walk
+            Map<String, Integer> still = Refraction.emptyKeys();
+            for (Object key : waiting) Refraction.add(still, String.valueOf(key));
+            Refraction.subtract(fired, still);
+            if (!fired.isEmpty()) into.refraction = new Refraction(rules, plan.restored, fired, places);
+        }
+        setFocus(into.session, plan.focus);
+        into.recorder.reset();
+    }
+
+    private static boolean namesAny(String key, Set<Integer> places) {
+        java.util.regex.Matcher m = PLACE.matcher(key);
+        while (m.find()) if (places.contains(Integer.valueOf(m.group(1)))) return true;
+        return false;
     }
 }

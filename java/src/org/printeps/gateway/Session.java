@@ -46,6 +46,7 @@ public final class Session {
      */
     public Session(Runner runner, boolean recordFacts, boolean realtime, boolean trackHandles) {
         this.runner = runner;
+        this.recordFacts = recordFacts;
         this.session = runner.newSession(realtime);
         if (Runner.declaresGlobal(session.getKieBase(), "actions")) session.setGlobal("actions", actions);
         this.recorder = new Recorder(actions, runner.types(), recordFacts);
@@ -53,6 +54,18 @@ public final class Session {
         this.clock = session.getSessionClock();
         this.handles = trackHandles ? new Handles() : null;
         if (handles != null) session.addEventListener(handles);
+    }
+
+    private final boolean recordFacts;
+
+    /**
+     * A fresh, empty session like this one: the same compiled version, clock kind, handle registry
+     * and fire time limit (what a snapshot taken with matches pending is restored into).
+     */
+    public Session twin() {
+        Session twin = new Session(runner, recordFacts, realtime(), handles != null);
+        twin.setFireTimeoutMs(fireTimeoutMs);
+        return twin;
     }
 
     /** Sets the time limit of this session's fires ({@code engine.fire_timeout_s}; 0: none). */
@@ -492,9 +505,9 @@ public final class Session {
     }
 
     /**
-     * The first half of {@link #restore}: the snapshot's facts, handles, clock, globals and focus,
-     * checked then restored; {@link #refract} must follow (with the pending matches taken from the
-     * session the snapshot was read from, once this half succeeded).
+     * The first half of {@link #restore}: the snapshot checked against this version (its facts,
+     * entry points and globals), nothing changed yet; {@link #refract} then restores it (with the
+     * pending matches taken from the session the snapshot was read from, once this half succeeded).
      */
     public synchronized String restoreFacts(String snapshotJson) {
         if (disposed) return Carry.problem("the session is disposed");
@@ -503,7 +516,7 @@ public final class Session {
         return answer.toString();
     }
 
-    /** The second half of {@link #restore}: refraction, with these pending matches (a JSON list of keys). */
+    /** The second half of {@link #restore}: the checked state restored, with these pending matches (a JSON list of keys). */
     public synchronized void refract(String pendingJson) {
         if (restoring == null) return;
         Carry.refract(this, restoring, Json.parse(pendingJson));
