@@ -269,6 +269,7 @@ final class Carry {
         StringBuilder b = new StringBuilder(4096).append("{\"ok\":true,\"time\":").append(s.clock.getCurrentTime());
         b.append(",\"facts\":[");
         boolean first = true;
+        Map<Long, List<String>> all = s.handles != null ? s.handles.allKeys() : null;
         for (FactHandle h : snapshotHandles(s)) {
             Object fact = DroolsInternals.objectOf(h);
             StringBuilder json = new StringBuilder();
@@ -280,8 +281,8 @@ final class Carry {
             b.append("{\"ep\":");
             Json.quote(b, DroolsInternals.entryPointName(h));
             b.append(",\"keys\":");
-            List<String> keys = s.handles != null ? s.handles.keysOf(h)
-                    : Collections.singletonList(DroolsInternals.handleId(h) + ":" + DroolsInternals.identityHashCode(h));
+            List<String> keys = all == null ? null : all.get(DroolsInternals.handleId(h));
+            if (keys == null) keys = Collections.singletonList(DroolsInternals.handleId(h) + ":" + DroolsInternals.identityHashCode(h));
             Json.write(b, keys, null);
             b.append(",\"fact\":").append(json).append('}');
         }
