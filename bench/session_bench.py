@@ -127,6 +127,17 @@ async def drive_each(port: int, reqs: list[bytes], seconds: float, check: bytes)
     return summarize(latencies, time.perf_counter() - start_t, sum(errors))
 
 
+def patient_post(c: httpx.Client, path: str, body: dict, deadline_s: float = 120.0) -> httpx.Response:
+    """A POST as a well-behaved client makes it: a 503 or 429 refusal is sent again after its
+    ``Retry-After`` (a durable session being rebuilt, a full queue); anything else is the answer."""
+    deadline = time.monotonic() + deadline_s
+    while True:
+        r = c.post(path, json=body)
+        if r.status_code not in (429, 503) or time.monotonic() > deadline:
+            return r
+        time.sleep(float(r.headers.get("retry-after", "1")))
+
+
 def conversation(url: str, calls: int = 1000) -> dict:
     """``calls`` KIE calls against one session, as a client holding handles makes them: insert a
     visit (keeping its handle), modify it, fire, retract it — a quarter of the calls each."""
@@ -136,26 +147,27 @@ def conversation(url: str, calls: int = 1000) -> dict:
         start_t = time.perf_counter()
         for k in range(calls // 4):
             t0 = time.perf_counter()
-            r = c.post(path, json={"lookup": "defaultKieSession", "commands": [
+            r = patient_post(c, path, {"lookup": "defaultKieSession", "commands": [
                 {"insert": {"object": {f"{PKG}.Visit": {"id": f"c{k}", "party": 1}}, "out-identifier": "v",
                             "return-object": False}}]})
+            assert r.status_code == 200, r.text
             handle = r.json()["result"]["execution-results"]["facts"][0]["value"]
             per["insert"].append(time.perf_counter() - t0)
             for kind, body in (("modify", {"modify": {"fact-handle": handle, "setters": [{"accessor": "party", "value": "6"}]}}),
                                ("fire", {"fire-all-rules": {"out-identifier": "n"}}),
                                ("retract", {"retract": {"fact-handle": handle}})):
                 t0 = time.perf_counter()
-                r = c.post(path, json={"lookup": "defaultKieSession", "commands": [body]})
+                r = patient_post(c, path, {"lookup": "defaultKieSession", "commands": [body]})
                 assert r.status_code == 200, r.text
                 per[kind].append(time.perf_counter() - t0)
         elapsed = time.perf_counter() - start_t
-        left = c.post(path, json={"lookup": "defaultKieSession", "commands": [{"get-fact-handles": {"out-identifier": "h"}}]})
+        left = patient_post(c, path, {"lookup": "defaultKieSession", "commands": [{"get-fact-handles": {"out-identifier": "h"}}]})
         remaining = len(left.json()["result"]["execution-results"]["results"][0]["value"])
-        c.post(path, json={"lookup": "defaultKieSession", "commands": [{"dispose": ""}]})
+        patient_post(c, path, {"lookup": "defaultKieSession", "commands": [{"dispose": ""}]})
         stateless: list[float] = []
         for _ in range(calls):
             t0 = time.perf_counter()
-            c.post("/api/rulesets/visits/fire", json={"facts": [FACT]})
+            patient_post(c, "/api/rulesets/visits/fire", {"facts": [FACT]})
             stateless.append(time.perf_counter() - t0)
     all_calls = [x for v in per.values() for x in v]
     return {"elapsed": elapsed, "calls": len(all_calls), "remaining": remaining, "all": summarize(all_calls, elapsed, 0),

@@ -12,10 +12,14 @@ plain JSON anyway. So:
   runaway guard, ``engine.fire_timeout_s``) is rolled back by rebuilding the session without it.
   A move to a new version (``follow``) is an entry too.
 - **Snapshots.** Every ``sessions.snapshot_every`` entries or ``sessions.snapshot_interval_s``
-  seconds, at the next point where the agenda holds nothing to fire (right after a full fire),
-  the session's state is written: facts in insertion order with every handle text clients may
-  hold for them, clock, globals, focus (``Session.snapshot`` in Java). Nothing pending means every
-  match over those facts has fired: a restore refracts them all, as a deploy's move does.
+  seconds, after the command that makes one due (any command), the session's state is written:
+  facts in insertion order with every handle text clients may hold for them, clock, globals,
+  focus (``Session.snapshot`` in Java) and the matches still pending in every agenda group
+  (``Session.takePending``, keys naming facts by their place). A restore counts every other match
+  over those facts as fired (refraction, as a deploy's move carries it). Taking the pending
+  matches consumes them, so the live session is then replaced by one restored from the snapshot
+  (:meth:`gateway.engine.session.StatefulSession._snapshot`); right after a full fire of rules
+  that name no agenda group nothing is pending, and the state is only read.
 - **Rebuild.** A new session on the snapshot's version, the snapshot restored, the entries after it
   replayed (each replayed insert's new handle aliased to the one the client holds). A snapshot that
   cannot be read falls back to the one before it (two are kept, with the log since the older), then
@@ -78,9 +82,11 @@ class Rebuilding(EngineError):
 
 
 class JournalRefused(EngineError):
-    """The command ran but could not be journalled (the journal is full): it was rolled back."""
+    """The command ran but could not be journalled (the journal is full): it was rolled back, and
+    the caller may send it again once the journal has drained (``Retry-After``)."""
 
     kind = "journal"
+    retry_after_s = 5
 
 
 class NotYetShared(EngineError):
@@ -145,8 +151,16 @@ class SessionLog(Protocol):
     def wait_shipped(self, timeout_s: float) -> bool:
         """Wait until everything journalled so far is in the shared database; False on timeout."""
 
+    def has_room(self, writes: int = 1) -> bool:
+        """Whether the journal takes ``writes`` more now (a batch is refused before it runs when
+        not: undoing one after it ran needs a rebuild, which needs the database)."""
+
     def sessions(self, ruleset: str | None = None) -> list[dict[str, Any]]:
         """The openings of the durable sessions kept (for a restart that looks them up)."""
+
+    def stored(self, ruleset: str, session_id: str) -> bool:
+        """Whether a durable session by that id is kept (opened, not disposed); raises
+        :class:`Rebuilding` when that cannot be told now (the database is away)."""
 
     def last_activity(self, opening: dict[str, Any]) -> float:
         """When the session last changed (epoch seconds)."""
@@ -212,6 +226,12 @@ class Durability:
     def open(self, opening: dict[str, Any]) -> None:
         self.log.append(self.ruleset, self.session_id, self.epoch, {"kind": "open", "seq": 0, "at": time.time(), **opening})
 
+    def check_room(self, commands: list[dict[str, Any]]) -> None:
+        """Refuses (:class:`JournalRefused`, nothing run) a changing batch the journal has no room for."""
+        if changes(commands) and not self.log.has_room(2):  # the entry, and a snapshot it may make due
+            raise JournalRefused(f"session {self.session_id} of {self.ruleset}: the journal is full (store.spool_max_docs "
+                                 "writes not yet in the Information State): the command was not run; retry later")
+
     def record(self, commands: list[dict[str, Any]], results: list[dict[str, Any]], clock_ms: int | None,
                current: Callable[[str], str | None]) -> None:
         """Journals an accepted batch (raises if the journal refuses it: the caller rolls back)."""
@@ -236,20 +256,29 @@ class Durability:
         return self.interval_s > 0 and time.monotonic() - self._since >= self.interval_s
 
     def snapshot(self, java: Any, version: int) -> bool:
-        """Writes a snapshot of ``java`` (a session with nothing left to fire); False (and why in
+        """Writes a snapshot of ``java`` (a session with nothing pending in any agenda group, so a
+        restore counts every match over its facts as fired); False (and why in
         ``snapshot_error``) if the state cannot be written: the log keeps growing instead."""
         answer = str(java.snapshot())
         if not answer.startswith('{"ok":true'):
-            self.snapshot_error = str(orjson.loads(answer).get("message"))
-            log.warning("session %s of %s: no snapshot: %s", self.session_id, self.ruleset, self.snapshot_error)
-            self._since = time.monotonic()
+            self.refused(str(orjson.loads(answer).get("message")))
             return False
-        state = answer
+        self.save(answer, version)
+        return True
+
+    def refused(self, why: str) -> None:
+        """No snapshot now (``why``): the log keeps growing; tried again after the interval."""
+        self.snapshot_error = why
+        log.warning("session %s of %s: no snapshot: %s", self.session_id, self.ruleset, why)
+        self._since = time.monotonic()
+
+    def save(self, state: str, version: int) -> None:
+        """Writes ``state`` (``Session.snapshot``'s JSON, with its ``pending`` matches if any were)
+        as the snapshot after the current entry."""
         snap = Snapshot(self.seq, version, state, hashlib.sha256(state.encode("utf-8")).hexdigest(), time.time())
         self.log.save_snapshot(self.ruleset, self.session_id, self.epoch, snap)
         self.snapshot_seq, self.last_snapshot, self.snapshot_error = self.seq, snap.at, None
         self._since = time.monotonic()
-        return True
 
     def info(self) -> dict[str, Any]:
         out: dict[str, Any] = {"durable": True, "last_snapshot": self.last_snapshot,

@@ -266,6 +266,8 @@ class StatefulSession:
             java = self._live()
             self.last_used = time.monotonic()
             self._check_fact_limit(java, commands)
+            if self.durability is not None:
+                self.durability.check_room(commands)
             answer = orjson.loads(str(java.execute(payload, self._fire_limit)))
             version = self.version
             rolled_back = False
@@ -299,14 +301,45 @@ class StatefulSession:
         except durable.NotYetShared:
             raise  # journalled and applied: not undone
         except Exception as exc:
-            self._roll_back(f"not journalled: {exc}")
+            undone = self._roll_back(f"not journalled: {exc}")
             raise durable.JournalRefused(f"session {self.id} of {self.ruleset}: the command was not kept ({exc}) and "
-                                         "was undone; retry later") from None
-        if state.due() and durable.quiescent(commands, answer["results"], self._fire_limit):
+                                         + ("was undone; retry later" if undone else
+                                            "could not be undone (the Information State is away): the session holds it "
+                                            "until its process ends")) from None
+        if state.due():
             try:
-                state.snapshot(java, self.version)
+                self._snapshot(durable.quiescent(commands, answer["results"], self._fire_limit))
             except Exception:  # the log keeps everything meanwhile: a rebuild replays more
                 log.warning("session %s of %s: snapshot failed", self.id, self.ruleset, exc_info=True)
+
+    def _snapshot(self, quiet: bool) -> None:
+        """(Under the lock) Writes a snapshot at this command boundary. Right after a full fire of
+        rules that name no agenda group nothing is pending: the state is only read. Otherwise the
+        snapshot carries the pending matches of every agenda group; taking them consumes them, so
+        the state is first restored into a fresh session (a state that does not fit changes
+        nothing), the pending matches taken, and the fresh session, which fires exactly what this
+        one would have (see Carry.java), replaces this one."""
+        state, java = self.durability, self._java
+        assert state is not None
+        if quiet and not bool(java.hasAgendaGroups()):
+            state.snapshot(java, self.version)
+            return
+        text = str(java.snapshot())
+        if not text.startswith('{"ok":true'):
+            state.refused(str(orjson.loads(text).get("message")))
+            return
+        fresh = java.twin()
+        restored = orjson.loads(str(fresh.restoreFacts(text)))
+        if not restored.get("ok"):
+            fresh.dispose()
+            state.refused(f"its state does not restore: {restored.get('message')}")
+            return
+        pending = str(java.takePending())
+        fresh.refract(pending)
+        self._java = fresh
+        self._attach(fresh)
+        java.dispose()
+        state.save(text[:-1] + ',"pending":' + pending + "}", self.version)
 
     def _roll_back(self, why: str) -> bool:
         """(Under the lock) Rebuilds the session from its log, without the batch that just failed

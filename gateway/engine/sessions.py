@@ -30,6 +30,7 @@ what happens to it on a deploy, after idling, or at a limit must be the same who
 
 from __future__ import annotations
 
+import collections
 import itertools
 import logging
 import os
@@ -48,6 +49,8 @@ log = logging.getLogger(__name__)
 CONVERSATION_KINDS = ("kie", "rest")  # sessions clients hold: counted in limits, reaped when idle
 STREAM_KIND = "stream"  # a stream binding's session: durable and claimed like a conversation, lives with its binding
 ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")
+#: Sessions disposed in this process that it remembers (see SessionManager._disposed_here).
+DISPOSED_REMEMBERED = 10_000
 _ids = itertools.count(1)
 
 
@@ -119,6 +122,11 @@ class SessionManager:
         self.directory: Directory | None = None
         self.log: durable.SessionLog | None = None  # durable sessions' log (gateway.runtime.session_log)
         self._rebuilding: set[tuple[str, str]] = set()
+        # Sessions this process disposed (or reaped), newest last, bounded: their tombstone may not
+        # have reached the Information State yet, so without this the next lookup of a declared
+        # ksession after a `dispose` would wait for the journal to catch up (a 503 under load)
+        # only to learn what this process already knows. One that fell off is looked up the slow way.
+        self._disposed_here: collections.OrderedDict[tuple[str, str], None] = collections.OrderedDict()
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()
         self._creating: dict[tuple[str, str], threading.Lock] = {}
@@ -169,6 +177,8 @@ class SessionManager:
                 raise SessionRefused(f"session '{session_id}' of {ruleset} is already open", conflict=True)
             if kind in CONVERSATION_KINDS:
                 self._check_session_limit(ruleset)
+        if session_id is not None and kind == "rest":
+            self._refuse_if_stored(ruleset, session_id)
         sid = session_id or self._new_id()
         clock = clock or (declared.clock if declared else "pseudo")
         policy = on_deploy or (declared.on_deploy if declared and declared.on_deploy else self.settings.on_deploy)
@@ -194,8 +204,20 @@ class SessionManager:
                 self._make_durable(session, record_facts)
         with self._lock:
             self._sessions[(ruleset, sid)] = session
+            self._disposed_here.pop((ruleset, sid), None)
         self._ensure_reaper()
         return session
+
+    def _refuse_if_stored(self, ruleset: str, session_id: str) -> None:
+        """A create naming an id that a durable session keeps in the log (its process restarted
+        or died, and nobody has used it since) is a conflict, as for a live one: opening a new
+        session under it would hide the stored one's facts from its clients."""
+        if self.log is None or (ruleset, session_id) in self._disposed_here:
+            return
+        if self.log.stored(ruleset, session_id):
+            raise SessionRefused(f"session '{session_id}' of {ruleset} already exists: it is a durable session kept in the "
+                                 "Information State (its process stopped or died), rebuilt on its next call; use it, or "
+                                 "dispose it first", conflict=True)
 
     # ------------------------------------------------------------------ durable sessions
 
@@ -249,8 +271,8 @@ class SessionManager:
             return self._recover(ruleset, session_id, owner)
         if owner is not None and self.directory is not None:  # recorded as ours but not here: disposed under the record
             self.directory.release(ruleset, session_id)
-        if self.log is None:
-            return None
+        if self.log is None or (ruleset, session_id) in self._disposed_here:
+            return None  # disposed here: nothing to rebuild, and no need to wait for the journal to say so
         return self._recover(ruleset, session_id, None)
 
     def _recover(self, ruleset: str, session_id: str, dead: dict[str, Any] | None) -> StatefulSession | None:
@@ -455,11 +477,19 @@ class SessionManager:
                 and not keep:
             # disposed (or reaped): its log goes; closed at shutdown: it stays, for a restart or a takeover
             self.log.delete(ruleset, session_id, session.durability.epoch)
+            self._remember_disposed((ruleset, session_id))
         if self.directory is not None:
             try:
                 self.directory.release(ruleset, session_id)
             except Exception:  # the record is cleaned when this process's member record goes
                 log.warning("could not release the record of session %s/%s", ruleset, session_id, exc_info=True)
+
+    def _remember_disposed(self, key: tuple[str, str]) -> None:
+        with self._lock:
+            self._disposed_here[key] = None
+            self._disposed_here.move_to_end(key)
+            while len(self._disposed_here) > DISPOSED_REMEMBERED:
+                self._disposed_here.popitem(last=False)
 
     # ------------------------------------------------------------------ deploys
 

@@ -121,6 +121,9 @@ class StoredSessionLog:
     def close(self) -> None:
         self._deletions.put(None)
 
+    def has_room(self, writes: int = 1) -> bool:
+        return self.store.journal.room() >= writes
+
     def wait_shipped(self, timeout_s: float) -> bool:
         return bool(self.store.flush(timeout_s))
 
@@ -163,6 +166,21 @@ class StoredSessionLog:
                               float(d.get("at", 0.0))) for d in snaps]
         entries = [_plain(d) for d in docs if d.get("kind") in ("batch", "move")]
         return History(_plain(opening), snapshots, entries, disposed)
+
+    def stored(self, ruleset: str, session_id: str) -> bool:
+        """Whether the Information State keeps a durable session by that id (its newest opening
+        has no tombstone). Reads what the journal has shipped: enough to refuse a create that
+        would shadow a session a stopped or dead process left (those are shipped long since)."""
+        try:
+            self._index()
+            opening = self.store.db[LOG].find_one({"ruleset": ruleset, "session": session_id, "kind": "open"}, {"key": 1},
+                                                  sort=[("at", pymongo.DESCENDING)])
+            if opening is None:
+                return False
+            return self.store.db[LOG].find_one({"key": opening["key"], "kind": "disposed"}, {"_id": 1}) is None
+        except PyMongoError as exc:
+            raise Rebuilding(f"cannot tell whether session {session_id} of {ruleset} is kept: the Information State is "
+                             f"away ({type(exc).__name__}); retry", retry_after_s=2) from None
 
     def last_activity(self, opening: dict[str, Any]) -> float:
         """When the session's newest entry was written (epoch seconds; its opening's if none)."""

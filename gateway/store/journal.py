@@ -259,6 +259,11 @@ class Journal:
                 self._pending.append(Entry(database, collection, line, segment))
             self._wake.notify()
 
+    def room(self) -> int:
+        """How many more writes the journal takes before it refuses (``max_docs`` not yet shipped)."""
+        with self._lock:
+            return self.max_docs - len(self._pending) - len(self._in_hand)
+
     def _writable_segment(self) -> Segment:
         if self._segment is None or self._segment.size >= SEGMENT_BYTES:
             self._segment = Segment.create(self.folder)

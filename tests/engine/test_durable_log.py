@@ -35,6 +35,9 @@ class MemoryLog:
         self.waits.append(timeout_s)
         return self.shared
 
+    def has_room(self, writes: int = 1) -> bool:
+        return not self.refuse
+
 
 class Java:
     """Records what a rebuild does to a Java session; answers like the real one."""
@@ -116,7 +119,8 @@ def test_only_changing_batches_are_journalled():
     ([{"op": "fire", "max": -1}, {"op": "get_objects"}], 1, True),  # reads do not count
     ([{"op": "insert"}], 0, False),
 ])
-def test_a_snapshot_is_taken_only_when_nothing_is_left_to_fire(commands, fired, quiet):
+def test_quiescent_tells_when_a_full_fire_left_nothing_to_fire(commands, fired, quiet):
+    """(A snapshot is taken at any command; at these points, for rules without agenda groups, it only reads.)"""
     fire_index = next((i for i, c in enumerate(commands) if c["op"] == "fire"), None)
     results = [{"i": i, "op": c["op"], **({"fire": {"fireCount": fired}} if i == fire_index else {})}
                for i, c in enumerate(commands)]
@@ -148,6 +152,17 @@ def test_durability_counts_commands_and_snapshots_when_due():
     with pytest.raises(RuntimeError):
         state.record([{"op": "fire"}], [], 0, lambda t: t)
     assert state.seq == 2  # a refused entry takes no number
+
+
+def test_a_changing_batch_is_refused_before_it_runs_when_the_journal_is_full():
+    log = MemoryLog()
+    state = Durability(log, "rs", "s1", "e1", every=10, interval_s=0)
+    state.check_room([{"op": "insert", "facts": []}])
+    log.refuse = True
+    state.check_room([{"op": "get_objects"}])  # reads need no room
+    with pytest.raises(durable.JournalRefused) as refused:
+        state.check_room([{"op": "insert", "facts": []}])
+    assert "journal is full" in str(refused.value) and refused.value.retry_after_s >= 1
 
 
 def test_rebuild_restores_the_newest_snapshot_and_replays_what_follows_with_aliases():

@@ -158,6 +158,23 @@ public final class DroolsInternals {
         return ((InternalAgenda) session.getAgenda()).getFocusName();
     }
 
+    /**
+     * The agenda groups other than {@code MAIN} that the rules of {@code base} name (the public
+     * {@code Rule} does not tell its group; a walk of a whole agenda must focus each in turn).
+     * Assumes: the rules a KiePackage lists are {@code RuleImpl}s (another kind names none).
+     */
+    public static java.util.Set<String> agendaGroups(KieBase base) {
+        java.util.Set<String> out = new java.util.TreeSet<String>();
+        for (org.kie.api.definition.KiePackage p : base.getKiePackages()) {
+            for (Rule r : p.getRules()) {
+                if (!(r instanceof RuleImpl)) continue;
+                String group = ((RuleImpl) r).getAgendaGroup();
+                if (group != null && !group.isEmpty() && !"MAIN".equals(group)) out.add(group);
+            }
+        }
+        return out;
+    }
+
     // ------------------------------------------------------------------ rule and query definitions
 
     /**

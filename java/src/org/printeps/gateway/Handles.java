@@ -146,4 +146,25 @@ final class Handles implements RuleRuntimeEventListener {
         for (Map.Entry<String, Entry> a : aliases.entrySet()) if (a.getValue() == e) out.add(a.getKey());
         return out;
     }
+
+    /**
+     * {@link #keysOf} of every live handle, by handle id, in one pass over the aliases: what a
+     * snapshot writes. Why not keysOf per handle: each scans every alias, and a rebuilt session
+     * holds an alias per restored fact, so a snapshot of 11,000 facts took 6 s instead of 0.3 s.
+     */
+    Map<Long, java.util.List<String>> allKeys() {
+        Map<Entry, java.util.List<String>> byEntry = new java.util.IdentityHashMap<Entry, java.util.List<String>>();
+        for (Map.Entry<String, Entry> a : aliases.entrySet()) {
+            byEntry.computeIfAbsent(a.getValue(), x -> new java.util.ArrayList<String>()).add(a.getKey());
+        }
+        Map<Long, java.util.List<String>> out = new HashMap<Long, java.util.List<String>>();
+        for (Map.Entry<Long, Entry> e : byId.entrySet()) {
+            java.util.List<String> keys = new java.util.ArrayList<String>();
+            for (Integer hash : e.getValue().hashes) keys.add(e.getKey() + ":" + hash);
+            java.util.List<String> more = byEntry.get(e.getValue());
+            if (more != null) keys.addAll(more);
+            out.put(e.getKey(), keys);
+        }
+        return out;
+    }
 }

@@ -20,45 +20,66 @@ import org.kie.api.runtime.rule.Match;
  * a match can arise only after the move, when another rule fires — a {@code not} or an
  * {@code accumulate} over other facts becoming true (the reception's "Pair" after "Adult" typed the
  * customers) — while its own facts are the unchanged ones; it never fired, and must fire now, as
- * {@code KieContainer.updateToVersion} would. It applies until a fire empties the agenda.
+ * {@code KieContainer.updateToVersion} would.
+ *
+ * <p>The same filter carries a durable session's snapshot (see {@link Carry#refract}): there the
+ * keys name facts by their place in the snapshot (so a snapshot's pending matches, written as
+ * keys, mean the same in the process that restores it), and "fired" is every match of the
+ * restored facts, in every agenda group, minus the ones pending when the snapshot was taken.
+ * It applies until each of its keys was dropped once: a key of an agenda group that has no focus
+ * waits for the group to be focused and fired.
  */
 final class Refraction implements AgendaFilter {
     private final Set<String> unchangedRules;
     private final Set<Object> unchangedFacts;   // identity set, shared with Handles
     private final Map<String, Integer> fired;    // keys (a multiset: query rows can share one) of matches fired already
+    private final Map<Object, Integer> places;   // a fact's place in the carried state (identity map)
 
-    Refraction(Set<String> unchangedRules, Set<Object> unchangedFacts, Map<String, Integer> fired) {
+    Refraction(Set<String> unchangedRules, Set<Object> unchangedFacts, Map<String, Integer> fired, Map<Object, Integer> places) {
         this.unchangedRules = unchangedRules;
         this.unchangedFacts = unchangedFacts;
         this.fired = fired;
+        this.places = places;
+    }
+
+    /** Whether every key was dropped (the filter has nothing left to do). */
+    boolean spent() { return fired.isEmpty(); }
+
+    /** The places of {@code facts} (in order) by identity: what keys name facts by. */
+    static Map<Object, Integer> places(List<Object> facts) {
+        Map<Object, Integer> out = new java.util.IdentityHashMap<Object, Integer>();
+        for (int k = 0; k < facts.size(); k++) if (facts.get(k) != null) out.put(facts.get(k), k);
+        return out;
     }
 
     /**
-     * A match's key: its rule and, per object, the identity of the fact (through {@code mapped}
+     * A match's key: its rule and, per object, the place of the fact (through {@code mapped}
      * from an old session's object to the one that came across, when given) or, for an object that
      * is no fact that came across unchanged (an accumulate's result, a modified or new fact), its
      * value: a count of 1 and a count of 2 are different matches.
      */
-    static String key(String rule, List<?> objects, Map<Object, Object> mapped, Set<Object> facts) {
+    static String key(String rule, List<?> objects, Map<Object, Object> mapped, Set<Object> facts, Map<Object, Integer> places) {
         StringBuilder b = new StringBuilder(rule);
         for (Object o : objects) {
             b.append('|');
-            part(b, o, mapped, facts, 0);
+            part(b, o, mapped, facts, places, 0);
         }
         return b.toString();
     }
 
-    /** One object of a key: a fact by identity, a value (an accumulate's result, a query's row) by its content. */
-    private static void part(StringBuilder b, Object o, Map<Object, Object> mapped, Set<Object> facts, int depth) {
+    /** One object of a key: a fact by its place, a value (an accumulate's result, a query's row) by its content. */
+    private static void part(StringBuilder b, Object o, Map<Object, Object> mapped, Set<Object> facts, Map<Object, Integer> places,
+                             int depth) {
         Object m = mapped == null ? o : mapped.get(o);
-        if (m != null && facts.contains(m)) {
-            b.append('#').append(System.identityHashCode(m));
+        Integer place = m == null ? null : places.get(m);
+        if (place != null && facts.contains(m)) {
+            b.append('#').append(place);
         } else if (o == null || o instanceof Number || o instanceof CharSequence || o instanceof Boolean || o instanceof Character) {
             b.append('=').append(o);
         } else if (depth < 4 && (o instanceof Iterable || o instanceof Object[])) {
             b.append('[');
             for (Object e : o instanceof Object[] ? java.util.Arrays.asList((Object[]) o) : (Iterable<?>) o) {
-                part(b, e, mapped, facts, depth + 1);
+                part(b, e, mapped, facts, places, depth + 1);
                 b.append(',');
             }
             b.append(']');
@@ -71,7 +92,7 @@ final class Refraction implements AgendaFilter {
     public boolean accept(Match match) {
         String rule = match.getRule().getName();
         if (!unchangedRules.contains(rule)) return true;
-        return !take(fired, key(rule, match.getObjects(), null, unchangedFacts));
+        return !take(fired, key(rule, match.getObjects(), null, unchangedFacts, places));
     }
 
     /** A multiset of keys (two matches can have one key: rows of a query without outputs). */

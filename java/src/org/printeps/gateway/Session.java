@@ -25,13 +25,13 @@ public final class Session {
     final Runner runner;
     final KieSession session;
     private final Actions actions = new Actions();
-    private final Recorder recorder;
+    final Recorder recorder;
     final SessionClock clock;
-    private final Map<String, FactHandle> byId = new HashMap<String, FactHandle>();
+    final Map<String, FactHandle> byId = new HashMap<String, FactHandle>();
     /** Fact handles by their external form (sessions that answer commands; null for stream sessions). */
-    private final Handles handles;
-    /** Refraction carried over a move to a new version, until a fire empties the agenda (see Refraction). */
-    private Refraction refraction;
+    final Handles handles;
+    /** Refraction carried over a move to a new version or a restore, until it is spent (see Refraction). */
+    Refraction refraction;
     boolean disposed;
     /** Time limit of each fire in ms (0: none), see {@link Watchdog}. */
     private volatile long fireTimeoutMs;
@@ -46,6 +46,7 @@ public final class Session {
      */
     public Session(Runner runner, boolean recordFacts, boolean realtime, boolean trackHandles) {
         this.runner = runner;
+        this.recordFacts = recordFacts;
         this.session = runner.newSession(realtime);
         if (Runner.declaresGlobal(session.getKieBase(), "actions")) session.setGlobal("actions", actions);
         this.recorder = new Recorder(actions, runner.types(), recordFacts);
@@ -53,6 +54,18 @@ public final class Session {
         this.clock = session.getSessionClock();
         this.handles = trackHandles ? new Handles() : null;
         if (handles != null) session.addEventListener(handles);
+    }
+
+    private final boolean recordFacts;
+
+    /**
+     * A fresh, empty session like this one: the same compiled version, clock kind, handle registry
+     * and fire time limit (what a snapshot taken with matches pending is restored into).
+     */
+    public Session twin() {
+        Session twin = new Session(runner, recordFacts, realtime(), handles != null);
+        twin.setFireTimeoutMs(fireTimeoutMs);
+        return twin;
     }
 
     /** Sets the time limit of this session's fires ({@code engine.fire_timeout_s}; 0: none). */
@@ -113,14 +126,22 @@ public final class Session {
             } finally {
                 Watchdog.release(watch);
             }
-            if (n < max) refraction = null;
+            afterFire(n < max);
             StringBuilder b = new StringBuilder(256);
             recorder.writeSuccess(b, n);
             return b.append('}').toString();
         }
         String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, false, refraction, fireTimeoutMs);
-        refraction = null;
+        afterFire(true);
         return answer;
+    }
+
+    /**
+     * After a fire: the refraction carried in is dropped once spent, or once a full fire emptied
+     * the agenda of a rule base without agenda groups (no match it could still drop is left).
+     */
+    private void afterFire(boolean emptied) {
+        if (refraction != null && (refraction.spent() || (emptied && !hasAgendaGroups()))) refraction = null;
     }
 
     /** Inserts facts (a JSON list); facts with an "id" can later be updated or retracted by it. */
@@ -136,7 +157,7 @@ public final class Session {
         String error = insertFacts(factsJson, timestampMs);
         if (error != null) return error;
         String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction, fireTimeoutMs);
-        refraction = null;
+        afterFire(true);
         return answer;
     }
 
@@ -257,7 +278,7 @@ public final class Session {
     /** Fires what is activated; the result holds the actions and firings since the last fire. */
     public synchronized String fire(int limit, boolean returnFacts) {
         String answer = Runner.fireAndReport(session, recorder, runner.types(), limit, returnFacts, refraction, fireTimeoutMs);
-        refraction = null;
+        afterFire(true);
         return answer;
     }
 
@@ -274,14 +295,10 @@ public final class Session {
 
     /** Runs a DRL {@code query} with positional arguments (a JSON list); rows keyed by identifier. */
     public synchronized String query(String name, String argsJson) {
-        Object parsed;
-        try {
-            parsed = Json.parse(argsJson);
-        } catch (Json.ParseException e) {
-            return Runner.factError(-1, null, "arguments", null, "query arguments are not valid JSON: " + e.getMessage());
-        }
-        if (!(parsed instanceof List)) return Runner.factError(-1, null, "arguments", null, "query arguments must be a JSON list");
-        Object[] args = ((List<?>) parsed).toArray();
+        String[] error = new String[1];
+        List<?> parsed = jsonList(argsJson, "arguments", "query arguments", error);
+        if (parsed == null) return error[0];
+        Object[] args = parsed.toArray();
         try {
             Class<?>[] types = queryParameterTypes(name);
             for (int k = 0; types != null && k < args.length && k < types.length; k++) {
@@ -310,16 +327,12 @@ public final class Session {
      * and one call each cost more than the queries themselves.
      */
     public synchronized String queries(String namesJson, int maxRows) {
-        Object parsed;
-        try {
-            parsed = Json.parse(namesJson);
-        } catch (Json.ParseException e) {
-            return Runner.factError(-1, null, "queries", null, "query names are not valid JSON: " + e.getMessage());
-        }
-        if (!(parsed instanceof List)) return Runner.factError(-1, null, "queries", null, "query names must be a JSON list");
+        String[] error = new String[1];
+        List<?> parsed = jsonList(namesJson, "queries", "query names", error);
+        if (parsed == null) return error[0];
         StringBuilder b = new StringBuilder("{\"ok\":true,\"results\":{");
         boolean first = true;
-        for (Object item : (List<?>) parsed) {
+        for (Object item : parsed) {
             String name = String.valueOf(item);
             org.kie.api.runtime.rule.QueryResults results;
             try {
@@ -335,6 +348,18 @@ public final class Session {
             b.append(']');
         }
         return b.append("}}").toString();
+    }
+
+    /** A JSON list argument ({@code field}, {@code what} for messages), or null with the refusal in {@code error[0]}. */
+    private static List<?> jsonList(String json, String field, String what, String[] error) {
+        try {
+            Object parsed = Json.parse(json);
+            if (parsed instanceof List) return (List<?>) parsed;
+            error[0] = Runner.factError(-1, null, field, null, what + " must be a JSON list");
+        } catch (Json.ParseException e) {
+            error[0] = Runner.factError(-1, null, field, null, what + " are not valid JSON: " + e.getMessage());
+        }
+        return null;
     }
 
     private void writeRows(StringBuilder b, org.kie.api.runtime.rule.QueryResults results, int maxRows) {
@@ -432,160 +457,8 @@ public final class Session {
      */
     public synchronized String moveFrom(Session old, String unchangedRulesJson) {
         synchronized (old) {
-            if (old.disposed) return "{\"ok\":false,\"message\":\"the session to move is disposed\"}";
-            TypeRegistry mine = runner.types();
-            TypeRegistry theirs = old.runner.types();
-            List<FactHandle> oldHandles = Handles.all(old.session);
-            List<Object> built = new ArrayList<Object>(oldHandles.size());
-            List<org.kie.api.runtime.rule.EntryPoint> targets = new ArrayList<org.kie.api.runtime.rule.EntryPoint>();
-            for (FactHandle h : oldHandles) {
-                Object fact = DroolsInternals.objectOf(h);
-                if (fact instanceof Actions) { built.add(null); targets.add(null); continue; }
-                StringBuilder json = new StringBuilder();
-                if (!theirs.writeFact(json, fact)) {
-                    return problem("fact " + Handles.external(h) + " is not of a declared type (" + fact.getClass().getName() + ")");
-                }
-                @SuppressWarnings("unchecked")
-                Map<String, Object> values = (Map<String, Object>) Json.parse(json.toString());
-                String type = String.valueOf(values.get("type"));
-                TypeRegistry.TypeInfo info = mine.type(type);
-                if (info == null) return problem("fact " + Handles.external(h) + ": the new version declares no type " + type);
-                try {
-                    built.add(mine.build(info, values, 0));
-                } catch (TypeRegistry.FactProblem p) {
-                    return problem("fact " + Handles.external(h) + " (" + type + ") does not fit the new version: " + p.getMessage());
-                }
-                org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(DroolsInternals.entryPointName(h));
-                if (ep == null) return problem("fact " + Handles.external(h) + ": the new version has no entry point " + DroolsInternals.entryPointName(h));
-                targets.add(ep);
-            }
-            Map<String, Object> globals = new java.util.LinkedHashMap<String, Object>();
-            for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
-                for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
-                    if (g.getName().equals("actions")) continue;
-                    Object v = old.session.getGlobals().get(g.getName());
-                    if (v == null) continue;
-                    StringBuilder json = new StringBuilder();
-                    Json.write(json, v, theirs);
-                    try {
-                        Class<?> type = mine.declaredClass(g.getType());
-                        if (type == null) type = Class.forName(g.getType(), false, Session.class.getClassLoader());
-                        globals.put(g.getName(), mine.convertValue(g.getName(), type, Json.parse(json.toString())));
-                    } catch (Exception e) {
-                        return problem("global '" + g.getName() + "' does not fit the new version: " + Runner.rootMessage(e));
-                    }
-                }
-            }
-            // the state fits: from here on nothing can refuse
-            if (clock instanceof SessionPseudoClock) advanceTo(old.clock.getCurrentTime());
-            for (Map.Entry<String, Object> g : globals.entrySet()) session.setGlobal(g.getKey(), g.getValue());
-            Map<Object, Object> mapped = new java.util.IdentityHashMap<Object, Object>();
-            java.util.Set<Object> unchanged = java.util.Collections.newSetFromMap(new java.util.IdentityHashMap<Object, Boolean>());
-            Map<String, FactHandle> oldAliases = old.handles == null ? new HashMap<String, FactHandle>() : old.handles.aliasHandles();
-            Map<FactHandle, FactHandle> moved = new java.util.IdentityHashMap<FactHandle, FactHandle>();
-            int count = 0;
-            for (int k = 0; k < oldHandles.size(); k++) {
-                Object fact = built.get(k);
-                if (fact == null) continue;
-                FactHandle nh = targets.get(k).insert(fact);
-                FactHandle oh = oldHandles.get(k);
-                moved.put(oh, nh);
-                mapped.put(DroolsInternals.objectOf(oh), fact);
-                unchanged.add(fact);
-                String id = theirs.idOf(DroolsInternals.objectOf(oh));
-                if (id != null && !types().isEvent(fact)) byId.put(id, nh);
-                if (handles != null) handles.alias(DroolsInternals.handleId(oh), DroolsInternals.identityHashCode(oh), nh);
-                count++;
-            }
-            if (handles != null) {
-                for (Map.Entry<String, FactHandle> a : oldAliases.entrySet()) {
-                    FactHandle nh = moved.get(a.getValue());
-                    if (nh == null) continue;
-                    String[] idHash = a.getKey().split(":");
-                    handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
-                }
-                handles.setUnchangedSinceMove(unchanged);
-            } else {
-                session.addEventListener(new org.kie.api.event.rule.DefaultRuleRuntimeEventListener() {
-                    @Override public void objectUpdated(org.kie.api.event.rule.ObjectUpdatedEvent e) {
-                        unchanged.remove(e.getOldObject());
-                        unchanged.remove(e.getObject());
-                    }
-                    @Override public void objectDeleted(org.kie.api.event.rule.ObjectDeletedEvent e) { unchanged.remove(e.getOldObject()); }
-                });
-            }
-            // the old session's pending matches: recorded (and consumed: it is discarded after the move)
-            final Map<String, Integer> pending = Refraction.emptyKeys();
-            final Map<Object, Object> byOld = mapped;
-            final java.util.Set<Object> cameAcross = unchanged;
-            try {
-                old.session.fireAllRules(match -> {
-                    Refraction.add(pending, Refraction.key(match.getRule().getName(), match.getObjects(), byOld, cameAcross));
-                    return false;
-                });
-            } catch (RuntimeException e) {
-                // an agenda that cannot even be walked: its matches count as pending (they fire here)
-            }
-            old.recorder.reset();
-            java.util.Set<String> unchangedRules = new java.util.HashSet<String>();
-            Object parsed = Json.parse(unchangedRulesJson);
-            if (parsed instanceof List) for (Object r : (List<?>) parsed) unchangedRules.add(String.valueOf(r));
-            // what had fired: the new version's first agenda over the facts that came across, minus the pending
-            Map<String, Integer> fired = firstAgenda(built, targets, globals, old, unchangedRules, cameAcross);
-            Refraction.subtract(fired, pending);
-            refraction = new Refraction(unchangedRules, unchanged, fired);
-            String focus = DroolsInternals.focusName(old.session);
-            if (focus != null && !focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
-            return "{\"ok\":true,\"facts\":" + count + "}";
+            return Carry.move(this, old, unchangedRulesJson);
         }
-    }
-
-    /**
-     * The keys (see {@link Refraction#key}) of the matches of {@code rules} that the new version
-     * holds over {@code built} before anything fires: found in a throwaway session of this version
-     * (same facts, same entry points, clock, globals and focus), whose agenda is walked without
-     * firing. This session's own agenda must not be walked: walking consumes the matches.
-     */
-    private Map<String, Integer> firstAgenda(List<Object> built, List<org.kie.api.runtime.rule.EntryPoint> targets,
-                                              Map<String, Object> globals, Session old, java.util.Set<String> rules,
-                                              java.util.Set<Object> facts) {
-        final Map<String, Integer> keys = Refraction.emptyKeys();
-        if (rules.isEmpty()) return keys;
-        KieSession probe = runner.newSession(false);
-        try {
-            if (Runner.declaresGlobal(probe.getKieBase(), "actions")) probe.setGlobal("actions", new Actions());
-            for (Map.Entry<String, Object> g : globals.entrySet()) probe.setGlobal(g.getKey(), g.getValue());
-            SessionClock probeClock = probe.getSessionClock();
-            long now = old.clock.getCurrentTime();
-            if (probeClock instanceof SessionPseudoClock && now > probeClock.getCurrentTime()) {
-                ((SessionPseudoClock) probeClock).advanceTime(now - probeClock.getCurrentTime(), TimeUnit.MILLISECONDS);
-            }
-            for (int k = 0; k < built.size(); k++) {
-                if (built.get(k) == null) continue;
-                probe.getEntryPoint(targets.get(k).getEntryPointId()).insert(built.get(k));
-            }
-            String focus = DroolsInternals.focusName(old.session);
-            if (focus != null && !focus.equals("MAIN")) probe.getAgenda().getAgendaGroup(focus).setFocus();
-            probe.fireAllRules(match -> {
-                String rule = match.getRule().getName();
-                if (rules.contains(rule)) Refraction.add(keys, Refraction.key(rule, match.getObjects(), null, facts));
-                return false;
-            });
-        } catch (RuntimeException e) {
-            // a probe that fails refracts nothing: every match fires again rather than one being lost
-            keys.clear();
-        } finally {
-            probe.dispose();
-        }
-        return keys;
-    }
-
-    private TypeRegistry types() { return runner.types(); }
-
-    private static String problem(String message) {
-        StringBuilder b = new StringBuilder("{\"ok\":false,\"message\":");
-        Json.quote(b, message);
-        return b.append('}').toString();
     }
 
     // ------------------------------------------------------------------ durable sessions (snapshot, restore)
@@ -593,146 +466,61 @@ public final class Session {
     /**
      * The session's state as JSON, for a durable session's snapshot: its facts in insertion order
      * (each with its entry point and every "id:hash" text clients may hold for it), the clock, the
-     * globals but {@code actions}, and the agenda focus. Taken only when the agenda holds nothing
-     * to fire (right after a full fire): {@link #restore} counts every match over these facts as
-     * fired. Returns {"ok":false,"message"} naming a fact that cannot be written.
+     * globals but {@code actions}, and the agenda focus. Reads only; what is pending on the agenda
+     * is {@link #takePending}'s. Returns {"ok":false,"message"} naming a fact that cannot be written.
      */
-    public synchronized String snapshot() {
-        if (disposed) return problem("the session is disposed");
-        TypeRegistry types = runner.types();
-        StringBuilder b = new StringBuilder(4096).append("{\"ok\":true,\"time\":").append(clock.getCurrentTime());
-        b.append(",\"facts\":[");
-        boolean first = true;
-        for (FactHandle h : Handles.all(session)) {
-            Object fact = DroolsInternals.objectOf(h);
-            if (fact instanceof Actions) continue;
-            StringBuilder json = new StringBuilder();
-            if (!types.writeFact(json, fact)) {
-                return problem("fact " + Handles.external(h) + " is not of a declared type (" + fact.getClass().getName() + ")");
-            }
-            if (!first) b.append(',');
-            first = false;
-            b.append("{\"ep\":");
-            Json.quote(b, DroolsInternals.entryPointName(h));
-            b.append(",\"keys\":[");
-            List<String> keys = handles != null ? handles.keysOf(h)
-                    : java.util.Collections.singletonList(DroolsInternals.handleId(h) + ":" + DroolsInternals.identityHashCode(h));
-            for (int k = 0; k < keys.size(); k++) {
-                if (k > 0) b.append(',');
-                Json.quote(b, keys.get(k));
-            }
-            b.append("],\"fact\":").append(json).append('}');
+    public synchronized String snapshot() { return Carry.snapshot(this); }
+
+    /**
+     * The matches pending on the agenda, in every agenda group, as a JSON list of keys naming facts
+     * by their place in {@link #snapshot}'s list (taken right after it): with it, a snapshot can be
+     * taken at any command boundary. The walk consumes them: this session must then be replaced
+     * by one restored from the snapshot ({@link #restoreFacts} then {@link #refract}).
+     */
+    public synchronized String takePending() { return Carry.takePending(this); }
+
+    /** Whether the rules name agenda groups besides MAIN (a full fire then leaves their matches pending). */
+    public synchronized boolean hasAgendaGroups() {
+        if (agendaGroups == null) agendaGroups = !DroolsInternals.agendaGroups(session.getKieBase()).isEmpty();
+        return agendaGroups;
+    }
+
+    private Boolean agendaGroups;
+    private Carry.Plan restoring;
+
+    /**
+     * Rebuilds a snapshot's state (see {@link #snapshot}) in this fresh session, then its
+     * refraction: every match over the restored facts, in every agenda group, counts as fired but
+     * the snapshot's {@code pending} ones (all, for a snapshot without that list, taken with nothing
+     * left to fire). Checks everything first: a snapshot that does not fit this version changes
+     * nothing and answers {"ok":false,"message"}.
+     */
+    public synchronized String restore(String snapshotJson) {
+        String answer = restoreFacts(snapshotJson);
+        if (restoring != null) {
+            Carry.refract(this, restoring, restoring.pending);
+            restoring = null;
         }
-        b.append("],\"globals\":{");
-        first = true;
-        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
-            for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
-                if (g.getName().equals("actions")) continue;
-                Object v = session.getGlobals().get(g.getName());
-                if (v == null) continue;
-                if (!first) b.append(',');
-                first = false;
-                Json.quote(b, g.getName());
-                b.append(':');
-                Json.write(b, v, types);
-            }
-        }
-        b.append("},\"focus\":");
-        String focus = DroolsInternals.focusName(session);
-        Json.quote(b, focus == null ? "MAIN" : focus);
-        return b.append('}').toString();
+        return answer;
     }
 
     /**
-     * Rebuilds a snapshot's state (see {@link #snapshot}) in this fresh session: the facts in
-     * their order into their entry points, the pseudo clock, the globals, the focus, the handles
-     * clients hold (as aliases), and refraction: every match over the restored facts counts as
-     * fired (the snapshot was taken with nothing left to fire), until a fire empties the agenda,
-     * as after {@link #moveFrom}. Checks everything first: a snapshot that does not fit this
-     * version changes nothing and answers {"ok":false,"message"}.
+     * The first half of {@link #restore}: the snapshot checked against this version (its facts,
+     * entry points and globals), nothing changed yet; {@link #refract} then restores it (with the
+     * pending matches taken from the session the snapshot was read from, once this half succeeded).
      */
-    public synchronized String restore(String snapshotJson) {
-        if (disposed) return problem("the session is disposed");
-        TypeRegistry mine = runner.types();
-        Map<?, ?> snap;
-        try {
-            snap = (Map<?, ?>) Json.parse(snapshotJson);
-        } catch (RuntimeException e) {
-            return problem("the snapshot is not readable JSON: " + Runner.rootMessage(e));
-        }
-        if (snap == null || !(snap.get("facts") instanceof List) || !(snap.get("time") instanceof Number)) {
-            return problem("the snapshot has no facts list or no time");
-        }
-        List<?> facts = (List<?>) snap.get("facts");
-        List<Object> built = new ArrayList<Object>(facts.size());
-        List<org.kie.api.runtime.rule.EntryPoint> targets = new ArrayList<org.kie.api.runtime.rule.EntryPoint>();
-        for (int k = 0; k < facts.size(); k++) {
-            if (!(facts.get(k) instanceof Map) || !(((Map<?, ?>) facts.get(k)).get("fact") instanceof Map)) {
-                return problem("snapshot fact " + k + " is not an object with a fact");
-            }
-            Map<?, ?> f = (Map<?, ?>) facts.get(k);
-            Map<?, ?> values = (Map<?, ?>) f.get("fact");
-            String type = String.valueOf(values.get("type"));
-            TypeRegistry.TypeInfo info = mine.type(type);
-            if (info == null) return problem("snapshot fact " + k + ": the version declares no type " + type);
-            try {
-                built.add(mine.build(info, values, 0));
-            } catch (TypeRegistry.FactProblem p) {
-                return problem("snapshot fact " + k + " (" + type + ") does not fit the version: " + p.getMessage());
-            }
-            org.kie.api.runtime.rule.EntryPoint ep = session.getEntryPoint(String.valueOf(f.get("ep")));
-            if (ep == null) return problem("snapshot fact " + k + ": the version has no entry point " + f.get("ep"));
-            targets.add(ep);
-        }
-        Map<String, Object> globals = new java.util.LinkedHashMap<String, Object>();
-        Map<?, ?> savedGlobals = snap.get("globals") instanceof Map ? (Map<?, ?>) snap.get("globals") : new HashMap<String, Object>();
-        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
-            for (org.kie.api.definition.rule.Global g : p.getGlobalVariables()) {
-                if (g.getName().equals("actions") || !savedGlobals.containsKey(g.getName())) continue;
-                try {
-                    Class<?> type = mine.declaredClass(g.getType());
-                    if (type == null) type = Class.forName(g.getType(), false, Session.class.getClassLoader());
-                    globals.put(g.getName(), mine.convertValue(g.getName(), type, savedGlobals.get(g.getName())));
-                } catch (Exception e) {
-                    return problem("global '" + g.getName() + "' does not fit the version: " + Runner.rootMessage(e));
-                }
-            }
-        }
-        // the state fits: from here on nothing can refuse
-        long now = ((Number) snap.get("time")).longValue();
-        if (clock instanceof SessionPseudoClock) advanceTo(now);
-        for (Map.Entry<String, Object> g : globals.entrySet()) session.setGlobal(g.getKey(), g.getValue());
-        java.util.Set<Object> restored = java.util.Collections.newSetFromMap(new java.util.IdentityHashMap<Object, Boolean>());
-        for (int k = 0; k < built.size(); k++) {
-            Object fact = built.get(k);
-            FactHandle nh = targets.get(k).insert(fact);
-            restored.add(fact);
-            String id = mine.idOf(fact);
-            if (id != null && !mine.isEvent(fact)) byId.put(id, nh);
-            Object keys = ((Map<?, ?>) facts.get(k)).get("keys");
-            if (handles != null && keys instanceof List) {
-                for (Object key : (List<?>) keys) {
-                    String[] idHash = String.valueOf(key).split(":");
-                    if (idHash.length != 2) continue;
-                    try {
-                        handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
-                    } catch (NumberFormatException e) {
-                        // a key that is no "id:hash" names no handle a client can hold
-                    }
-                }
-            }
-        }
-        if (handles != null) handles.setUnchangedSinceMove(restored);
-        java.util.Set<String> rules = new java.util.HashSet<String>();
-        for (org.kie.api.definition.KiePackage p : session.getKieBase().getKiePackages()) {
-            for (org.kie.api.definition.rule.Rule r : p.getRules()) rules.add(r.getName());
-        }
-        String focus = snap.get("focus") == null ? "MAIN" : String.valueOf(snap.get("focus"));
-        Map<String, Integer> fired = probeAgenda(built, targets, globals, now, focus, rules, restored);
-        refraction = new Refraction(rules, restored, fired);
-        if (!focus.equals("MAIN")) session.getAgenda().getAgendaGroup(focus).setFocus();
-        recorder.reset();
-        return "{\"ok\":true,\"facts\":" + built.size() + "}";
+    public synchronized String restoreFacts(String snapshotJson) {
+        if (disposed) return Carry.problem("the session is disposed");
+        StringBuilder answer = new StringBuilder();
+        restoring = Carry.restoreFacts(this, snapshotJson, answer);
+        return answer.toString();
+    }
+
+    /** The second half of {@link #restore}: the checked state restored, with these pending matches (a JSON list of keys). */
+    public synchronized void refract(String pendingJson) {
+        if (restoring == null) return;
+        Carry.refract(this, restoring, Json.parse(pendingJson));
+        restoring = null;
     }
 
     /**
@@ -740,16 +528,16 @@ public final class Session {
      * {@code nowText} names here: a durable session's replayed insert gets a new handle.
      */
     public synchronized String alias(String oldText, String nowText) {
-        if (handles == null) return problem("this session keeps no fact handles");
+        if (handles == null) return Carry.problem("this session keeps no fact handles");
         try {
             FactHandle now = handles.resolve(nowText);
             String[] parts = oldText.trim().split(":");
             handles.alias(Long.parseLong(parts[1]), Integer.parseInt(parts[2]), now);
             return "{\"ok\":true}";
         } catch (Handles.Stale e) {
-            return problem(e.getMessage());
+            return Carry.problem(e.getMessage());
         } catch (RuntimeException e) {
-            return problem("'" + oldText + "' is not a fact handle: " + Runner.rootMessage(e));
+            return Carry.problem("'" + oldText + "' is not a fact handle: " + Runner.rootMessage(e));
         }
     }
 
@@ -760,38 +548,5 @@ public final class Session {
         } catch (Handles.Stale e) {
             return null;
         }
-    }
-
-    /**
-     * The keys of the matches of {@code rules} over {@code built} before anything fires, found in
-     * a throwaway session of this version (see {@link #firstAgenda}; this one takes the clock and
-     * focus as values, for a restore that has no old session).
-     */
-    private Map<String, Integer> probeAgenda(List<Object> built, List<org.kie.api.runtime.rule.EntryPoint> targets,
-                                             Map<String, Object> globals, long now, String focus,
-                                             java.util.Set<String> rules, java.util.Set<Object> facts) {
-        final Map<String, Integer> keys = Refraction.emptyKeys();
-        if (rules.isEmpty() || built.isEmpty()) return keys;
-        KieSession probe = runner.newSession(false);
-        try {
-            if (Runner.declaresGlobal(probe.getKieBase(), "actions")) probe.setGlobal("actions", new Actions());
-            for (Map.Entry<String, Object> g : globals.entrySet()) probe.setGlobal(g.getKey(), g.getValue());
-            SessionClock probeClock = probe.getSessionClock();
-            if (probeClock instanceof SessionPseudoClock && now > probeClock.getCurrentTime()) {
-                ((SessionPseudoClock) probeClock).advanceTime(now - probeClock.getCurrentTime(), TimeUnit.MILLISECONDS);
-            }
-            for (int k = 0; k < built.size(); k++) probe.getEntryPoint(targets.get(k).getEntryPointId()).insert(built.get(k));
-            if (focus != null && !focus.equals("MAIN")) probe.getAgenda().getAgendaGroup(focus).setFocus();
-            probe.fireAllRules(match -> {
-                String rule = match.getRule().getName();
-                if (rules.contains(rule)) Refraction.add(keys, Refraction.key(rule, match.getObjects(), null, facts));
-                return false;
-            });
-        } catch (RuntimeException e) {
-            keys.clear();  // a probe that fails refracts nothing: matches fire again rather than one being lost
-        } finally {
-            probe.dispose();
-        }
-        return keys;
     }
 }
