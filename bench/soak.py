@@ -249,14 +249,18 @@ def slope_per_hour(rows: list[dict[str, Any]], key: str) -> float | None:
     return None if den == 0 else sum((t - mt) * (v - mv) for t, v in pts) / den * 60
 
 
-def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str) -> str:
+def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str,
+           hz: float = HZ, deploy_every_s: float = 60.0, parts: tuple[str, ...] = PARTS) -> str:
     lines = [SECTION, "",
              f"`bench/soak.py --minutes {minutes:g}` ({started}, {machine}; the load runs on the same cores): "
-             "`printeps serve` (1 worker, embedded database) under the teahouse entrance stream at 30 Hz, REST fires "
-             "of the reception rule set (2 connections, ~50/s), a stateful session opened, fired and closed every 2 s "
-             "(5 kept open) and a deploy of the reception rule set every minute. "
-             f"Load sent: {json.dumps(counts)}.", "",
-             "![Soak: RSS, JVM heap, journal backlog, open sessions and REST fire p99 over time](img/soak.svg)", "",
+             "`printeps serve` (1 worker, embedded database) under "
+             + "; ".join(what for part, what in (
+                 ("stream", f"the teahouse entrance stream at {hz:g} Hz"),
+                 ("fires", "REST fires of the reception rule set (2 connections, ~50/s)"),
+                 ("sessions", "a stateful session opened, fired and closed every 2 s (5 kept open)"),
+                 ("deploys", f"a deploy of the reception rule set every {deploy_every_s:g} s")) if part in parts)
+             + f". Load sent: {json.dumps(counts)}.", "",
+             "![Soak: RSS (all, gateway, database), database files, JVM heap and non-heap, classes, journal backlog, open sessions and REST fire p99 over time](img/soak.svg)", "",
              "| measure | first sample | last sample | max | slope per hour (second half) |", "|---|---|---|---|---|"]
     for title, key in PANELS:
         values = [r[key] for r in rows if r.get(key) is not None]
@@ -291,7 +295,8 @@ def main() -> None:
             server.wait(timeout=60)
     if args.rows:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
-    text = report(rows, counts, args.minutes, started, machine)
+    text = report(rows, counts, args.minutes, started, machine, args.hz, args.deploy_every_s,
+                  tuple(args.parts.split(",")))
     print(text)
     if args.write_docs:
         PLOT.parent.mkdir(parents=True, exist_ok=True)
