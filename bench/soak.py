@@ -34,11 +34,12 @@ import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from http_bench import free_port, start_server, teahouse_facts  # noqa: E402
-from report import machine_note, write_section  # noqa: E402
+from report import DOC, machine_note, write_section  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PLOT = ROOT / "docs" / "img" / "soak.svg"
 SECTION = "## Soak"
+READING = "<!-- hand-written reading below: bench/soak.py --write-docs keeps it -->"
 ENTRANCE = "http://printeps.org/cafe/entrance"
 HZ = 30
 
@@ -272,6 +273,17 @@ def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, s
     return "\n".join(lines)
 
 
+def kept_reading(doc: Path = DOC) -> str:
+    """The section's hand-written reading (from the READING marker to the next section), so a new
+    run replaces the figures and keeps what a person wrote about them (to be re-read, then)."""
+    current = doc.read_text() if doc.exists() else ""
+    if SECTION not in current:
+        return ""
+    rest = current.split(SECTION, 1)[1]
+    rest = rest[:rest.find("\n## ")] if "\n## " in rest else rest
+    return "\n\n" + rest[rest.find(READING):].strip() if READING in rest else ""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--minutes", type=float, default=60.0)
@@ -301,7 +313,7 @@ def main() -> None:
     if args.write_docs:
         PLOT.parent.mkdir(parents=True, exist_ok=True)
         PLOT.write_text(plot(rows, f"bench/soak.py, {started}, {args.minutes:g} min, 2 shared cores; linear scales"))
-        write_section(SECTION, text)
+        write_section(SECTION, text + kept_reading())
 
 
 if __name__ == "__main__":
