@@ -34,41 +34,68 @@ import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from http_bench import free_port, start_server, teahouse_facts  # noqa: E402
-from report import machine_note, write_section  # noqa: E402
+from report import DOC, machine_note, write_section  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PLOT = ROOT / "docs" / "img" / "soak.svg"
 SECTION = "## Soak"
+READING = "<!-- hand-written reading below: bench/soak.py --write-docs keeps it -->"
 ENTRANCE = "http://printeps.org/cafe/entrance"
 HZ = 30
 
 
-def rss_mb(pid: int) -> float:
-    """Resident memory of ``pid`` and its descendants (MB), from /proc."""
-    total, todo, seen = 0, [pid], set()
+def _rss_kb(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+def rss_split_mb(pid: int) -> dict[str, float]:
+    """Resident memory (MB) of the server process ``pid`` alone (``gateway``: Python and the JVM),
+    of its descendants that are the embedded database (``database``: a command line naming
+    secantus) and of everything together (``rss``), from /proc: the two grow for different reasons
+    (objects kept alive against stored data), so the soak plots them apart."""
+    parts = {"gateway": 0, "database": 0, "rss": 0}
+    todo, seen = [pid], set()
     while todo:
         p = todo.pop()
         if p in seen:
             continue
         seen.add(p)
         try:
-            for line in Path(f"/proc/{p}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    total += int(line.split()[1])
+            kb = _rss_kb(p)
+            parts["rss"] += kb
+            if p == pid:
+                parts["gateway"] += kb
+            elif b"secantus" in Path(f"/proc/{p}/cmdline").read_bytes().lower():
+                parts["database"] += kb
             for task in Path(f"/proc/{p}/task").iterdir():
-                children = (task / "children").read_text().split()
-                todo.extend(int(c) for c in children)
+                todo.extend(int(c) for c in (task / "children").read_text().split())
         except (FileNotFoundError, ProcessLookupError, PermissionError):
             continue
-    return total / 1024
+    return {k: round(v / 1024, 1) for k, v in parts.items()}
 
 
-def entrance_message(k: int, t0_ms: int) -> dict[str, Any]:
-    """The k-th reading: two people walking up to the entrance and away again (a 20 s cycle)."""
-    phase = (k % (20 * HZ)) / HZ
+def database_files_mb(pid: int) -> float | None:
+    """Size on disk (MB) of the embedded database's storage (``--storage-path`` of the secantus
+    child of ``pid``): stored data growing says the database's RSS may be its cache filling."""
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            args = Path(f"/proc/{child}/cmdline").read_bytes().decode(errors="replace").split("\0")
+            if "--storage-path" in args:
+                root = Path(args[args.index("--storage-path") + 1])
+                return round(sum(f.stat().st_size for f in root.rglob("*") if f.is_file()) / 2**20, 1)
+    return None
+
+
+def entrance_message(k: int, t0_ms: int, hz: float = HZ) -> dict[str, Any]:
+    """The k-th reading at ``hz``: two people walking up to the entrance and away again (a 20 s cycle)."""
+    cycle = max(1, int(20 * hz))
+    phase = (k % cycle) / hz
     distance = round(abs(10.0 - phase) / 2 + 1.0, 3)  # 6 m -> 1 m -> 6 m
-    party = f"p{k // (20 * HZ)}"
-    return {"stream": ENTRANCE, "timestamp": t0_ms + int(k * 1000 / HZ), "message": {
+    party = f"p{k // cycle}"
+    return {"stream": ENTRANCE, "timestamp": t0_ms + int(k * 1000 / hz), "message": {
         "id": f"e{k}", "number_of_customers": 2, "customers": [
             {"id": f"{party}a", "distance": distance, "age": 34, "gender": "female"},
             {"id": f"{party}b", "distance": distance + 0.05, "age": 36, "gender": "male"}]}}
@@ -77,8 +104,8 @@ def entrance_message(k: int, t0_ms: int) -> dict[str, Any]:
 class Load:
     """The mixed load's tasks and what they saw."""
 
-    def __init__(self, url: str, until: float) -> None:
-        self.url, self.until = url, until
+    def __init__(self, url: str, until: float, hz: float = HZ, deploy_every_s: float = 60.0) -> None:
+        self.url, self.until, self.hz, self.deploy_every_s = url, until, hz, deploy_every_s
         self.fire_latencies: list[float] = []
         self.counts = {"stream_posts": 0, "stream_errors": 0, "fires": 0, "fire_errors": 0, "sessions": 0,
                        "session_errors": 0, "deploys": 0, "deploy_errors": 0}
@@ -86,10 +113,10 @@ class Load:
     async def stream(self, client: httpx.AsyncClient) -> None:
         t0_ms, k, start = int(time.time() * 1000), 0, time.perf_counter()
         while time.perf_counter() < self.until:
-            r = await client.post("/api/streams", json=entrance_message(k, t0_ms))
+            r = await client.post("/api/streams", json=entrance_message(k, t0_ms, self.hz))
             self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
             k += 1
-            await asyncio.sleep(max(0.0, start + k / HZ - time.perf_counter()))
+            await asyncio.sleep(max(0.0, start + k / self.hz - time.perf_counter()))
 
     async def fires(self, client: httpx.AsyncClient) -> None:
         body = {"facts": teahouse_facts()}
@@ -126,7 +153,7 @@ class Load:
         current = (await client.get("/api/rulesets/reception")).json()["files"]
         n = 0
         while True:
-            await asyncio.sleep(60.0)
+            await asyncio.sleep(self.deploy_every_s)
             if time.perf_counter() >= self.until:
                 return
             n += 1
@@ -143,8 +170,12 @@ async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, 
         ordered = sorted(latencies)
         health = (await client.get("/health")).json()
         engine, store = health.get("engine", {}), health.get("store", {})
-        row = {"t_min": round((time.perf_counter() - started) / 60, 2), "rss_mb": round(rss_mb(pid), 1),
-               "heap_mb": (engine.get("jvm_heap") or {}).get("used"), "backlog": store.get("buffered"),
+        rss = rss_split_mb(pid)
+        non_heap = engine.get("jvm_non_heap") or {}
+        row = {"t_min": round((time.perf_counter() - started) / 60, 2), "rss_mb": rss["rss"],
+               "gateway_mb": rss["gateway"], "database_mb": rss["database"], "data_mb": database_files_mb(pid),
+               "heap_mb": (engine.get("jvm_heap") or {}).get("used"), "non_heap_mb": non_heap.get("used"),
+               "classes": non_heap.get("classes"), "backlog": store.get("buffered"),
                "sessions": engine.get("sessions"),
                "fire_p99_ms": round(ordered[int(0.99 * len(ordered))] * 1000, 2) if ordered else None,
                "fires": len(ordered)}
@@ -152,26 +183,37 @@ async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, 
         print(json.dumps(row), flush=True)
 
 
-async def soak(url: str, pid: int, minutes: float, every: float) -> tuple[list[dict[str, Any]], dict[str, int]]:
+PARTS = ("stream", "fires", "sessions", "deploys")
+
+
+async def soak(url: str, pid: int, minutes: float, every: float, hz: float = HZ, deploy_every_s: float = 60.0,
+               parts: tuple[str, ...] = PARTS) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """Runs the chosen ``parts`` of the load together (a part left out isolates what grows)."""
     started = time.perf_counter()
-    load = Load(url, started + minutes * 60)
+    load = Load(url, started + minutes * 60, hz, deploy_every_s)
     rows: list[dict[str, Any]] = []
     limits = httpx.Limits(max_connections=20)
     async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as client:
-        await asyncio.gather(load.stream(client), load.fires(client), load.fires(client), load.sessions(client),
-                             load.deploys(client), sample(load, client, pid, every, started, rows))
+        tasks = {"stream": [load.stream], "fires": [load.fires, load.fires], "sessions": [load.sessions],
+                 "deploys": [load.deploys]}
+        await asyncio.gather(*(task(client) for part in parts for task in tasks[part]),
+                             sample(load, client, pid, every, started, rows))
     return rows, load.counts
 
 
-PANELS = (("RSS, server and children (MB)", "rss_mb"), ("JVM heap in use (MB)", "heap_mb"),
+PANELS = (("RSS, server and children (MB)", "rss_mb"), ("RSS, gateway process (MB)", "gateway_mb"),
+          ("RSS, embedded database (MB)", "database_mb"), ("database files on disk (MB)", "data_mb"),
+          ("JVM heap in use (MB)", "heap_mb"),
+          ("JVM non-heap in use (MB)", "non_heap_mb"), ("JVM classes loaded", "classes"),
           ("journal backlog (decisions)", "backlog"), ("open sessions", "sessions"),
           ("REST fire p99 (ms)", "fire_p99_ms"))
 
 
 def plot(rows: list[dict[str, Any]], note: str) -> str:
-    """Five small panels over time (linear scales), as SVG: no plotting library needed."""
+    """Small panels over time (linear scales), as SVG: no plotting library needed."""
     w, h, pad = 300, 170, 46
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{2 * w + 20}" height="{3 * (h + 10) + 30}" '
+    rows_n = (len(PANELS) + 1) // 2
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{2 * w + 20}" height="{rows_n * (h + 10) + 30}" '
            'font-family="sans-serif" font-size="11">', '<rect width="100%" height="100%" fill="white"/>']
     t_max = max((r["t_min"] for r in rows), default=1) or 1
     for k, (title, key) in enumerate(PANELS):
@@ -192,7 +234,7 @@ def plot(rows: list[dict[str, Any]], note: str) -> str:
             path = " ".join(f"{x(t):.1f},{y(v):.1f}" for t, v in pts)
             out.append(f'<polyline points="{path}" fill="none" stroke="#1565c0" stroke-width="2"/>')
         out.append(f'<text x="{ox + w - 10}" y="{oy + h}" text-anchor="end" fill="#555">minutes</text>')
-    out.append(f'<text x="10" y="{3 * (h + 10) + 20}" fill="#555">{note}</text>')
+    out.append(f'<text x="10" y="{rows_n * (h + 10) + 20}" fill="#555">{note}</text>')
     out.append("</svg>")
     return "\n".join(out)
 
@@ -208,14 +250,18 @@ def slope_per_hour(rows: list[dict[str, Any]], key: str) -> float | None:
     return None if den == 0 else sum((t - mt) * (v - mv) for t, v in pts) / den * 60
 
 
-def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str) -> str:
+def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str,
+           hz: float = HZ, deploy_every_s: float = 60.0, parts: tuple[str, ...] = PARTS) -> str:
     lines = [SECTION, "",
              f"`bench/soak.py --minutes {minutes:g}` ({started}, {machine}; the load runs on the same cores): "
-             "`printeps serve` (1 worker, embedded database) under the teahouse entrance stream at 30 Hz, REST fires "
-             "of the reception rule set (2 connections, ~50/s), a stateful session opened, fired and closed every 2 s "
-             "(5 kept open) and a deploy of the reception rule set every minute. "
-             f"Load sent: {json.dumps(counts)}.", "",
-             "![Soak: RSS, JVM heap, journal backlog, open sessions and REST fire p99 over time](img/soak.svg)", "",
+             "`printeps serve` (1 worker, embedded database) under "
+             + "; ".join(what for part, what in (
+                 ("stream", f"the teahouse entrance stream at {hz:g} Hz"),
+                 ("fires", "REST fires of the reception rule set (2 connections, ~50/s)"),
+                 ("sessions", "a stateful session opened, fired and closed every 2 s (5 kept open)"),
+                 ("deploys", f"a deploy of the reception rule set every {deploy_every_s:g} s")) if part in parts)
+             + f". Load sent: {json.dumps(counts)}.", "",
+             "![Soak: RSS (all, gateway, database), database files, JVM heap and non-heap, classes, journal backlog, open sessions and REST fire p99 over time](img/soak.svg)", "",
              "| measure | first sample | last sample | max | slope per hour (second half) |", "|---|---|---|---|---|"]
     for title, key in PANELS:
         values = [r[key] for r in rows if r.get(key) is not None]
@@ -227,10 +273,25 @@ def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, s
     return "\n".join(lines)
 
 
+def kept_reading(doc: Path = DOC) -> str:
+    """The section's hand-written reading (from the READING marker to the next section), so a new
+    run replaces the figures and keeps what a person wrote about them (to be re-read, then)."""
+    current = doc.read_text() if doc.exists() else ""
+    if SECTION not in current:
+        return ""
+    rest = current.split(SECTION, 1)[1]
+    rest = rest[:rest.find("\n## ")] if "\n## " in rest else rest
+    return "\n\n" + rest[rest.find(READING):].strip() if READING in rest else ""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--minutes", type=float, default=60.0)
     parser.add_argument("--sample-s", type=float, default=10.0)
+    parser.add_argument("--hz", type=float, default=HZ, help="entrance stream rate (accelerated runs: higher)")
+    parser.add_argument("--deploy-every-s", type=float, default=60.0, help="seconds between deploys (accelerated: 5)")
+    parser.add_argument("--parts", default=",".join(PARTS), help=f"which loads to run, of {','.join(PARTS)}")
+    parser.add_argument("--rows", type=Path, help="also write the samples here (JSON lines)")
     parser.add_argument("--write-docs", action="store_true", help=f"write {PLOT.name} and the section of docs/benchmarks.md")
     args = parser.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
@@ -239,16 +300,20 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         server = start_server(Path(tmp), port)
         try:
-            rows, counts = asyncio.run(soak(f"http://127.0.0.1:{port}", server.pid, args.minutes, args.sample_s))
+            rows, counts = asyncio.run(soak(f"http://127.0.0.1:{port}", server.pid, args.minutes, args.sample_s,
+                                            args.hz, args.deploy_every_s, tuple(args.parts.split(","))))
         finally:
             server.terminate()
             server.wait(timeout=60)
-    text = report(rows, counts, args.minutes, started, machine)
+    if args.rows:
+        args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    text = report(rows, counts, args.minutes, started, machine, args.hz, args.deploy_every_s,
+                  tuple(args.parts.split(",")))
     print(text)
     if args.write_docs:
         PLOT.parent.mkdir(parents=True, exist_ok=True)
         PLOT.write_text(plot(rows, f"bench/soak.py, {started}, {args.minutes:g} min, 2 shared cores; linear scales"))
-        write_section(SECTION, text)
+        write_section(SECTION, text + kept_reading())
 
 
 if __name__ == "__main__":

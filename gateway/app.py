@@ -94,7 +94,8 @@ class Gateway:
         """Per part: ``{"status": "ok" | "degraded" | "down" | "not configured", ...}``."""
         report: dict[str, dict[str, Any]] = {
             "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()},
-                       "sessions": len(self.engine.session_manager.list()), "jvm_heap": jvm.heap()},
+                       "sessions": len(self.engine.session_manager.list()), "jvm_heap": jvm.heap(),
+                       "jvm_non_heap": jvm.non_heap()},
             "store": self.store.health() if self.store is not None else {"status": "not configured"},
             "ros": self.ros.health() if self.ros is not None else {"status": "not configured"},
             "actions": {"status": "ok", "handlers": sorted(self.actions.handlers), **self.actions.stats},

@@ -160,6 +160,10 @@ class StoreSettings(BaseModel):
         default=False,
         description="fsync every journalled write: survives a machine crash, not only a killed process (slower).")
     decision_facts_max: int = Field(default=1000, description="Facts kept per decision record (the count is kept).")
+    retention_days: dict[str, float] = Field(
+        default_factory=dict, description="Days each named collection keeps a document (by _meta.inserted_at), "
+        "expired by the database's TTL index, e.g. {decisions: 30, sensor_messages: 7}; 0 or absent: kept for ever. "
+        "Costs one index write per stored document. Never for the collections that hold state (session logs, catalog).")
     ship_from: Literal["process", "thread"] = Field(
         default="process", description="Where journalled writes are inserted into MongoDB: a shipper process "
         "of each gateway process (off the serving process's GIL: lower tail latency) or a thread of it.")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -50,6 +51,10 @@ log = logging.getLogger(__name__)
 
 Listener = Callable[[str, dict[str, Any]], None]
 DRAFT = "(draft)"
+# Per-deploy memos of an engine, each bounded: a process deploying every minute for months must
+# not keep one entry per version it ever served (found by bench/soak.py; see docs/benchmarks.md).
+DECLARED_KEPT = 64  # kmodule declarations by compiled hash (recomputed from the version on a miss)
+UNCHANGED_KEPT = 256  # unchanged rules by (rule set, old version, new version): a moving session's refraction
 KIND = "ruleset"
 
 
@@ -73,6 +78,17 @@ class LiveRuleSet:
     seq: int
 
 
+def _keep(memo: OrderedDict[Any, Any], key: Any, value: Any, limit: int) -> None:
+    """Remember ``value`` under ``key``, forgetting the oldest entries past ``limit``."""
+    memo.pop(key, None)
+    memo[key] = value
+    while len(memo) > limit:  # another thread may trim at the same time: forgetting is all this does
+        try:
+            memo.popitem(last=False)
+        except KeyError:
+            return
+
+
 class Engine(CatalogLifecycle):
     """Rule sets by name, each with a live version; thread-safe."""
 
@@ -86,9 +102,9 @@ class Engine(CatalogLifecycle):
         jvm.configure(self.settings.jvm)
         self._live: dict[str, LiveRuleSet] = {}
         self._listeners: list[Listener] = []
-        self._declared: dict[str, kmodule.Declarations] = {}  # compiled hash -> the sessions it declares
+        self._declared: OrderedDict[str, kmodule.Declarations] = OrderedDict()  # compiled hash -> its sessions
         self._recent = warmup.RecentRequests()  # each rule set's last requests' facts (warm-up samples)
-        self._unchanged: dict[tuple[str, int, int], list[str]] = {}
+        self._unchanged: OrderedDict[tuple[str, int, int], list[str]] = OrderedDict()
         self.rule_policy = policy.RulePolicy(tuple(self.settings.engine.rule_policy.allow))
         self._policy_verdicts: dict[str, bool] = {}  # content hash -> passes the rule policy
         self._explainers = explain.ExplainCache()
@@ -127,7 +143,7 @@ class Engine(CatalogLifecycle):
             raise CompileFailed(failed.errors + problems) if problems else failed from None
         if problems:
             raise CompileFailed(problems)
-        self._declared[compiled.hash] = kmodule.declarations(files)
+        _keep(self._declared, compiled.hash, kmodule.declarations(files), DECLARED_KEPT)
         if warm:
             warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s, recent=self.recent_requests(label))
         return compiled
@@ -577,18 +593,20 @@ class Engine(CatalogLifecycle):
         found = self._declared.get(compiled.hash)
         if found is None:
             found = kmodule.declarations(self.version(name, info.version).files)
-            self._declared[compiled.hash] = found
+            _keep(self._declared, compiled.hash, found, DECLARED_KEPT)
         return found
 
     def unchanged_rules(self, name: str, old: int, new: int) -> list[str]:
         """Rules whose text is the same in versions ``old`` and ``new`` (a moving session's
         matches of these do not fire again; see Refraction.java)."""
         key = (name, old, new)
-        if key not in self._unchanged:
+        found = self._unchanged.get(key)
+        if found is None:
             before = rule_fingerprints(self._rule_texts(self.version(name, old).files))
             after = rule_fingerprints(self._rule_texts(self.version(name, new).files))
-            self._unchanged[key] = sorted(r for r, digest in after.items() if before.get(r) == digest)
-        return self._unchanged[key]
+            found = sorted(r for r, digest in after.items() if before.get(r) == digest)
+            _keep(self._unchanged, key, found, UNCHANGED_KEPT)
+        return found
 
     @staticmethod
     def _rule_texts(files: dict[str, str]) -> list[str]:

@@ -56,6 +56,7 @@ def open_store(settings: Any, *, join_running: bool = False) -> ManagedStore:
                          backend="embedded" if embedded else "external", timeout_ms=cfg.timeout_ms,
                          spool_max_docs=cfg.spool_max_docs, retry_interval_s=cfg.retry_interval_s,
                          fsync=cfg.journal_fsync, linger_s=cfg.ship_linger_s,
-                         ship_process=cfg.ship_from == "process")
+                         ship_process=cfg.ship_from == "process", retention_days=cfg.retention_days)
     store.embedded = embedded
+    store.apply_retention()
     return store

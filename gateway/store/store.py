@@ -40,6 +40,22 @@ RULE_FIRINGS = "rule_firings"
 ACTIONS = "actions"
 
 
+RETENTION_INDEX = "retention"  # the TTL index on _meta.inserted_at (store.retention_days)
+
+
+def _set_ttl(coll: Any, seconds: int) -> None:
+    """Create, change (collMod) or, for 0 seconds, drop the retention TTL index of ``coll``."""
+    existing = coll.index_information().get(RETENTION_INDEX)
+    if seconds <= 0:
+        if existing is not None:
+            coll.drop_index(RETENTION_INDEX)
+        return
+    if existing is None:
+        coll.create_index("_meta.inserted_at", name=RETENTION_INDEX, expireAfterSeconds=seconds)
+    elif existing.get("expireAfterSeconds") != seconds:
+        coll.database.command("collMod", coll.name, index={"name": RETENTION_INDEX, "expireAfterSeconds": seconds})
+
+
 class StoreError(ValueError):
     """Bad arguments to the store (collection name, field, time range): what and where."""
 
@@ -95,7 +111,8 @@ class InformationState:
 
     def __init__(self, uri: str, database: str, journal_dir: Path, *, backend: str = "external",
                  timeout_ms: int = 1000, spool_max_docs: int = 200_000, retry_interval_s: float = 1.0,
-                 fsync: bool = False, linger_s: float = 0.0, ship_process: bool = False) -> None:
+                 fsync: bool = False, linger_s: float = 0.0, ship_process: bool = False,
+                 retention_days: Mapping[str, float] | None = None) -> None:
         self.uri = uri
         self.backend = backend
         self.process = process_name()  # stamped on every write (_meta.process)
@@ -103,6 +120,8 @@ class InformationState:
         self.client: pymongo.MongoClient = mongo_client(uri, timeout_ms)
         self.db = self.client[database]
         self._indexed: set[tuple[str, str]] = set()
+        self.retention_days = {check_collection(c): float(d) for c, d in (retention_days or {}).items()}
+        self._retained: set[str] = set()  # collections whose retention index is as configured
         # inserts made by a process of their own, off the serving process's GIL (gateway.store.shipper)
         self.shipper = ShipperProcess(uri, timeout_ms) if ship_process else None
         self.journal = Journal(Path(journal_dir), self._ship, max_docs=spool_max_docs, fsync=fsync,
@@ -152,6 +171,25 @@ class InformationState:
         ``_meta`` index to it (every index is a write per document)."""
         self._indexed.add((self.database, collection))
 
+    def apply_retention(self, *collections: str) -> None:
+        """Make the TTL index of each configured collection (all by default) say its
+        ``store.retention_days``: documents older than that (by ``_meta.inserted_at``) are then
+        deleted by the database itself (MongoDB's TTL monitor, SecantusDB's sweeper: once a
+        minute); 0 drops the index, so nothing expires any more.
+
+        Why TTL indexes: the high-volume collections (decisions, sensor_messages, rdf_events,
+        query_results) grow with traffic for ever otherwise, and the database expiring them needs
+        no job of the gateway's. The cost: one index write per stored document. Not fatal when the
+        database is away: retried at the next write of that collection."""
+        for collection in collections or tuple(self.retention_days):
+            days = self.retention_days[collection]
+            try:
+                _set_ttl(self.db[collection], int(days * 86400))
+            except PyMongoError as exc:
+                log.warning("Information State: retention of %s not set now: %s", collection, exc)
+                continue
+            self._retained.add(collection)
+
     def flush(self, timeout_s: float = 10.0) -> bool:
         """Wait until every write made so far is in the database; False if it is not reachable."""
         return self.journal.flush(timeout_s)
@@ -160,6 +198,8 @@ class InformationState:
         """Insert journalled writes (from the shipper process, or here); the documents the database
         refuses are set aside. Raises when the batch is not known to be in (it is then retried)."""
         create_index = (database, collection) not in self._indexed
+        if database == self.database and collection in self.retention_days and collection not in self._retained:
+            self.apply_retention(collection)
         if self.shipper is not None:
             refused = self.shipper.ship(database, collection, lines, create_index=create_index)
         else:

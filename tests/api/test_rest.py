@@ -146,6 +146,8 @@ def test_health_and_metrics(client, deployed):
     h = client.get("/health").json()
     assert h["status"] == "ok" and h["engine"]["rulesets"]["rest"] == 2
     assert h["store"]["status"] == "ok" and h["sync"]["status"] == "ok"
+    non_heap = h["engine"]["jvm_non_heap"]  # what the soak plots beside the heap (a deploy leak shows here)
+    assert 0 < non_heap["used"] <= non_heap["committed"] and non_heap["classes"] > 1000
     client.post("/api/rulesets/rest/fire", json={"facts": FACTS})
     text = client.get("/metrics").text
     assert 'printeps_fires_total{outcome="ok",ruleset="rest"}' in text

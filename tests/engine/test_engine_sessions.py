@@ -218,3 +218,25 @@ def test_a_move_with_unchanged_rules_is_invisible_on_every_random_rule_shape(eng
             for s in (still, moving):
                 s.close()
         engine.delete(name)
+
+
+def test_deploys_with_a_session_open_keep_a_bounded_memo_of_versions(engine, monkeypatch):
+    """bench/soak.py (a deploy a minute, sessions open): each move remembered the unchanged rules of
+    its (old, new) pair and each build its kmodule declarations, for ever. Now only the last few;
+    a forgotten one is recomputed, so the session still follows and fires."""
+    from gateway.engine import engine as engine_module
+
+    monkeypatch.setattr(engine_module, "UNCHANGED_KEPT", 3, raising=False)
+    monkeypatch.setattr(engine_module, "DECLARED_KEPT", 3, raising=False)
+    engine.deploy("memo", files("Seat0"), force=True)
+    session = engine.session_manager.open("memo", kind="rest")
+    for n in range(1, 8):
+        engine.deploy("memo", files(f"Seat{n}"), force=True)
+        assert session.version == n + 1  # the session moved: its unchanged rules were asked for
+    assert len(engine._unchanged) <= 3 and len(engine._declared) <= 3
+    engine.deploy("memo", files("Seat0"), force=True)  # an evicted content again (the compile cache has it)
+    assert engine.declared_sessions("memo") is not None
+    answer = session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "g", "party": 1}]},
+                              {"op": "fire", "max": -1}])
+    assert [a["params"]["text"] for a in answer.actions() if a["module"] == "say"] == ["Seat0 g"]
+    session.close()
