@@ -65,3 +65,47 @@ def store(mongo, tmp_path: Path):
     s = open_test_store(mongo, tmp_path)
     yield s
     s.close()
+
+
+TESTS = Path(__file__).resolve().parent
+# Run as one unit on one xdist worker: the ROS tests check that no DDS shared-memory files
+# (/dev/shm, machine-wide) are left behind, which another worker's ROS test would be creating.
+ONE_WORKER_DIRS = ("ros",)
+
+
+def _unit(path: Path) -> str | None:
+    """The folder whose tests must share a worker, if ``path`` is in one."""
+    relative = path.relative_to(TESTS) if path.is_relative_to(TESTS) else path
+    return relative.parts[0] if len(relative.parts) > 1 and relative.parts[0] in ONE_WORKER_DIRS else None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On pytest-xdist workers (`make test`), the long units are handed out first: the files
+    holding `slow` tests and the one-worker folders.
+
+    Why: `--dist loadfile` gives each worker a whole file at a time, in collection order; a browser
+    story or cluster file of minutes handed out last leaves the other worker idle that long. The
+    longest first keeps the two busy to the end. The order inside each file stays as written, and a
+    run in one process keeps the usual order. Every worker collects the same list, as xdist needs."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    long_files = {item.path for item in items if item.get_closest_marker("slow") or _unit(item.path)}
+    items.sort(key=lambda item: item.path not in long_files)  # stable: files and tests keep their order
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """`--dist loadfile`, except that each of ONE_WORKER_DIRS goes to one worker as a whole."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LoadFileAndFolderScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            scope = super()._split_scope(nodeid)
+            parts = Path(scope).parts
+            if len(parts) > 2 and parts[0] == TESTS.name and parts[1] in ONE_WORKER_DIRS:
+                return str(Path(*parts[:2]))
+            return scope
+
+    return LoadFileAndFolderScheduling(config, log)
