@@ -62,14 +62,21 @@ run: install
 serve: install
 	$(BIN)/printeps serve
 
+# Two pytest-xdist workers, each with its own JVM, SecantusDB, browser and ROS domains, one test
+# file per worker at a time (--dist loadfile: a file's module fixtures are built once). A single
+# pytest process keeps one of the two cores idle most of the time (docs/operations.md, "Where the
+# suite's time goes"). TEST_WORKERS=0 runs everything in one process.
+TEST_WORKERS ?= 2
+PYTEST_RUN   := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile
+
 # Everything, slow tests included (what CI runs). Under CI=true a skipped test is a failure unless
 # tests/skip_allowlist.txt names it with its reason.
 test: install browser node
-	$(BIN)/pytest
+	$(PYTEST_RUN)
 
 # The inner loop: everything but the tests marked `slow` (long soaks, cluster faults, browser stories).
 test-fast: install browser node
-	$(BIN)/pytest -m "not slow"
+	$(PYTEST_RUN) -m "not slow"
 
 bench: install
 	$(BIN)/python bench/run_all.py

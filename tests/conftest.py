@@ -65,3 +65,57 @@ def store(mongo, tmp_path: Path):
     s = open_test_store(mongo, tmp_path)
     yield s
     s.close()
+
+
+TESTS = Path(__file__).resolve().parent
+# The tests that use ROS 2 run as one unit on one xdist worker: tests/ros/test_process.py checks
+# that no DDS shared-memory files (/dev/shm, machine-wide) are left behind, which another worker's
+# ROS test would be creating meanwhile. Every test marked `ros` must be under one of these
+# (checked at collection).
+ROS_UNIT = ("ros", "workflow/test_ros.py", "sync/test_gateway_record.py", "demo/test_demo.py")
+
+
+def _in_ros_unit(path: Path | str) -> bool:
+    relative = Path(path).relative_to(TESTS) if Path(path).is_relative_to(TESTS) else Path(path)
+    if relative.parts[:1] == (TESTS.name,):  # a node id: tests/ros/test_node.py
+        relative = Path(*relative.parts[1:])
+    return any(relative == Path(unit) or Path(unit) in relative.parents for unit in ROS_UNIT)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On pytest-xdist workers (`make test`), the long units are handed out first: the files
+    holding `slow` tests and the ROS unit.
+
+    Why: `--dist loadfile` gives each worker a whole file at a time, in collection order; a browser
+    story or cluster file of minutes handed out last leaves the other worker idle that long. The
+    longest first keeps the two busy to the end. The order inside each file stays as written, and a
+    run in one process keeps the usual order. Every worker collects the same list, as xdist needs."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    for item in items:
+        if item.get_closest_marker("ros") and not _in_ros_unit(item.path):
+            item.add_marker(pytest.mark.outside_ros_unit)
+    long_files = {item.path for item in items if item.get_closest_marker("slow") or _in_ros_unit(item.path)}
+    items.sort(key=lambda item: item.path not in long_files)  # stable: files and tests keep their order
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A `ros` test outside ROS_UNIT fails, naming the list to add its file to."""
+    if item.get_closest_marker("outside_ros_unit"):
+        pytest.fail(f"{item.nodeid} is marked `ros` but its file is not in ROS_UNIT (tests/conftest.py): "
+                    "under xdist it would run beside the other ROS tests", pytrace=False)
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """`--dist loadfile`, except that the files of ROS_UNIT go to one worker as a whole."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LoadFileAndFolderScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            scope = super()._split_scope(nodeid)
+            return "ROS_UNIT" if _in_ros_unit(scope) else scope
+
+    return LoadFileAndFolderScheduling(config, log)

@@ -36,15 +36,15 @@ def small_suite(tmp_path: Path) -> Path:
     return tmp_path
 
 
-def run(folder: Path, ci: str | None, allowlist: str = "allow.txt") -> subprocess.CompletedProcess:
+def run(folder: Path, ci: str | None, allowlist: str = "allow.txt", *options: str) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "CI"}
     env.update(PYTHONPATH=os.pathsep.join([str(TESTS), env.get("PYTHONPATH", "")]),
                PRINTEPS_SKIP_ALLOWLIST=str(folder / allowlist))
     if ci is not None:
         env["CI"] = ci
-    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", "--rootdir",
-                           str(folder), str(folder)], cwd=folder, env=env, capture_output=True, text=True,
-                          timeout=120)
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", *options,
+                           "--rootdir", str(folder), str(folder)], cwd=folder, env=env, capture_output=True, text=True,
+                          timeout=300)  # a loaded 2-core machine: an xdist run took 3 min
 
 
 def test_in_ci_an_unlisted_skip_fails_and_names_the_allowlist(small_suite):
@@ -55,6 +55,16 @@ def test_in_ci_an_unlisted_skip_fails_and_names_the_allowlist(small_suite):
     # a module skipped as a whole fails the run too, named at its end
     assert "FAILED (skipped module) test_whole_module.py was skipped under CI=true" in out.stdout
     # the listed test (every parameter) is still a skip, the passing one passes
+    assert "1 failed, 1 passed, 3 skipped" in out.stdout, out.stdout
+
+
+def test_in_ci_on_xdist_workers_an_unlisted_skip_still_fails(small_suite):
+    """`make test` runs the suite on pytest-xdist workers: the skips found there (in a test, or of
+    a whole module at collection) reach the controller and still fail the run."""
+    out = run(small_suite, "true", "allow.txt", "-n", "1", "--dist", "loadfile")
+    assert out.returncode == 1, out.stdout
+    assert "test_skips_without_reason_to was skipped under CI=true" in out.stdout
+    assert "FAILED (skipped module) test_whole_module.py was skipped under CI=true" in out.stdout
     assert "1 failed, 1 passed, 3 skipped" in out.stdout, out.stdout
 
 
