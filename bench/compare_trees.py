@@ -14,6 +14,7 @@ process with ``PYTHONPATH=<tree>`` and ``cwd=<tree>`` (the existing benches' fun
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -22,12 +23,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import http_bench as hb  # noqa: E402
-from report import machine_note, write_section  # noqa: E402
+import http_bench as hb
+from report import machine_note, write_section
 
 SECTION = "## Before and after the restructuring (issue 27)"
 ORDER = ("before", "after", "after", "before")  # repeated: each pair of rounds sees the same drift
@@ -56,7 +57,7 @@ def use_tree(tree: Path) -> None:
 
 def child(tree: Path, args: list[str], timeout: float) -> str:
     """Run ``python args`` in ``tree`` with that tree's code; its stdout (the error's tail if it fails)."""
-    done = subprocess.run([sys.executable, *args], cwd=tree, env={**os.environ, "PYTHONPATH": str(tree)},
+    done = subprocess.run([sys.executable, *args], check=False, cwd=tree, env={**os.environ, "PYTHONPATH": str(tree)},
                           capture_output=True, text=True, timeout=timeout)
     if done.returncode != 0:
         raise RuntimeError(f"{args[0]} failed in {tree} (exit {done.returncode}): {done.stderr[-2000:]}")
@@ -73,8 +74,9 @@ def rest(tree: Path, work: Path, args: argparse.Namespace) -> dict[str, float]:
     fire = hb.request_bytes("POST", "/api/rulesets/reception/fire", json.dumps({"facts": facts}).encode())
     kie = hb.request_bytes("POST", "/kie-server/services/rest/server/containers/instances/reception",
                            json.dumps(hb.kie_batch(facts)).encode())
-    rows = hb.measure(work / "server", [("fire8", fire, 8, b'"decision_id"'), ("fire2", fire, 2, b'"decision_id"'),
-                                        ("kie8", kie, 8, b'"SUCCESS"')], args.seconds)
+    with contextlib.redirect_stdout(sys.stderr):  # its progress lines: stdout keeps one JSON line per round
+        rows = hb.measure(work / "server", [("fire8", fire, 8, b'"decision_id"'), ("fire2", fire, 2, b'"decision_id"'),
+                                            ("kie8", kie, 8, b'"SUCCESS"')], args.seconds)
     errors = sum(r["errors"] for r in rows.values())
     if errors:
         raise RuntimeError(f"REST run in {tree}: {errors} failed requests")
@@ -85,7 +87,10 @@ def rest(tree: Path, work: Path, args: argparse.Namespace) -> dict[str, float]:
 
 def stream(tree: Path, work: Path, args: argparse.Namespace) -> dict[str, float]:
     out = child(tree, ["-c", STREAM_CHILD, str(args.stream_seconds), str(args.general_seconds)], 600)
-    data = json.loads(next(x for x in out.splitlines() if x.startswith("COMPARE "))[8:])
+    line = next((x for x in out.splitlines() if x.startswith("COMPARE ")), None)
+    if line is None:
+        raise RuntimeError(f"no result line from the stream child in {tree}: {out[-1000:]}")
+    data = json.loads(line[8:])
     return {"stream step p50 (wall)": data["wall"], "stream step p50 (CPU)": data["cpu"]}
 
 
@@ -104,10 +109,13 @@ MEASURES: dict[str, Callable[[Path, Path, argparse.Namespace], dict[str, float]]
 def one_round(n: int, side: str, tree: Path, work: Path, args: argparse.Namespace) -> dict:
     """Every chosen measure once against ``tree``; the round's JSON record."""
     use_tree(tree)
-    record: dict = {"round": n, "tree": side, "time": time.strftime("%H:%M:%S"), "load": os.getloadavg()[0]}
+    record: dict = {"round": n, "tree": side, "time": time.strftime("%H:%M:%S"), "load": round(os.getloadavg()[0], 2)}
     t0 = time.monotonic()
     for name in args.measures:
-        record.update({k: round(v, 3) for k, v in MEASURES[name](tree, work / f"r{n}-{name}", args).items()})
+        try:
+            record.update({k: round(v, 3) for k, v in MEASURES[name](tree, work / f"r{n}-{name}", args).items()})
+        except (RuntimeError, subprocess.SubprocessError, OSError, ValueError) as exc:  # one failure loses no round
+            record[f"error {name}"] = str(exc)[-500:]
     record["seconds"] = round(time.monotonic() - t0, 1)
     return record
 
@@ -125,20 +133,32 @@ def report(records: list[dict], args: argparse.Namespace, note: str) -> str:
         ok = ratio >= 1 if higher else ratio <= 1
         lines.append(f"| {metric} | {b:.2f} {unit} | {a:.2f} {unit} | {ratio:.2f} | "
                      f"{'higher' if higher else 'lower'} | {'yes' if ok else 'no'} |")
+    errors = [f"- round {r['round']} ({r['tree']}): {k}: {v}" for r in records for k, v in r.items()
+              if k.startswith("error ")]
     loads = ", ".join(f"{r['round']} {r['tree']} {r['time']} load {r['load']:.1f}" for r in records)
     head = (f"`bench/compare_trees.py --before {args.before} --after {args.after} --rounds {args.rounds} "
             f"--budget {args.budget:.0f} --seconds {args.seconds:g} --stream-seconds {args.stream_seconds:g} "
             f"--ros-trials {args.ros_trials}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
             f"(before, after, after, before, ...); each measure runs the tree's own code (PYTHONPATH and cwd = the "
             f"tree); medians over each tree's rounds; the ratio is after/before in the same run.")
-    return "\n".join([SECTION, "", head, "", *lines, "", f"Load average (1 min) at the start of each round: {loads}."])
+    return "\n".join([SECTION, "", head, "", *lines, "", f"Load average (1 min) at the start of each round: {loads}.",
+                      *(["", "Failed measures (not in the medians):", *errors] if errors else [])])
+
+
+def fits(records: list[dict], start: float, budget: float) -> bool:
+    """Whether one more pair of rounds, as long as the mean round so far, ends within the budget."""
+    if not records:
+        return True
+    mean = statistics.fmean(r["seconds"] for r in records)
+    return time.monotonic() - start + 2 * mean <= budget
 
 
 def parse() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--before", type=Path, required=True, help="tree before the change (a git checkout)")
     parser.add_argument("--after", type=Path, required=True, help="tree after the change; --write-docs writes here")
-    parser.add_argument("--budget", type=float, default=600, help="seconds: no new pair of rounds starts after it")
+    parser.add_argument("--budget", type=float, default=600,
+                        help="seconds for the whole run: a new pair of rounds starts only if it should end within it")
     parser.add_argument("--rounds", type=int, default=0, help="at most this many rounds (even; 0: the budget decides)")
     parser.add_argument("--seconds", type=float, default=5.0, help="per engine and REST run")
     parser.add_argument("--stream-seconds", type=float, default=20.0, help="stream length for the papers' query")
@@ -169,10 +189,10 @@ def main() -> None:
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="compare-trees-") as tmp:
         n = 0
-        while (not args.rounds or n < args.rounds) and (n % 2 or time.monotonic() - start < args.budget):
+        while (not args.rounds or n < args.rounds) and (n % 2 or fits(records, start, args.budget)):
             side = ORDER[n % len(ORDER)]
             records.append(one_round(n + 1, side, trees[side], Path(tmp), args))
-            print(json.dumps(records[-1]), flush=True)
+            print(json.dumps(records[-1], ensure_ascii=False), flush=True)
             n += 1
     args.rounds = n
     text = report(records, args, note)
