@@ -138,7 +138,7 @@ def report(records: list[dict], args: argparse.Namespace, note: str) -> str:
     loads = ", ".join(f"{r['round']} {r['tree']} {r['time']} load {r['load']:.1f}" for r in records)
     head = (f"`bench/compare_trees.py --before {args.before} --after {args.after} --rounds {args.rounds} "
             f"--budget {args.budget:.0f} --seconds {args.seconds:g} --stream-seconds {args.stream_seconds:g} "
-            f"--ros-trials {args.ros_trials}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
+            f"--ros-trials {args.ros_trials} --measures {','.join(args.measures)}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
             f"(before, after, after, before, ...); each measure runs the tree's own code (PYTHONPATH and cwd = the "
             f"tree); medians over each tree's rounds; the ratio is after/before in the same run.")
     return "\n".join([SECTION, "", head, "", *lines, "", f"Load average (1 min) at the start of each round: {loads}.",
