@@ -3,14 +3,26 @@ the one composition root (:func:`gateway.app.build_gateway`)."""
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
 import contextlib
 import itertools
 import os
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable, Coroutine, TypeVar
+
+T = TypeVar("T")
 
 _databases = itertools.count(1)
+
+
+def run_async(coro: Coroutine[Any, Any, T]) -> T:
+    """``asyncio.run(coro)`` on a thread of its own: the session's browser (Playwright's sync API)
+    keeps an event loop running on the main thread once a browser test has run in this process
+    (with pytest-xdist any test file may come after one), and asyncio.run refuses to start there."""
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="test-async") as pool:
+        return pool.submit(asyncio.run, coro).result()
 
 
 def wait_for(cond: Callable[[], object], timeout_s: float = 30.0, step: float = 0.05) -> bool:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 
 import pytest
 
@@ -16,6 +15,7 @@ from gateway.api.jsonio import BadBody, json_depth_ok, parse_json
 from gateway.api.limits import BodyLimit
 from gateway.api.routes.rulesets import facts_from_body, file_diffs
 from gateway.config import ApiSettings, load_settings
+from gw_testing import run_async
 
 
 def test_tokens_and_users_parse_from_env_strings(monkeypatch):
@@ -173,7 +173,7 @@ def _run_asgi(app, headers, chunks):
         sent.append(message)
 
     scope = {"type": "http", "headers": headers}
-    asyncio.run(app(scope, receive, send))
+    run_async(app(scope, receive, send))
     return sent
 
 

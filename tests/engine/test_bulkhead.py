@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
 import threading
 
 import pytest
 
 from gateway.engine.bulkhead import Bulkhead
 from gateway.engine.errors import Overloaded
-from gw_testing import wait_for
+from gw_testing import run_async, wait_for
 
 
 def test_threads_are_bounded_and_the_queue_refuses_at_once_when_full():
@@ -53,7 +52,7 @@ def test_run_answers_on_the_event_loop_and_passes_errors_on():
             await bulkhead.run(lambda: 1 / 0)
         return value, threading.current_thread().name
 
-    worker, loop_thread = asyncio.run(main())
+    worker, loop_thread = run_async(main())
     assert worker == "fire-set" and loop_thread != worker
 
 

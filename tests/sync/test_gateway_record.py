@@ -260,9 +260,9 @@ def test_export_and_import_commands_join_a_running_gateway(tmp_path):
         imported = cli("import", str(out), "--comment", "from git")
         assert imported.returncode == 0, imported.stdout + imported.stderr
         assert "rule set reception: deployed v2" in imported.stdout
-        facts = {"facts": RECEPTION_FACTS[:1] + [dict(RECEPTION_FACTS[1], id="b"), dict(RECEPTION_FACTS[1], id="c")]
-                 + RECEPTION_FACTS[2:]}
-        facts["facts"][0]["number_of_customers"] = 2
+        # copies: the module's RECEPTION_FACTS are shared with other tests (test_decision_format)
+        facts = {"facts": [dict(RECEPTION_FACTS[0], number_of_customers=2), dict(RECEPTION_FACTS[1], id="b"),
+                           dict(RECEPTION_FACTS[1], id="c"), *RECEPTION_FACTS[2:]]}
 
         def says() -> str:
             answer = httpx.post(f"http://127.0.0.1:{port}/api/rulesets/reception/fire", json=facts, timeout=10).json()
