@@ -150,7 +150,7 @@ def in_process_fire(tmp: Path, facts: list[dict], seconds: float) -> dict:
     code = (
         "import json,sys,time;from gateway.config import Settings;from gateway.engine import Engine\n"
         f"s=Settings.model_validate({{'data_dir': {str(tmp / 'inproc')!r}, 'engine': {{'rules_dir': {str(RULES)!r}}}}})\n"
-        "e=Engine(s);e.seed(s.engine.rules_dir);facts=json.loads(sys.argv[1]);secs=float(sys.argv[2])\n"
+        "e=Engine(s);e.seed(s.engine.rules_dir) if hasattr(e, 'seed') else e.seed_from();facts=json.loads(sys.argv[1]);secs=float(sys.argv[2])\n"
         "end=time.perf_counter()+3\n"
         "while time.perf_counter()<end: e.fire('reception',facts)\n"
         "lat=[];t=time.perf_counter();end=t+secs\n"
