@@ -429,15 +429,20 @@ class _Parser:
             raise NotPlain("a call on a bound variable")
         self.take(".")
         method = self.name()
+        args = self.arguments()
+        self.take(";")
+        return {"target": target, "method": method, "args": args}
+
+    def arguments(self) -> list[Any]:
+        """``( a, b, … )``: a call's arguments, each read by :meth:`argument`."""
         self.take("(")
-        args = []
+        args: list[Any] = []
         while self.peek()[1] != ")":
             if args:
                 self.take(",")
             args.append(self.argument())
         self.take(")")
-        self.take(";")
-        return {"target": target, "method": method, "args": args}
+        return args
 
     def argument(self) -> dict[str, Any]:
         """A literal, a bound variable ``$v``, a getter ``$v.getX()``, or a text built with ``+`` from
@@ -483,13 +488,7 @@ class _Parser:
         method = self.name()
         if method in REFLECTION_MEMBERS:
             raise NotPlain(f"reflection ({owner}.{method})")
-        self.take("(")
-        args = []
-        while self.peek()[1] != ")":
-            if args:
-                self.take(",")
-            args.append(self.argument())
-        self.take(")")
+        args = self.arguments()
         if self.peek()[1] == ".":
             raise NotPlain("a call on the result of a call")
         return {"static": owner, "method": method, "args": args}
