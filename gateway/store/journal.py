@@ -237,6 +237,7 @@ class Journal:
         self._in_hand: list[Entry] = []  # the batch being shipped (back to the queue if shipping breaks)
         self._stop = False
         self._adopted: deque[tuple[str, str, bytes]] = deque()
+        self._adopted_in_hand: list[tuple[str, str, bytes]] = []  # the adopted chunk being shipped
         self._adopt_pending = 0
         self._adopted_files: list[tuple[Path, int]] = []
         self._adopt_lock = threading.Lock()  # the shipper's periodic look and catch_up() adopt one at a time
@@ -290,6 +291,8 @@ class Journal:
                 with self._lock:
                     self._pending.extendleft(reversed(self._in_hand))
                     self._in_hand = []
+                    self._adopted.extendleft(reversed(self._adopted_in_hand))
+                    self._adopted_in_hand = []
                 time.sleep(self.retry_interval_s)
 
     def _ship_until_stopped(self) -> None:
@@ -473,22 +476,35 @@ class Journal:
                 os.close(adopted[0])
 
     def _ship_adopted(self) -> bool:
-        """Ship what was adopted from dead processes; False if a try failed (retried later)."""
-        while self._adopted:
-            chunk = self._take(self._adopted, lambda adopted: adopted[2])
+        """Ship what was adopted from dead processes; False if a try failed (retried later).
+
+        The chunk being shipped is held in ``_adopted_in_hand`` (as ``_in_hand`` holds this
+        process's batch), so :meth:`flush` and :meth:`catch_up` wait for it: taken off
+        ``_adopted`` and not yet in the database, it was counted nowhere, and a rebuild read the
+        database without a dead owner's last acknowledged entries (issue 28)."""
+        while True:
+            with self._lock:
+                if not self._adopted:
+                    # every adopted file's entries are shipped (a file and its entries are added together)
+                    files, self._adopted_files = self._adopted_files, []
+                    break
+                chunk = self._take(self._adopted, lambda adopted: adopted[2])
+                self._adopted_in_hand = chunk
             groups: dict[tuple[str, str], list[bytes]] = {}
             for database, collection, line in chunk:
                 groups.setdefault((database, collection), []).append(line)
             for (database, collection), lines in groups.items():
                 if not self._try_ship(database, collection, lines):
-                    self._adopted.extendleft(reversed(chunk))
+                    with self._lock:
+                        self._adopted.extendleft(reversed(chunk))
+                        self._adopted_in_hand = []
                     return False
             with self._lock:
                 self._adopt_pending -= len(chunk)
-        for path, fd in self._adopted_files:
+                self._adopted_in_hand = []
+        for path, fd in files:
             _unlink_quietly(path)
             os.close(fd)
-        self._adopted_files = []
         return True
 
     # ---- waiting and closing ---------------------------------------------------------------------
@@ -504,8 +520,8 @@ class Journal:
                 self._flushing -= 1
 
     def _wait_shipped(self, deadline: float) -> bool:
-        """(lock held) Wait until nothing is pending, in flight or adopted."""
-        while self._pending or self._in_hand or self._adopted:
+        """(lock held) Wait until nothing is pending, in flight or adopted (queued or in flight)."""
+        while self._pending or self._in_hand or self._adopted or self._adopted_in_hand:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return False

@@ -11,6 +11,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -282,4 +283,34 @@ def test_catch_up_ships_a_dead_writers_segments_now_and_waits_for_another_adopte
             os.close(fd)
         assert journal.catch_up(5, (dead_pid,))
     finally:
+        journal.close()
+
+
+def test_flush_and_catch_up_wait_for_the_adopted_writes_still_being_shipped(tmp_path: Path) -> None:
+    """Issue 28: a dead owner's last acknowledged entry went missing from a durable session
+    rebuilt elsewhere. The shipper had taken the adopted chunk holding it off the queue and was
+    still shipping it, and neither flush nor catch_up counted it: they returned, the rebuild
+    read the database without it. Both must wait until the chunk is in."""
+    dead_pid = 999_999_999
+    (tmp_path / f"{dead_pid}-1-1.jsonl").write_bytes(b"".join(encode("db", "c", {"id": f"d{k}"}) for k in range(3)))
+    shipping, release = threading.Event(), threading.Event()
+    shipped: list[str] = []
+
+    def ship(db: str, c: str, lines: list[bytes]) -> None:
+        shipping.set()
+        assert release.wait(10)
+        shipped.extend(json.loads(x)["d"]["id"] for x in lines)
+
+    journal = Journal(tmp_path, ship, adopt_interval_s=3600)  # adopts the dead writer's segment as it starts
+    try:
+        assert shipping.wait(5)  # the adopted chunk is in the shipper's hands, not in the database
+        assert not journal.flush(0.3)
+        assert not journal.catch_up(0.3)  # no gone pid named: the rebuild after a forward found its owner gone
+        assert shipped == []
+        release.set()
+        assert journal.catch_up(5)
+        assert shipped == ["d0", "d1", "d2"]
+        assert wait_for(lambda: not list(tmp_path.glob(f"{dead_pid}-*.jsonl")), 5)  # deleted once shipped
+    finally:
+        release.set()
         journal.close()
