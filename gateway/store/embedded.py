@@ -60,6 +60,28 @@ class EmbeddedDbHeld(EmbeddedDbError):
             f"{owner.get('pid', '?')} first.")
 
 
+def _wait_for_previous_daemon(data_dir: Path, timeout_s: float) -> None:
+    """Wait (up to ``timeout_s``) until the database daemon of this data dir's previous owner is gone.
+
+    Why: an owner killed with SIGKILL drops its lock at once, but its daemon only then gets SIGINT
+    (PR_SET_PDEATHSIG) and shuts down with the storage still open; a new daemon started meanwhile
+    exits with code 1 (a lone restart right after a SIGKILL, seen in bench/durable_sessions.py)."""
+    try:
+        pid = int((data_dir / "daemon.pid").read_text(encoding="utf-8").strip())
+    except (OSError, ValueError):
+        return
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            return  # gone
+        if DAEMON.encode() not in cmdline:
+            return  # the pid was reused by something else
+        time.sleep(0.1)
+    log.warning("the previous %s (pid %s) of %s is still running after %.0f s", DAEMON, pid, data_dir, timeout_s)
+
+
 def running_owner(data_dir: Path) -> dict | None:
     """``owner.json`` of the live process running the embedded database in ``data_dir``, else None."""
     data_dir = Path(data_dir)
@@ -120,6 +142,7 @@ class EmbeddedMongo:
             return self.uri
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self._take_ownership()
+        _wait_for_previous_daemon(self.data_dir, timeout_s)
         logfile = open(self.data_dir / "secantusd.log", "ab")
         cmd = [_daemon_path(), "--host", "127.0.0.1", "--port", str(self.port), "--storage-path",
                str(self.data_dir / "data"), "--cache-size", self.cache, "--log-level", "WARNING"]
@@ -128,6 +151,7 @@ class EmbeddedMongo:
                                      env=dict(os.environ), start_new_session=True,
                                      preexec_fn=_die_with_parent if sys.platform == "linux" else None)
         logfile.close()
+        (self.data_dir / "daemon.pid").write_text(str(self.proc.pid), encoding="utf-8")
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
