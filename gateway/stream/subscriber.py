@@ -187,9 +187,7 @@ class BindingSubscriber:
             session = self._session(runtime, binding)
             return _push(self.rules_engine.recorder, session, fire.facts, fire.instant,
                          window_decision(name, window, session.id))
-        result = self.rules_engine.fire(binding.ruleset, fire.facts, record=False)
-        self.rules_engine.recorder.record(result, fire.facts, **window_decision(name, window))
-        return result
+        return self.rules_engine.fire(binding.ruleset, fire.facts, **window_decision(name, window))
 
     def _session(self, runtime: QueryRuntime, binding: RuleBinding) -> Any:
         """The binding's session: this process's, rebuilt from its log, or opened (on first use)."""
