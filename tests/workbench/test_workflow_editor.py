@@ -370,7 +370,7 @@ def test_a_robot_new_to_the_workflow_comes_with_its_actor(author_page: Page, gat
 def test_table2_8_fire_the_seat_info_rules_after_the_welcome(author_page: Page, gateway):
     from agile_harness import SEAT_INFO_DRL, TABLES
 
-    ruleset = f"seat_info_{os.getpid()}"
+    ruleset = f"seat_info_wf{os.getpid()}"  # not the Table 2 browser test's name: both may share a worker's gateway
     response = gateway.deploy(ruleset, {"seat_info.drl": SEAT_INFO_DRL}, "Table 2 #8: seat information")
     assert response.status_code == 201, response.text
     name, _ = copy_workflow(gateway, "1_greeting.yaml")

@@ -207,18 +207,22 @@ export async function showLive(main, ctx) {
   function addDetection(event) {
     const end = event.window && event.window.end;
     if (end !== undefined && end !== null) state.marks.push({ t: Number(end), query: event.query });
-    // The same query seeing the same people window after window is one detection going on:
-    // its item is updated (latest values, how many windows) instead of a new one each second.
-    const key = `${event.query}|${detectionKey(event)}`;
-    const first = detectionsEl.firstElementChild;
-    if (first && first.dataset.key === key) {
-      const windows = Number(first.dataset.windows) + 1;
-      const item = detectionItem(event, windows, first.dataset.since);
-      item.dataset.key = key;
-      first.replaceWith(item);
+    // The same query seeing the same people window after window is one detection going on: its
+    // item is updated (latest values, how many windows) instead of a new one each second. "The
+    // same people" is any overlap with the query's latest item, since a sliding window may still
+    // hold someone who walked past a moment before, or already have lost them.
+    const people = detectionPeople(event);
+    const latest = [...detectionsEl.querySelectorAll("li.detection")].find((li) => li.dataset.query === (event.query || ""));
+    const ongoing = latest && JSON.parse(latest.dataset.people || "[]").some((p) => people.includes(p));
+    if (ongoing) {
+      const windows = Number(latest.dataset.windows) + 1;
+      const item = detectionItem(event, windows, latest.dataset.since);
+      item.dataset.people = JSON.stringify(people);
+      latest.remove();
+      prepend(detectionsEl, item);
     } else {
       const item = detectionItem(event, 1, String(event.at));
-      item.dataset.key = key;
+      item.dataset.people = JSON.stringify(people);
       prepend(detectionsEl, item);
     }
     scheduleDraw();
@@ -370,10 +374,10 @@ function timeCell(event) {
 }
 
 /** What a detection is about: the first column's values (the people, the tables). */
-function detectionKey(event) {
+function detectionPeople(event) {
   const rows = event.rows || [];
   const first = (event.variables || (rows[0] ? Object.keys(rows[0]) : []))[0];
-  return rows.map((row) => shortValue(row[first])).sort().join(",");
+  return [...new Set(rows.map((row) => shortValue(row[first])))].sort();
 }
 
 function detectionItem(event, windows, since) {
