@@ -203,6 +203,8 @@ def test_a_place_is_picked_from_what_the_run_is_given_and_told_in_words(author_p
     page = author_page
     open_workflow(page, name)
     form = page.get_by_test_id("wf-form")
+    # the canvas tells the prompt's reference in words, not as ${input.table.id}
+    expect(step_button(page, "settle_bill").locator(".wf-summary")).to_have_text("staff_task: Settle the bill of [the table]")
     step_button(page, "settle_bill").click()  # a staff task whose prompt already names the table
     expect(form.get_by_text("Uses the table (table1).")).to_be_visible()
 

@@ -8,6 +8,7 @@ import {
   getIn, removeStep, shiftStep, moveStep, listName, stepSummary, samePath, renameProcess, removeProcess,
   nameProblem, pathKey,
 } from "./workflow-model.js";
+import { referencesInWords, valueChoices } from "./workflow-values.js";
 
 export const canvasMethods = {
   // ------------------------------------------------------------------ process view
@@ -157,12 +158,13 @@ export const canvasMethods = {
     const id = step && step.id ? step.id : `(step ${path[path.length - 1] + 1})`;
     const kind = step.module ? ((this.doc.modules || {})[step.module] || {}).kind || "module"
       : step.if !== undefined ? "branch" : step.process ? "process" : "set";
+    const summary = referencesInWords(stepSummary(step), valueChoices(this.doc, path));
     const main = h("button", {
       class: "wf-step-main", "aria-pressed": String(selected), "data-step": step.id || "",
-      "aria-label": `Step ${id}: ${stepSummary(step)}. Alt+Arrow keys move it, Delete removes it.`,
+      "aria-label": `Step ${id}: ${summary}. Alt+Arrow keys move it, Delete removes it.`,
       onclick: () => this.select(path), onkeydown: (e) => this.stepKeys(e, path),
     }, h("span", { class: `wf-kind k-${kind}` }, kindWord(kind)), h("span", { class: "wf-id" }, id),
-    h("span", { class: "wf-summary" }, stepSummary(step)));
+    h("span", { class: "wf-summary", title: stepSummary(step) }, summary));
     const list = getIn(this.doc, path.slice(0, -1));
     const index = path[path.length - 1];
     const li = h("li", {

@@ -22,7 +22,7 @@ function sample(value) {
 }
 
 function choice(label, hint, ref, group) {
-  return { label: hint ? `${label} (${hint})` : label, ref: `\${${ref}}`, expression: ref, group };
+  return { label: hint ? `${label} (${hint})` : label, words: label, ref: `\${${ref}}`, expression: ref, group };
 }
 
 /** What the run is given: each input, and a thing's named parts ("the table's x"). */
@@ -86,6 +86,21 @@ export function describeReferences(text, choices) {
       && /^[A-Za-z_][\w.]*$/.test(expression)) unknown.push(expression.split(".")[0]);
   }
   return { known, unknown };
+}
+
+/** A step's summary line in words: each `${…}` it holds becomes what it stands for, in brackets
+ *  ("say: Table [the table] is free"); a name neither given nor found says so; any other
+ *  expression is shown without its `${ }`. Why: the canvas is read by the owner, not the engine. */
+export function referencesInWords(text, choices) {
+  if (typeof text !== "string") return text;
+  const inputs = new Set(choices.filter((c) => c.group === "given").map((c) => c.expression.split(".")[1]));
+  return text.replace(REFERENCE, (_, expression) => {
+    const exact = choices.find((c) => c.expression === expression);
+    if (exact) return `[${exact.words}]`;
+    const input = /^input\.([A-Za-z_]\w*)/.exec(expression);
+    if (input && !inputs.has(input[1])) return `[${words(input[1])}: not given]`;
+    return `[${expression}]`;
+  });
 }
 
 /** `text` with `ref` put in at `at` (the cursor), or in place of the whole text when it is empty. */

@@ -1,7 +1,7 @@
 // Unit tests of the values a step's field can refer to (run by tests/workbench/test_workbench_checks.py).
 import { test } from "node:test";
 import assert from "node:assert/strict";
-import { describeReferences, insertReference, valueChoices } from "../src/workflow-values.js";
+import { describeReferences, insertReference, referencesInWords, valueChoices } from "../src/workflow-values.js";
 
 const doc = () => ({
   inputs: { table: { id: "table1", x: 4.0, y: 2.0 }, customers: [{ id: "c1" }, { id: "c2" }], pepper_position: "entrance" },
@@ -38,6 +38,14 @@ test("references are told in words, and a name neither given nor found is named"
   assert.deepEqual(describeReferences("${input.tabel.id} and ${input.tables}", choices), { known: [], unknown: ["tabel", "tables"] });
   assert.deepEqual(describeReferences("${len(input.customers)}", choices), { known: [], unknown: [] });
   assert.deepEqual(describeReferences("${later_name}", choices), { known: [], unknown: ["later_name"] });
+});
+
+test("a step's summary tells its references in words", () => {
+  const choices = valueChoices(doc(), ["processes", "p", "steps", 2]);
+  assert.equal(referencesInWords("say: Bill of ${input.table.id} for ${ greeting }", choices), "say: Bill of [the table] for [the greeting]");
+  assert.equal(referencesInWords("say: ${input.tabel.id}", choices), "say: [the tabel: not given]");
+  assert.equal(referencesInWords("say: ${len(input.customers)} guests", choices), "say: [len(input.customers)] guests");
+  assert.equal(referencesInWords("say: hello", choices), "say: hello");
 });
 
 test("a picked reference becomes the value of an empty field, else goes in at the cursor", () => {
