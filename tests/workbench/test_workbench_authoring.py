@@ -19,10 +19,26 @@ _names = itertools.count(1)
 COMPLETIONS = ".cm-tooltip-autocomplete"
 
 
+_copies: list[str] = []
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _delete_copies(gateway):
+    """The copies this file deployed are deleted afterwards: the worker's gateway is shared with
+    the other browser files, whose menus and rule lists should not show them."""
+    yield
+    with gateway.rest() as client:
+        for name in _copies:
+            response = client.delete(f"/api/rulesets/{name}")
+            assert response.status_code == 200, response.text
+    _copies.clear()
+
+
 def deploy_copy(gateway, files: dict[str, str], stem: str) -> str:
     name = f"{stem}-{os.getpid()}-{next(_names)}"
     response = gateway.deploy(name, files, f"copy for a test ({stem})")
     assert response.status_code == 201, response.text
+    _copies.append(name)
     return name
 
 
