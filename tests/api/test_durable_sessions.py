@@ -113,6 +113,37 @@ def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, ap
     assert manager.find("durable", sid) is None
 
 
+
+def test_a_rebuild_after_forwarding_found_the_owner_gone_waits_for_that_owners_journal(rs, api_gateway, monkeypatch):
+    """Issue 28: forwarding that finds a session's owner dead releases its record and runs the call
+    again here, where no owner is recorded any more. The rebuild must still wait for the dead
+    owner's journal segments (named by its pid), whoever holds them; before, the pid was lost and
+    the rebuild read the Information State without the owner's last acknowledged entries."""
+    import fcntl
+    import os
+    import socket
+
+    manager = api_gateway.engine.session_manager
+    sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "g", "age": 3}]}).json()["id"]
+    _crash(api_gateway, sid)
+    dead_pid = 999_999_998
+    segment = api_gateway.store.journal.folder / f"{dead_pid}-1-1.jsonl"
+    segment.write_bytes(b"")
+    held = os.open(segment, os.O_RDONLY)  # as a process that has it and ships it would hold it
+    fcntl.flock(held, fcntl.LOCK_EX)
+    monkeypatch.setattr(manager.log, "catch_up_s", 0.3)
+    try:
+        manager.owner_gone("durable", sid, f"{socket.gethostname()}:{dead_pid}")  # what forwarding tells it
+        waiting = rs.get(f"{PREFIX}/sessions/{sid}")
+        assert waiting.status_code == 503 and "retry-after" in waiting.headers, waiting.text
+        assert manager.find("durable", sid) is None  # not rebuilt without the dead owner's journal
+    finally:
+        os.unlink(segment)  # shipped and deleted by whoever held it
+        os.close(held)
+    assert [name for name, _ in _facts(rs, sid)] == ["g"]  # rebuilt now
+    assert manager._gone_owners.get(("durable", sid)) is None  # forgotten once rebuilt
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
+
 def test_dispose_deletes_the_log_and_non_durable_sessions_keep_none(rs, api_gateway):
     sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "x", "age": 3}]}).json()["id"]
     api_gateway.store.flush()
