@@ -90,9 +90,13 @@ def _gone_message(elsewhere: SessionElsewhere) -> str:
 
 
 def _release(gateway: Any, elsewhere: SessionElsewhere) -> None:
-    directory = getattr(gateway.engine.session_manager, "directory", None)
+    """Forget the gone owner's record, and tell the session manager who it was: the call is run
+    again here, and a durable session's rebuild waits for that process's journal."""
+    manager = gateway.engine.session_manager
+    directory = getattr(manager, "directory", None)
     if directory is None:
         return
+    manager.owner_gone(elsewhere.ruleset, elsewhere.session_id, str(elsewhere.owner.get("process")))
     try:
         directory.release(elsewhere.ruleset, elsewhere.session_id, process=elsewhere.owner.get("process"))
     except Exception:  # the next call finds the same and tries again

@@ -127,6 +127,10 @@ class SessionManager:
         # ksession after a `dispose` would wait for the journal to catch up (a 503 under load)
         # only to learn what this process already knows. One that fell off is looked up the slow way.
         self._disposed_here: collections.OrderedDict[tuple[str, str], None] = collections.OrderedDict()
+        # Owners forwarding found dead (and released the record of), bounded: the call is then run
+        # again here, finds no owner, and its rebuild must still wait for that process's journal
+        # (see owner_gone). One that fell off waits for every dead writer's journal all the same.
+        self._gone_owners: collections.OrderedDict[tuple[str, str], str] = collections.OrderedDict()
         self._sessions: dict[tuple[str, str], StatefulSession] = {}
         self._lock = threading.RLock()
         self._creating: dict[tuple[str, str], threading.Lock] = {}
@@ -273,11 +277,27 @@ class SessionManager:
             self.directory.release(ruleset, session_id)
         if self.log is None or (ruleset, session_id) in self._disposed_here:
             return None  # disposed here: nothing to rebuild, and no need to wait for the journal to say so
-        return self._recover(ruleset, session_id, None)
+        with self._lock:
+            gone = self._gone_owners.get((ruleset, session_id))  # kept until a rebuild succeeds (a 503 is retried)
+        return self._recover(ruleset, session_id, None, gone)
 
-    def _recover(self, ruleset: str, session_id: str, dead: dict[str, Any] | None) -> StatefulSession | None:
-        """Claims the session (a compare-and-set on its owner record) and rebuilds it from its log;
-        callers meanwhile get :class:`durable.Rebuilding` (503, retry)."""
+    def owner_gone(self, ruleset: str, session_id: str, process: str) -> None:
+        """Forwarding found the session's owner ``process`` dead and released its record; the call
+        is run again here and rebuilds the session. Its rebuild must read every entry that process
+        acknowledged, so it waits for that process's journal (named by its pid on this host) to be
+        in the Information State, whoever ships it (issue 28)."""
+        with self._lock:
+            self._gone_owners[(ruleset, session_id)] = process
+            self._gone_owners.move_to_end((ruleset, session_id))
+            while len(self._gone_owners) > DISPOSED_REMEMBERED:
+                self._gone_owners.popitem(last=False)
+
+    def _recover(self, ruleset: str, session_id: str, dead: dict[str, Any] | None,
+                 gone_process: str | None = None) -> StatefulSession | None:
+        """Claims the session (a compare-and-set on its owner record, ``dead``'s if one is still
+        recorded) and rebuilds it from its log, once the journal of the process it was taken from
+        (``dead``, or ``gone_process`` whose record forwarding released) is in; callers meanwhile
+        get :class:`durable.Rebuilding` (503, retry)."""
         key = (ruleset, session_id)
         with self._lock:
             if key in self._rebuilding:
@@ -286,7 +306,7 @@ class SessionManager:
         claimed = False
         try:
             assert self.log is not None
-            gone = str(dead.get("process")) if dead is not None else None
+            gone = str(dead.get("process")) if dead is not None else gone_process
             history = self.log.history(ruleset, session_id, gone)
             if history is None or history.disposed:
                 if dead is not None and self.directory is not None:
@@ -299,9 +319,10 @@ class SessionManager:
             session = self._wrap(ruleset, session_id, history.opening, rebuilt)
             with self._lock:
                 self._sessions[key] = session
+                self._gone_owners.pop(key, None)
             log.warning("session %s of %s rebuilt here at command %d (version %d, %d facts)%s", session_id, ruleset,
                      rebuilt.seq, rebuilt.version, session.fact_count,
-                     f", taken over from {dead.get('process')}" if dead else "")
+                     f", taken over from {gone}" if gone else "")
         except SessionElsewhere:
             raise
         except BaseException:

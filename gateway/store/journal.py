@@ -14,8 +14,10 @@ Layout: ``<dir>/<pid>-<start>-<n>.jsonl`` segments, one JSON document per line
 (``{"db", "c", "d"}``: database, collection, document). Each process holds an exclusive
 ``flock`` on the segments it writes; a segment whose lock can be taken belongs to a process that
 is gone (crashed, killed, restarted) and is adopted: shipped and deleted by whichever process
-finds it first. Shipping is idempotent (every document carries its ``_id`` before it is
-journalled), so a segment shipped twice duplicates nothing. The hand-over has races, all handled:
+finds it first, which renames it ``*.jsonl.adopted`` while it ships it (so that a process that must
+know every entry is in the database waits for it: :meth:`Journal.catch_up`). Shipping is
+idempotent (every document carries its ``_id`` before it is journalled), so a segment shipped
+twice duplicates nothing. The hand-over has races, all handled:
 a segment is created locked under ``*.jsonl.new`` and only then renamed (no adopter sees it
 unlocked); an adopter reads through the descriptor it locked, and only if the path still names
 that file (another adopter, or the writer itself, may have shipped and deleted it meanwhile); and
@@ -43,6 +45,7 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 SEGMENT_BYTES = 4 * 1024 * 1024
 NEW_SUFFIX = ".new"  # a segment being created (locked, then renamed to ``*.jsonl``)
+ADOPTED_SUFFIX = ".adopted"  # a dead writer's segment another process holds and is shipping
 STALE_NEW_S = 60.0  # a ``*.new`` file this old was left by a creator that died
 _segment_ids = itertools.count(1)
 
@@ -141,13 +144,14 @@ def read_entries(fh: BinaryIO, path: Path) -> Iterator[tuple[str, str, bytes]]:
             log.warning("journal %s: skipped an unreadable line (%d bytes)", path, len(raw))
 
 
-def _lock_orphan(path: Path, read: bool = True) -> tuple[int, list[tuple[str, str, bytes]]] | None:
-    """(locked fd, entries) of the segment at ``path`` if its writer is gone; None if a live
-    writer holds it or it is no longer there.
+def _lock_orphan(path: Path, read: bool = True) -> tuple[int, Path, list[tuple[str, str, bytes]]] | None:
+    """(locked fd, its path now, entries) of the segment at ``path`` if its writer is gone; None
+    if a live writer (or another adopter) holds it or it is no longer there.
 
     The entries are read through the locked descriptor, and only if ``path`` still names that
     file: another adopter (or its writer, shipping its last entry) may have deleted or replaced
-    it between our open and our lock, and then its entries are already in the database."""
+    it between our open and our lock, and then its entries are already in the database. A
+    segment read for shipping is first renamed ``*.jsonl.adopted`` (see :meth:`Journal.catch_up`)."""
     try:
         fd = os.open(path, os.O_RDONLY)
     except FileNotFoundError:
@@ -158,9 +162,13 @@ def _lock_orphan(path: Path, read: bool = True) -> tuple[int, list[tuple[str, st
             os.close(fd)
             return None
         if not read:
-            return fd, []
+            return fd, path, []
+        if not path.name.endswith(ADOPTED_SUFFIX):
+            adopted = path.with_name(path.name + ADOPTED_SUFFIX)
+            os.rename(path, adopted)
+            path = adopted
         with os.fdopen(os.dup(fd), "rb") as fh:
-            return fd, list(read_entries(fh, path))
+            return fd, path, list(read_entries(fh, path))
     except BlockingIOError:
         os.close(fd)
         return None
@@ -417,22 +425,33 @@ class Journal:
     def catch_up(self, timeout_s: float = 10.0, gone_pids: tuple[int, ...] = ()) -> bool:
         """Adopt every segment a gone process left here now (not at the next periodic look) and
         wait until they, and everything appended so far, are in the database; False on timeout.
-        ``gone_pids``: processes of this host known to be dead, whose segments must be gone (shipped
-        by us or by another process adopting them at the same time) before this returns.
-        Why: a durable session rebuilt after its process died must read every entry that process
-        acknowledged (``gateway.engine.durable``)."""
+        Segments another process adopted and is still shipping (``*.jsonl.adopted``, locked by
+        it) are waited for too, and so are any left by ``gone_pids`` (processes of this host known
+        to be dead). Why: a durable session rebuilt after its process died must read every entry
+        that process acknowledged (``gateway.engine.durable``), also when a third process on the
+        host happens to be shipping the dead one's journal at that moment (issue 28)."""
         deadline = time.monotonic() + timeout_s
         while True:
             found = self._adopt_orphans()
             if not self.flush(max(0.0, deadline - time.monotonic())):
                 return False
-            left = [p for pid in gone_pids for p in self.folder.glob(f"{pid}-*.jsonl")]
+            left = self._shipped_elsewhere(gone_pids)
             if not found and not left:
                 return True
             if time.monotonic() >= deadline:
                 return False
             if not found:
                 time.sleep(0.05)  # another process is shipping them
+
+    def _shipped_elsewhere(self, gone_pids: tuple[int, ...]) -> list[Path]:
+        """Segments of dead writers still on disk and not ours to ship: adopted by another process
+        (``*.jsonl.adopted``), or named after one of ``gone_pids``."""
+        with self._lock:
+            mine = {path for path, _fd in self._adopted_files}
+        left = [p for p in self.folder.glob("*.jsonl" + ADOPTED_SUFFIX) if p not in mine]
+        for pid in gone_pids:
+            left += [p for p in self.folder.glob(f"{pid}-*.jsonl") if p not in mine]
+        return left
 
     def _adopt_orphans(self) -> bool:
         """Take over unlocked segments (their writer died) and queue their entries for shipping;
@@ -443,13 +462,14 @@ class Journal:
     def _adopt_one(self) -> bool:
         if self._adopted:
             return True
-        for path in sorted(self.folder.glob("*.jsonl")):
+        # *.jsonl.adopted: an adopter died before it had shipped all of a dead writer's segment
+        for path in sorted([*self.folder.glob("*.jsonl"), *self.folder.glob("*.jsonl" + ADOPTED_SUFFIX)]):
             if self._segment is not None and path == self._segment.path:
                 continue
             adopted = _lock_orphan(path)
             if adopted is None:
-                continue  # a live writer holds it, or it is gone
-            fd, entries = adopted
+                continue  # a live writer (or adopter) holds it, or it is gone
+            fd, path, entries = adopted
             log.info("Information State: adopting %d journalled writes from %s", len(entries), path.name)
             with self._lock:
                 self._adopted.extend(entries)

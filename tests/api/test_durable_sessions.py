@@ -113,6 +113,37 @@ def test_a_corrupt_snapshot_falls_back_to_the_one_before_and_then_the_log(rs, ap
     assert manager.find("durable", sid) is None
 
 
+
+def test_a_rebuild_after_forwarding_found_the_owner_gone_waits_for_that_owners_journal(rs, api_gateway, monkeypatch):
+    """Issue 28: forwarding that finds a session's owner dead releases its record and runs the call
+    again here, where no owner is recorded any more. The rebuild must still wait for the dead
+    owner's journal segments (named by its pid), whoever holds them; before, the pid was lost and
+    the rebuild read the Information State without the owner's last acknowledged entries."""
+    import fcntl
+    import os
+    import socket
+
+    manager = api_gateway.engine.session_manager
+    sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "g", "age": 3}]}).json()["id"]
+    _crash(api_gateway, sid)
+    dead_pid = 999_999_998
+    segment = api_gateway.store.journal.folder / f"{dead_pid}-1-1.jsonl"
+    segment.write_bytes(b"")
+    held = os.open(segment, os.O_RDONLY)  # as a process that has it and ships it would hold it
+    fcntl.flock(held, fcntl.LOCK_EX)
+    monkeypatch.setattr(manager.log, "catch_up_s", 0.3)
+    try:
+        manager.owner_gone("durable", sid, f"{socket.gethostname()}:{dead_pid}")  # what forwarding tells it
+        waiting = rs.get(f"{PREFIX}/sessions/{sid}")
+        assert waiting.status_code == 503 and "retry-after" in waiting.headers, waiting.text
+        assert manager.find("durable", sid) is None  # not rebuilt without the dead owner's journal
+    finally:
+        os.unlink(segment)  # shipped and deleted by whoever held it
+        os.close(held)
+    assert [name for name, _ in _facts(rs, sid)] == ["g"]  # rebuilt now
+    assert manager._gone_owners.get(("durable", sid)) is None  # forgotten once rebuilt
+    assert rs.delete(f"{PREFIX}/sessions/{sid}").status_code == 200
+
 def test_dispose_deletes_the_log_and_non_durable_sessions_keep_none(rs, api_gateway):
     sid = rs.post(f"{PREFIX}/sessions", json={"facts": [{"type": "Customer", "id": "x", "age": 3}]}).json()["id"]
     api_gateway.store.flush()
@@ -297,3 +328,99 @@ def test_an_unfocused_agenda_groups_matches_still_fire_after_a_rebuild_and_fired
     assert _texts(groups.post(f"{GROUPS}/sessions/{sid}/fire")) == ["Hello z"]
     assert _run(api_gateway, sid, {"op": "set_focus", "group": "seating"}, {"op": "fire", "max": -1}) == ["Seat z"]
     assert groups.delete(f"{GROUPS}/sessions/{sid}").status_code == 200
+
+
+GLOBALS = PREFIX.replace("durable", "durglobals")
+GLOBAL_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+global java.lang.Integer minimumAge;
+
+rule "Adult"
+when
+    $c : Customer( age >= minimumAge )
+then
+    actions.say("pepper", "Adult " + $c.getId());
+end
+"""
+
+
+def test_globals_limits_refusals_a_rebuild_in_progress_and_idle_expiry(rs, api_gateway):
+    """Issue 28, line by line: a global survives a rebuild; `sessions.max_facts` still bounds the
+    rebuilt session; commands the engine refuses (unknown field, stale handle, over the limit) are
+    not journalled; while a rebuild runs a call gets 503 + Retry-After, never 410; an idle-expired
+    durable session's log and snapshots are deleted."""
+    import threading
+
+    from api_helpers import TYPES
+
+    assert rs.put(GLOBALS, json={"files": {"types.drl": TYPES, "adult.drl": GLOBAL_RULES}}).status_code == 201
+    manager = api_gateway.engine.session_manager
+    db = api_gateway.store.db
+    sid = rs.post(f"{GLOBALS}/sessions", json={}).json()["id"]
+    manager.find("durglobals", sid).durability.every = 2
+    manager.get("durglobals", sid).execute([{"op": "set_global", "name": "minimumAge", "value": 40}])
+    made = rs.post(f"{GLOBALS}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "a", "age": 50},
+                                                                     {"type": "Customer", "id": "b", "age": 30}], "fire": True})
+    assert _texts(made) == ["Adult a"]
+
+    def logged() -> int:
+        api_gateway.store.flush()
+        return db[LOG].count_documents({"session": sid})
+
+    before = logged()
+    assert rs.post(f"{GLOBALS}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "x", "height": 3}]}).status_code == 422
+    assert rs.delete(f"{GLOBALS}/sessions/{sid}/facts/0:999999:999999").status_code in (404, 422)
+    settings = manager.settings
+    manager.settings = settings.model_copy(update={"max_facts": 3})
+    try:
+        _crash(api_gateway, sid, "durglobals")
+        over = rs.post(f"{GLOBALS}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": f"o{k}", "age": 1}
+                                                                          for k in range(2)]})
+        assert over.status_code == 429, over.text  # rebuilt with its two facts: the limit still holds
+        assert logged() == before  # none of the refused commands was journalled
+        assert manager.get("durglobals", sid).get_global("minimumAge") == 40  # the global came back
+        assert _texts(rs.post(f"{GLOBALS}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "c", "age": 45}],
+                                                                       "fire": True})) == ["Adult c"]
+    finally:
+        manager.settings = settings
+
+    _crash(api_gateway, sid, "durglobals")
+    history, reading, release = manager.log.history, threading.Event(), threading.Event()
+
+    def slow_history(*args, **kwargs):  # the real read, held up: the rebuild is still running
+        reading.set()
+        assert release.wait(30)
+        return history(*args, **kwargs)
+
+    manager.log.history = slow_history
+    rebuilt: list[object] = []
+    taker = threading.Thread(target=lambda: rebuilt.append(manager.get("durglobals", sid)))
+    try:
+        taker.start()
+        assert reading.wait(30)
+        meanwhile = rs.get(f"{GLOBALS}/sessions/{sid}/facts")
+        assert meanwhile.status_code == 503 and "retry-after" in meanwhile.headers, meanwhile.text
+    finally:
+        release.set()
+        taker.join(30)
+        manager.log.history = history
+    assert rebuilt and [name for name, _ in _facts_of(rs, GLOBALS, sid)] == ["a", "b", "c"]
+
+    assert db[SNAPSHOTS].count_documents({"key": {"$regex": f"^durglobals/{sid}/"}}) > 0
+    manager.settings = settings.model_copy(update={"idle_ttl_s": 0.2})
+    try:
+        assert wait_for(lambda: sid in manager.reap(), 10)
+    finally:
+        manager.settings = settings
+    assert wait_for(lambda: db[LOG].count_documents({"session": sid}) == 0
+                    and db[SNAPSHOTS].count_documents({"key": {"$regex": f"^durglobals/{sid}/"}}) == 0, 30)
+    assert rs.get(f"{GLOBALS}/sessions/{sid}").status_code == 404
+
+
+def _facts_of(rs, prefix: str, sid: str) -> list[tuple[str, str | None]]:
+    r = rs.get(f"{prefix}/sessions/{sid}/facts")
+    assert r.status_code == 200, r.text
+    return sorted((f["fact"]["id"], f["fact"]["category"]) for f in r.json()["facts"])

@@ -8,9 +8,11 @@ a corrupt snapshot falls back to the log."""
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import httpx
 import pytest
@@ -114,6 +116,132 @@ def test_owner_killed_while_another_process_feeds_keeps_every_acknowledged_inser
         a.stop()
         b.stop()
 
+
+
+def shipper_of(p: Process) -> int:
+    """The pid of ``p``'s shipper process (gateway.store.shipper: it inserts what p journals)."""
+    assert p.proc is not None
+
+    def find() -> int | None:
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+                if ppid == p.proc.pid and b"gateway.store.shipper" in (stat.parent / "cmdline").read_bytes():
+                    return int(stat.parent.name)
+            except (OSError, ValueError, IndexError):
+                continue
+        return None
+
+    assert wait_for(lambda: find() is not None, 60), f"no shipper process under {p.name}"
+    pid = find()
+    assert pid is not None
+    return pid
+
+
+def lock_holder(path: Path) -> int | None:
+    """The pid holding the flock on ``path`` (from /proc/locks), None if nobody holds it."""
+    try:
+        inode = os.stat(path).st_ino
+    except FileNotFoundError:
+        return None
+    for line in Path("/proc/locks").read_text().splitlines():
+        parts = line.split()
+        if len(parts) > 5 and parts[1] == "FLOCK" and parts[5].rsplit(":", 1)[-1] == str(inode):
+            return int(parts[4])
+    return None
+
+
+def request_waiting_at(port: int) -> bool:
+    """Whether a connection to ``port`` has bytes its (stopped) server has not read yet."""
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            parts = line.split()
+            if int(parts[1].rsplit(":", 1)[1], 16) == port and int(parts[4].split(":")[1], 16) > 0:
+                return True
+    return False
+
+
+def test_owner_gone_mid_forward_while_a_third_process_ships_its_journal_keeps_every_acknowledged_insert(home):
+    """Issue 28 with three processes on one host, made deterministic with SIGSTOP. A owns a session
+    B feeds (forwarded to A); A's last acknowledged inserts are only in A's local journal (its
+    shipper process is stopped). B's next insert is forwarded to A, which is frozen, and B is frozen
+    too; A is then SIGKILLed, and C, taking over another of A's sessions, adopts A's journal and is
+    still shipping it (its shipper stopped) when B wakes, finds its forward failed and A dead, and
+    takes the session over through that failed forward. B must wait for C's shipping of A's journal:
+    every acknowledged insert is there afterwards (B rebuilt without A's last 20 before)."""
+    folder, config, env = home
+    a, b, c = (Process(n, config, env, folder).start() for n in ("JA", "JB", "JC"))
+    stopped: list[int] = []
+
+    def stop(pid: int) -> None:
+        os.kill(pid, signal.SIGSTOP)
+        stopped.append(pid)
+
+    def resume(pid: int) -> None:
+        os.kill(pid, signal.SIGCONT)
+        stopped.remove(pid)
+
+    try:
+        for p in (a, b, c):
+            p.ready()
+        made = httpx.post(f"{a.url}{API}", json={"facts": [{"type": "Customer", "id": "first", "age": 30}]}, timeout=60)
+        assert made.status_code == 201, made.text
+        sid = made.json()["id"]
+        other = httpx.post(f"{a.url}{API}", json={"facts": [{"type": "Customer", "id": "other", "age": 30}]},
+                           timeout=60).json()["id"]
+        assert httpx.post(f"{c.url}/api/rulesets/cluster/fire", json={"facts": [{"type": "Customer", "id": "c", "age": 1}]},
+                          timeout=60).status_code == 200  # a recorded decision: C's shipper process is started
+        acked: list[str] = []
+
+        def insert(k: int) -> None:
+            r = call("POST", f"{b.url}{API}/{sid}/facts", json={"facts": [{"type": "Customer", "id": f"g{k}", "age": 1}]})
+            assert r.status_code == 201, r.text
+            acked.append(f"g{k}")
+
+        for k in range(20):
+            insert(k)
+        a_pid, a_shipper, c_shipper = a.proc.pid, shipper_of(a), shipper_of(c)  # type: ignore[union-attr]
+        stop(a_shipper)  # A journals and acknowledges, but ships nothing more
+        for k in range(20, 40):
+            insert(k)
+        stop(c_shipper)
+        stop(a_pid)
+        b_takes = threading.Thread(target=insert, args=(40,))
+        b_takes.start()
+        assert wait_for(lambda: request_waiting_at(a.port), 60), "B did not forward to A"  # B found A alive
+        stop(b.proc.pid)  # type: ignore[union-attr]
+        stopped.remove(a_pid)
+        kill(a)
+        os.kill(a_shipper, signal.SIGKILL)  # orphaned and stopped: it would never read the end of its input
+        stopped.remove(a_shipper)
+        taken: dict[str, list[str]] = {}
+        c_takes = threading.Thread(target=lambda: taken.setdefault("other", facts(c.url, other)))
+        c_takes.start()  # C's takeover of the other session adopts A's journal now, and cannot ship it
+
+        def c_holds_a_journal() -> bool:
+            journal = folder / "var" / "store" / "journal"
+            return any(lock_holder(f) == c.proc.pid for f in journal.glob(f"{a_pid}-*.jsonl*")  # type: ignore[union-attr]
+                       if not f.name.endswith(".new"))
+
+        assert wait_for(c_holds_a_journal, 60), "C did not adopt A's journal"
+        resume(b.proc.pid)  # type: ignore[union-attr]  # its forward fails: B takes the session over
+        wait_for(lambda: not b_takes.is_alive(), 3)  # it waits for C's shipping (before: it did not)
+        resume(c_shipper)
+        b_takes.join(timeout=120)
+        c_takes.join(timeout=120)
+        for k in range(41, 50):
+            insert(k)
+        assert acked == [f"g{k}" for k in range(50)]
+        held = facts(b.url, sid)
+        assert sorted(set(acked) - set(held)) == [] and "first" in held  # every acknowledged insert
+        assert len(held) == 51
+        assert taken["other"] == ["other"]
+        assert rebuilt_in(b, c) == 2
+    finally:
+        for pid in stopped:
+            os.kill(pid, signal.SIGCONT)
+        for p in (a, b, c):
+            p.stop()
 
 def test_two_processes_racing_to_take_over_one_wins_and_the_other_forwards(home):
     folder, config, env = home

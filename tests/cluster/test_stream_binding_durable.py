@@ -6,7 +6,9 @@ disposes it."""
 
 from __future__ import annotations
 
+import json
 import signal
+import threading
 import time
 
 import httpx
@@ -118,3 +120,63 @@ def test_a_stateful_binding_keeps_its_facts_and_clock_across_restarts(home):
         assert wait_for(lambda: httpx.get(f"{p.url}{SESSION}", timeout=60).status_code == 404, 30) is not None
     finally:
         p.stop()
+
+
+def test_a_window_firing_in_a_process_that_does_not_own_the_bindings_session_is_an_error_naming_the_owner(home):
+    """A stateful binding fires in one process: the first whose window fires it owns its session.
+    A window of the same binding in another process (its own stream messages) does not fire there,
+    nor open a second session: it is reported as an ``error`` event (and the query's last_error)
+    naming the owner, and the owner's session is left as it was."""
+    folder, config, env = home
+    query = QUERY.replace("Readings", "Owned")
+    owned = SESSION.replace("Readings", "Owned")
+    owner = Process("OA", config, env, folder).start().ready()
+    other: Process | None = None
+    try:
+        assert httpx.put(f"{owner.url}/api/rulesets/sensors", json={"files": {"sensors.drl": DRL}},
+                         timeout=180).status_code in (200, 201)
+        r = httpx.post(f"{owner.url}/api/queries", json={"query": query, "rules": BINDING}, timeout=60)
+        assert r.status_code == 201, r.text
+        post(owner.url, 500, "o1")
+        post(owner.url, 1500)  # closes the window ending at 1000: o1 fires, and this process owns the session
+        assert wait_for(lambda: call("GET", f"{owner.url}{owned}/facts").status_code == 200, 60) is not None
+        owner_process = call("GET", f"{owner.url}{owned}").json()["process"]
+        assert owner_process.endswith(f":{owner.proc.pid}")  # type: ignore[union-attr]
+
+        other = Process("OB", config, env, folder).start().ready()  # loads the query and its binding
+        assert httpx.get(f"{other.url}/api/queries/Owned", timeout=60).json()["binding"]["mode"] == "stateful"
+        events: list[tuple[str, dict]] = []
+        connected = threading.Event()
+
+        def listen() -> None:
+            with httpx.stream("GET", f"{other.url}/api/queries/Owned/live", timeout=90) as live:
+                kind = None
+                for line in live.iter_lines():
+                    if line.startswith(": connected"):
+                        connected.set()
+                    elif line.startswith("event: "):
+                        kind = line[len("event: "):]
+                    elif line.startswith("data: ") and kind is not None:
+                        events.append((kind, json.loads(line[len("data: "):])))
+                        if kind == "error":
+                            return
+
+        listener = threading.Thread(target=listen, daemon=True)
+        listener.start()
+        assert wait_for(lambda: connected.is_set(), 30) is not None  # subscribed before the window closes
+        post(other.url, 2500, "o2")
+        post(other.url, 3500)  # closes the window ending at 3000 in the other process
+        assert wait_for(lambda: any(k == "error" for k, _ in events), 60) is not None, events
+        error = next(e for k, e in events if k == "error")["error"]
+        assert f"held by gateway process {owner_process}" in error and "stream.Owned" in error, error
+        info = httpx.get(f"{other.url}/api/queries/Owned", timeout=60).json()
+        assert info["stats"]["rule_errors"] >= 1 and owner_process in info["last_error"]
+        assert not any(k == "actions" for k, _ in events)  # nothing fired in the other process
+        # the session stays the owner's, untouched: read through the other process, it is forwarded there
+        assert call("GET", f"{other.url}{owned}").json()["process"] == owner_process
+        assert sorted(f["fact"]["id"] for f in call("GET", f"{other.url}{owned}/facts").json()["facts"]) == ["o1"]
+        assert httpx.delete(f"{owner.url}/api/queries/Owned/rules", timeout=60).status_code == 200
+    finally:
+        owner.stop()
+        if other is not None:
+            other.stop()

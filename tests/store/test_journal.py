@@ -98,7 +98,8 @@ def test_writers_killed_at_random_lose_no_acknowledged_write_and_no_shipper_dies
 
     last = Journal(folder, ship, adopt_interval_s=0.01)
     try:
-        assert wait_for(lambda: not list(folder.glob("*.jsonl")), 60), "segments left unadopted"
+        assert wait_for(lambda: not [*folder.glob("*.jsonl"), *folder.glob("*.jsonl.adopted")], 60), \
+            "segments left unadopted"
         assert last.flush(10)
     finally:
         last.close()
@@ -313,4 +314,51 @@ def test_flush_and_catch_up_wait_for_the_adopted_writes_still_being_shipped(tmp_
         assert wait_for(lambda: not list(tmp_path.glob(f"{dead_pid}-*.jsonl")), 5)  # deleted once shipped
     finally:
         release.set()
+        journal.close()
+
+
+def test_catch_up_waits_for_a_dead_writers_segment_another_process_is_shipping_unnamed(tmp_path: Path) -> None:
+    """Issue 28, with three processes on one host: the owner of a session dies, a third process
+    adopts its segment and is still shipping it when the taker rebuilds through a failed forward,
+    which knows no dead pid. The taker cannot lock that segment, so it used to think it had caught
+    up and rebuilt without the dead owner's last entries. An adopter renames what it ships
+    ``*.jsonl.adopted``, and catch_up waits until that is gone."""
+    dead_pid = 999_999_999
+    (tmp_path / f"{dead_pid}-1-1.jsonl").write_bytes(b"".join(encode("db", "c", {"id": f"d{k}"}) for k in range(3)))
+    shipping, release = threading.Event(), threading.Event()
+    shipped: list[str] = []
+
+    def slow_ship(db: str, c: str, lines: list[bytes]) -> None:  # the third process's shipping, held up
+        shipping.set()
+        assert release.wait(10)
+        shipped.extend(json.loads(x)["d"]["id"] for x in lines)
+
+    third = Journal(tmp_path, slow_ship, adopt_interval_s=3600)  # adopts the dead writer's segment as it starts
+    taker = Journal(tmp_path, lambda db, c, lines: None, adopt_interval_s=3600)
+    try:
+        assert shipping.wait(5)
+        assert not taker.catch_up(0.3)  # no gone pid named, and the segment is not the taker's to ship
+        assert [p.name for p in tmp_path.glob("*.jsonl*")] == [f"{dead_pid}-1-1.jsonl.adopted"]
+        release.set()
+        assert taker.catch_up(5)
+        assert shipped == ["d0", "d1", "d2"]
+        assert not list(tmp_path.glob("*.jsonl*"))
+    finally:
+        release.set()
+        taker.close()
+        third.close()
+
+
+def test_a_segment_an_adopter_left_half_shipped_is_adopted_again(tmp_path: Path) -> None:
+    """An adopter that dies while shipping leaves ``*.jsonl.adopted`` unlocked: the next process
+    adopts it as it would the writer's segment (shipping twice duplicates nothing)."""
+    left = tmp_path / "999999999-1-1.jsonl.adopted"
+    left.write_bytes(b"".join(encode("db", "c", {"id": f"d{k}"}) for k in range(2)))
+    shipped: list[str] = []
+    journal = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["id"] for x in lines),
+                      adopt_interval_s=3600)
+    try:
+        assert journal.catch_up(5)
+        assert shipped == ["d0", "d1"] and not left.exists()
+    finally:
         journal.close()
