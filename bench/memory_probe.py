@@ -11,6 +11,8 @@ Environment:
 - ``PROBE_DIR`` (required): the probe starts once a file ``start`` appears there; where ``probe.jsonl`` (one line per tick) and, with tracemalloc,
   ``tracemalloc_top.txt`` (the allocation sites that grew most since the first tick) go;
 - ``PROBE_EVERY_S`` (default 60);
+- ``PROBE_MALLOC_TRIM=1``: call ``malloc_trim(0)`` at every tick, after the malloc totals (what
+  the RSS gives back is what glibc held free);
 - ``PROBE_TRACEMALLOC`` (frames, default 0: off). Tracing costs CPU and memory of its own (the
   trace table is reported apart, ``tracemalloc_overhead_mb``).
 """
@@ -51,6 +53,23 @@ def malloc_totals() -> dict[str, float]:
             "malloc_mmapped_mb": round(info.hblkhd / mb, 1)}
 
 
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return round(int(line.split()[1]) / 1024, 1)
+    return 0.0
+
+
+def trim() -> dict[str, float]:
+    """``malloc_trim(0)``: glibc gives the free pages of every arena back to the system; the RSS
+    before and after says how much of the process was memory malloc held free (fragmentation)."""
+    before = rss_mb()
+    started = time.perf_counter()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
+    return {"rss_before_trim_mb": before, "rss_after_trim_mb": rss_mb(),
+            "trim_ms": round((time.perf_counter() - started) * 1000, 1)}
+
+
 def threads() -> int:
     return len(os.listdir("/proc/self/task"))
 
@@ -58,6 +77,8 @@ def threads() -> int:
 def tick(out: Path, started: float, first: list[tracemalloc.Snapshot]) -> None:
     row: dict[str, object] = {"t_min": round((time.monotonic() - started) / 60, 2), "threads": threads(),
                               "python_objects": len(gc.get_objects()), **malloc_totals()}
+    if os.environ.get("PROBE_MALLOC_TRIM") == "1":
+        row.update(trim())
     if tracemalloc.is_tracing():
         snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])
         row["python_traced_mb"] = round(tracemalloc.get_traced_memory()[0] / 2 ** 20, 1)

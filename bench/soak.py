@@ -141,18 +141,34 @@ def nmt_committed(text: str) -> dict[str, dict[str, float]]:
     return out
 
 
-def smaps_split_mb(pid: int) -> dict[str, float]:
-    """Resident MB of ``pid`` by kind of mapping: the brk heap, anonymous mappings (malloc arenas
-    and mmapped chunks, pymalloc arenas, the Java heap and JVM's own reservations), thread
-    stacks, files (libraries, mapped data)."""
-    parts = {"heap": 0, "anon": 0, "stack": 0, "file": 0}
+HEAP_SPACE = re.compile(r"^\s*(?P<name>DefNew|Tenured)\s+total \d+K, used (?P<used>\d+)K "
+                        r"\[0x(?P<lo>[0-9a-f]+), 0x[0-9a-f]+, 0x(?P<hi>[0-9a-f]+)\)")
+
+
+def java_heap_spaces(text: str) -> dict[str, dict[str, int]]:
+    """The serial collector's young and old spaces in ``jcmd GC.heap_info``: their reserved address
+    ranges (to find their pages in /proc/pid/smaps) and KB used; {} for another collector."""
+    return {("young" if m["name"] == "DefNew" else "tenured"): {"lo": int(m["lo"], 16), "hi": int(m["hi"], 16),
+                                                                 "used_kb": int(m["used"])}
+            for m in map(HEAP_SPACE.match, text.splitlines()) if m}
+
+
+def smaps_split_mb(pid: int, spaces: dict[str, dict[str, int]] | None = None) -> dict[str, float]:
+    """Resident MB of ``pid`` by kind of mapping: the Java heap's ``spaces`` (young, tenured: an
+    old generation's pages stay resident once touched, so it can rise while the heap in use does
+    not), the brk heap, other anonymous mappings (glibc's other malloc arenas, pymalloc arenas,
+    metaspace, code cache), thread stacks, files (libraries, mapped data)."""
+    spaces = spaces or {}
+    parts = {**{name: 0 for name in spaces}, "heap": 0, "anon": 0, "stack": 0, "file": 0}
     kind = "anon"
     for line in Path(f"/proc/{pid}/smaps").read_text().splitlines():
         head = line.split()
         if head and "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
             name = head[5] if len(head) > 5 else ""
-            kind = ("heap" if name == "[heap]" else "stack" if name.startswith("[stack") else
-                    "anon" if not name or name.startswith("[anon") else "file" if name.startswith("/") else "anon")
+            lo, hi = (int(x, 16) for x in head[0].split("-"))
+            kind = next((space for space, r in spaces.items() if r["lo"] <= lo and hi <= r["hi"]), None) or (
+                "heap" if name == "[heap]" else "stack" if name.startswith("[stack") else
+                "anon" if not name or name.startswith("[anon") else "file" if name.startswith("/") else "anon")
         elif head and head[0] == "Rss:":
             parts[kind] += int(head[1])
     return {k: round(v / 1024, 1) for k, v in parts.items()}
@@ -182,8 +198,11 @@ class Load:
     async def stream(self, client: httpx.AsyncClient) -> None:
         t0_ms, k, start = int(time.time() * 1000), 0, time.perf_counter()
         while time.perf_counter() < self.until:
-            r = await client.post("/api/streams", json=entrance_message(k, t0_ms, self.hz))
-            self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
+            try:
+                r = await client.post("/api/streams", json=entrance_message(k, t0_ms, self.hz))
+                self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
+            except httpx.TransportError:  # counted; a dead server shows in the sampler
+                self.counts["stream_errors"] += 1
             k += 1
             await asyncio.sleep(max(0.0, start + k / self.hz - time.perf_counter()))
 
@@ -191,7 +210,12 @@ class Load:
         body = {"facts": teahouse_facts()}
         while time.perf_counter() < self.until:
             t0 = time.perf_counter()
-            r = await client.post("/api/rulesets/reception/fire", json=body)
+            try:
+                r = await client.post("/api/rulesets/reception/fire", json=body)
+            except httpx.TransportError:
+                self.counts["fire_errors"] += 1
+                await asyncio.sleep(0.04)
+                continue
             if r.status_code == 200:
                 self.counts["fires"] += 1
                 self.fire_latencies.append(time.perf_counter() - t0)
@@ -227,8 +251,24 @@ class Load:
                 return
             n += 1
             files = {name: text.replace("Welcome", "Welcome back") if n % 2 else text for name, text in current.items()}
-            r = await client.put("/api/rulesets/reception", json={"files": files, "comment": f"soak {n}", "force": True})
-            self.counts["deploys" if r.status_code == 201 else "deploy_errors"] += 1
+            try:
+                r = await client.put("/api/rulesets/reception", json={"files": files, "comment": f"soak {n}", "force": True})
+                self.counts["deploys" if r.status_code == 201 else "deploy_errors"] += 1
+            except httpx.TransportError:
+                self.counts["deploy_errors"] += 1
+
+
+async def read_health(client: httpx.AsyncClient, tries: int = 3) -> dict[str, Any]:
+    """``/health``, tried again after a transport error (a closed keep-alive connection): a server
+    that is gone raises after ``tries``."""
+    for attempt in range(tries):
+        try:
+            return (await client.get("/health")).json()
+        except httpx.TransportError:
+            if attempt == tries - 1:
+                raise
+            await asyncio.sleep(1.0)
+    return {}
 
 
 async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, started: float,
@@ -237,7 +277,7 @@ async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, 
         await asyncio.sleep(every)
         latencies, load.fire_latencies = load.fire_latencies, []
         ordered = sorted(latencies)
-        health = (await client.get("/health")).json()
+        health = await read_health(client)
         engine, store = health.get("engine", {}), health.get("store", {})
         rss = rss_split_mb(pid)
         non_heap = engine.get("jvm_non_heap") or {}
@@ -264,8 +304,10 @@ async def watch_native(load: Load, pid: int, every: float, started: float, out: 
         t = round((time.perf_counter() - started) / 60, 2)
         text = await asyncio.to_thread(jcmd, pid, "VM.native_memory", "summary.diff")
         (out / "nmt_diff_latest.txt").write_text(f"t={t} min\n{text}")
-        row = {"t_min": t, "gateway_mb": rss_split_mb(pid)["gateway"], "smaps": smaps_split_mb(pid),
-               "nmt": nmt_committed(text)}
+        spaces = java_heap_spaces(await asyncio.to_thread(jcmd, pid, "GC.heap_info"))
+        row = {"t_min": t, "gateway_mb": rss_split_mb(pid)["gateway"], "smaps": smaps_split_mb(pid, spaces),
+               "nmt": nmt_committed(text), **{f"{name}_used_mb": round(r["used_kb"] / 1024, 1)
+                                              for name, r in spaces.items()}}
         rows.append(row)
         print(json.dumps(row), flush=True)
         if time.perf_counter() + every >= load.until:
@@ -284,7 +326,9 @@ async def soak(url: str, pid: int, minutes: float, every: float, hz: float = HZ,
     started = time.perf_counter()
     load = Load(url, started + minutes * 60, hz, deploy_every_s)
     rows: list[dict[str, Any]] = []
-    limits = httpx.Limits(max_connections=20)
+    # keepalive_expiry under uvicorn's 5 s: a connection idle as long as the server's timeout can be
+    # closed by the server just as the client reuses it (a ReadError, seen at load ~35)
+    limits = httpx.Limits(max_connections=20, keepalive_expiry=2.0)
     async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as client:
         tasks = {"stream": [load.stream], "fires": [load.fires, load.fires], "sessions": [load.sessions],
                  "deploys": [load.deploys]}
@@ -357,6 +401,8 @@ def native_table(native_rows: list[dict[str, Any]]) -> list[str]:
              "| measure | first | last | change | per minute |", "|---|---|---|---|---|"]
     pairs = [("gateway RSS", first["gateway_mb"], last["gateway_mb"])]
     pairs += [(f"RSS: {k} mappings", first["smaps"][k], last["smaps"][k]) for k in first["smaps"]]
+    pairs += [(f"Java {k} space in use", first[k], last[k]) for k in ("young_used_mb", "tenured_used_mb")
+              if k in first and k in last]
     names = sorted(last["nmt"], key=lambda n: (n != "Total", -abs(last["nmt"][n]["committed_mb"]
                                                                 - first["nmt"].get(n, {}).get("committed_mb", 0))))
     pairs += [(f"NMT {n}", first["nmt"].get(n, {}).get("committed_mb", 0), last["nmt"][n]["committed_mb"])

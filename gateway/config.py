@@ -408,6 +408,10 @@ class Settings(BaseModel):
     """All gateway settings. Sections are added by the adapters that use them."""
 
     data_dir: str = str(PROJECT_ROOT / "var")
+    malloc_arena_max: int = Field(
+        default=2, ge=0, description="glibc malloc arenas of a gateway process (gateway.base.malloc): 2 keeps the "
+        "memory threads free where the next allocation finds it (the soak's slow rise was free memory kept in ~16 "
+        "arenas); 0: glibc's default (8 per core). $MALLOC_ARENA_MAX wins when set.")
     jvm: JvmSettings = Field(default_factory=JvmSettings)
     engine: EngineSettings = Field(default_factory=EngineSettings)
     api: ApiSettings = Field(default_factory=ApiSettings)
