@@ -13,6 +13,8 @@ Environment:
 - ``PROBE_EVERY_S`` (default 60);
 - ``PROBE_MALLOC_TRIM=1``: call ``malloc_trim(0)`` at every tick, after the malloc totals (what
   the RSS gives back is what glibc held free);
+- ``PROBE_TYPES=1``: also count the collector's objects by type at every tick (types_top.txt:
+  the types that grew most since the first tick);
 - ``PROBE_TRACEMALLOC`` (frames, default 0: off). Tracing costs CPU and memory of its own (the
   trace table is reported apart, ``tracemalloc_overhead_mb``).
 """
@@ -28,6 +30,7 @@ import sys
 import threading
 import time
 import tracemalloc
+from collections import Counter
 from pathlib import Path
 
 
@@ -74,11 +77,29 @@ def threads() -> int:
     return len(os.listdir("/proc/self/task"))
 
 
+def type_counts() -> Counter[str]:
+    """Objects the collector tracks, by type (``module.qualname``): what a steady rise of
+    ``python_objects`` is made of."""
+    return Counter(f"{type(o).__module__}.{type(o).__qualname__}" for o in gc.get_objects())
+
+
+def write_type_growth(out: Path, t_min: float, first: list[Counter[str]]) -> None:
+    counts = type_counts()
+    if not first:
+        first.append(counts)
+        return
+    grown = sorted(((n - first[0].get(name, 0), name) for name, n in counts.items()), reverse=True)[:30]
+    (out / "types_top.txt").write_text(f"t={t_min} min, objects by type, change since the first tick:\n"
+                                       + "".join(f"{d:+8d}  {name}\n" for d, name in grown))
+
+
 def tick(out: Path, started: float, first: list[tracemalloc.Snapshot]) -> None:
     row: dict[str, object] = {"t_min": round((time.monotonic() - started) / 60, 2), "threads": threads(),
                               "python_objects": len(gc.get_objects()), **malloc_totals()}
     if os.environ.get("PROBE_MALLOC_TRIM") == "1":
         row.update(trim())
+    if os.environ.get("PROBE_TYPES") == "1":
+        write_type_growth(out, row["t_min"], FIRST_TYPES)  # type: ignore[arg-type]
     if tracemalloc.is_tracing():
         snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])
         row["python_traced_mb"] = round(tracemalloc.get_traced_memory()[0] / 2 ** 20, 1)
@@ -93,6 +114,9 @@ def tick(out: Path, started: float, first: list[tracemalloc.Snapshot]) -> None:
         setattr(snap, "t_min", row["t_min"])
     with (out / "probe.jsonl").open("a") as fh:
         fh.write(json.dumps(row) + "\n")
+
+
+FIRST_TYPES: list[Counter[str]] = []
 
 
 def run_probe(out: Path, every: float, frames: int) -> None:
