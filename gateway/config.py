@@ -8,6 +8,7 @@ embedded ones: a working gateway with no file at all.
 from __future__ import annotations
 
 import os
+import shlex
 from pathlib import Path
 from typing import Any, Literal
 
@@ -27,7 +28,15 @@ class JvmSettings(BaseModel):
     max_heap: str = Field(
         default="1g",
         description="-Xmx for the embedded JVM; 1g holds a 10,000-rule set, the version it replaces and a build.")
-    extra_options: list[str] = Field(default_factory=list)
+    extra_options: list[str] = Field(
+        default_factory=list,
+        description="More JVM options, e.g. ['-XX:NativeMemoryTracking=summary', '-XX:+StartAttachListener'] to read "
+        "the JVM's native memory with jcmd; env PRINTEPS_JVM_OPTIONS='-XX:A -XX:B' (split like a shell).")
+
+    @field_validator("extra_options", mode="before")
+    @classmethod
+    def _options_from_string(cls, value: Any) -> Any:
+        return shlex.split(value) if isinstance(value, str) else value
 
 
 class RulePolicySettings(BaseModel):
@@ -399,6 +408,10 @@ class Settings(BaseModel):
     """All gateway settings. Sections are added by the adapters that use them."""
 
     data_dir: str = str(PROJECT_ROOT / "var")
+    malloc_arena_max: int = Field(
+        default=2, ge=0, description="glibc malloc arenas of a gateway process (gateway.base.malloc): 2 keeps the "
+        "memory threads free where the next allocation finds it (the soak's slow rise was free memory kept in ~16 "
+        "arenas); 0: glibc's default (8 per core). $MALLOC_ARENA_MAX wins when set.")
     jvm: JvmSettings = Field(default_factory=JvmSettings)
     engine: EngineSettings = Field(default_factory=EngineSettings)
     api: ApiSettings = Field(default_factory=ApiSettings)
@@ -421,6 +434,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_RULES_DIR": ("engine", "rules_dir"),
     "PRINTEPS_JAVA_HOME": ("jvm", "java_home"),
     "PRINTEPS_JVM_HEAP": ("jvm", "max_heap"),
+    "PRINTEPS_JVM_OPTIONS": ("jvm", "extra_options"),
     "PRINTEPS_COMPILE_TIMEOUT": ("engine", "compile_timeout_s"),
     "PRINTEPS_COMPILE_WORKERS": ("engine", "compile_workers"),
     "PRINTEPS_EXPLAIN_PREBUILD": ("engine", "explain_prebuild"),

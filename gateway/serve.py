@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.app import build_gateway
+from gateway.base.malloc import limit_arenas
 from gateway.config import Settings, load_settings
 from gateway.store.embedded import EmbeddedMongo
 from gateway.store.factory import embedded_dir, store_uri
@@ -265,6 +266,7 @@ def worker_main(argv: list[str] | None = None) -> int:
     sys.setswitchinterval(0.001)
     logging.basicConfig(level=logging.INFO, format=f"%(asctime)s worker{args.index} %(levelname)s %(name)s: %(message)s")
     settings = load_settings(args.config)
+    limit_arenas(settings.malloc_arena_max)  # before the JVM's and the servers' threads allocate
     gateway = build_gateway(settings, ros=args.ros)
     sock = listening_socket(args.host, args.port)  # after the build: a worker takes connections once it serves
     # A private loopback port of this worker alone: calls forwarded to the sessions it holds must
@@ -297,6 +299,7 @@ def run(settings: Settings, *, rest: bool = True, ros: bool | None = None, host:
     With ``rest`` uvicorn serves the app (and handles the signals); without, the process waits on
     the signals itself (the ROS launcher).
     """
+    limit_arenas(settings.malloc_arena_max)  # before the JVM's and the servers' threads allocate
     gateway = build_gateway(settings, rest=rest, ros=ros)
     try:
         if rest:

@@ -191,3 +191,11 @@ def test_body_limit_declared_and_streamed():
     assert _run_asgi(limited, [], [b"x" * 6, b"x" * 6])[0]["status"] == 413
     assert _run_asgi(limited, [(b"content-length", b"zz")], [b""])[0]["status"] == 400
     assert _run_asgi(limited, [], [b"x" * 5])[0]["status"] == 200
+
+
+def test_jvm_options_come_from_the_environment_split_like_a_shell(monkeypatch):
+    """How a soak (or an operator) turns on the JVM's native memory tracking without a file."""
+    monkeypatch.setenv("PRINTEPS_JVM_OPTIONS", "-XX:NativeMemoryTracking=summary  '-Dprinteps.note=two words'")
+    assert load_settings().jvm.extra_options == ["-XX:NativeMemoryTracking=summary", "-Dprinteps.note=two words"]
+    monkeypatch.delenv("PRINTEPS_JVM_OPTIONS")
+    assert load_settings().jvm.extra_options == []
