@@ -47,12 +47,10 @@ def _current(catalog: Catalog, kind: str) -> list[tuple[str, Any]]:
 def seed_folders(settings: Any) -> dict[str, list[Path]]:
     """The folders a gateway with ``settings`` seeds from, by catalog kind: what a start passes to
     each service's ``seed(folder)`` (:mod:`gateway.base.lifecycle`) and where :func:`export_to`
-    finds the seed files' names. The knowledge has one folder, or two when the ontology and the
-    SWRL files sit apart (the ontology's first)."""
+    finds the seed files' names. One folder per kind (a list: none when a setting is None)."""
     streams = settings.streams
-    knowledge = [Path(streams.ontology_file).parent, Path(streams.swrl_file).parent]
     return {"ruleset": [Path(settings.engine.rules_dir)],
-            "knowledge": list(dict.fromkeys(knowledge)),
+            "knowledge": [Path(streams.knowledge_dir)] if streams.knowledge_dir else [],
             "workflow": [Path(settings.workflows.source_dir)],
             "query": [Path(streams.queries_dir)] if streams.queries_dir else [],
             "mapping": [Path(streams.mappings_dir)] if streams.mappings_dir else []}
