@@ -24,6 +24,7 @@ from typing import Any
 import yaml
 
 from gateway.base.versions import Catalog
+from gateway.config import knowledge_files
 from gateway.engine.ruleset import write_file
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import RuleBinding
@@ -171,9 +172,12 @@ def import_from(gateway: Any, folder: Path, *, author: str, comment: str,
             attempt(f"rule set {sub.name}",
                     lambda sub=sub: gateway.engine.import_folder(sub, author, comment, role=role))
     knowledge = gateway.knowledge
-    for kind, suffixes in (("ontology", (".ttl", ".owl", ".rdf")), ("swrl", (".swrl",))):
-        files = sorted(p for p in (folder / ONTOLOGY).glob("*") if p.suffix in suffixes) if (folder / ONTOLOGY).is_dir() else []
-        for path in files[:1]:
+    for kind, files in knowledge_files(folder / ONTOLOGY).items():  # the seed folder's layout (streams.knowledge_dir)
+        if len(files) > 1:
+            report.append((f"{kind} {', '.join(p.name for p in files)}",
+                           f"failed: {folder / ONTOLOGY} holds {len(files)} {kind} files: keep one"))
+            continue
+        for path in files:
             attempt(f"{kind} {path.name}", lambda kind=kind, path=path: _import_knowledge(knowledge, kind, path, author, comment))
     workflows = folder / WORKFLOWS
     if workflows.is_dir():
