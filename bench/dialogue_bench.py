@@ -153,9 +153,8 @@ def _dialogue_in_memory(settings):
     from gateway.runtime.transfer import seed_folders
 
     jvm.start(settings.jvm)
-    cfg = settings.streams
     engine = Engine(settings)
-    knowledge = KnowledgeBase(files={"ontology": Path(cfg.ontology_file).name, "swrl": Path(cfg.swrl_file).name})
+    knowledge = KnowledgeBase()
     folders = seed_folders(settings)
     for service in (knowledge, engine):
         for folder in folders[service.kind]:

@@ -105,7 +105,7 @@ def run(query: str, stream: str, mapped: list[tuple[int, list]], fast: bool, ont
         max_steps: int | None = None) -> dict[str, Any]:
     """Push everything; the time of every push that closed a window (a step) and of the others."""
     settings = StreamSettings(queries_dir=None, fast_path=fast, max_window_triples=10**7,
-                              **({"ontology_file": ontology} if ontology else {}))
+                              **({"knowledge_dir": str(Path(ontology).parent)} if ontology else {}))
     engine = StreamEngine(settings)
     name = engine.register(query)["name"]
     steps: list[float] = []

@@ -203,8 +203,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
 
     cfg = settings.streams
     seeds = seed_folders(settings) if seed else {}
-    knowledge = KnowledgeBase(catalog, files={"ontology": Path(cfg.ontology_file).name,
-                                              "swrl": Path(cfg.swrl_file).name})
+    knowledge = KnowledgeBase(catalog)
     _seed_and_load(knowledge, seeds)
     _seed_and_load(engine, seeds)
 
@@ -243,8 +242,9 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         ros_gateway.attach_dialogue(dialogue)
 
     workflows = build_service(settings, catalog=catalog, engine=engine, store=store,
-                              ontology_lookup=knowledge.value, ros_modules=ros_modules, seed=seed, dialogue=dialogue)
+                              ontology_lookup=knowledge.value, ros_modules=ros_modules, dialogue=dialogue)
     closers.append(("the workflow executor", workflows.close))
+    _seed_and_load(workflows.registry, seeds)
     workflows.executor.recorder = FanOutRecorder(workflows.executor.recorder, CallableRecorder(live.on_workflow_record))
     actions.register("workflow", workflow_handler(workflows))
     streams.subscribe(actions.on_stream_event)

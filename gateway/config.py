@@ -7,15 +7,17 @@ embedded ones: a working gateway with no file at all.
 
 from __future__ import annotations
 
+import logging
 import os
 import shlex
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
+log = logging.getLogger(__name__)
 
 
 class JvmSettings(BaseModel):
@@ -335,15 +337,48 @@ class WorkflowSettings(BaseModel):
     runs_kept: int = Field(default=200, description="Recent runs kept for GET /api/workflows/runs.")
 
 
+ONTOLOGY_SUFFIXES = (".ttl", ".n3", ".owl", ".rdf")
+SWRL_SUFFIXES = (".swrl",)
+
+
+def knowledge_files(folder: str | Path | None) -> dict[str, list[Path]]:
+    """The files of a knowledge folder (``streams.knowledge_dir``) by item, ``ontology`` and
+    ``swrl``, sorted by name: one of each is expected; more than one is the caller's to refuse
+    (it names them), none is an item the folder does not seed."""
+    root = Path(folder) if folder else None
+    found: dict[str, list[Path]] = {"ontology": [], "swrl": []}
+    if root is None or not root.is_dir():
+        return found
+    for path in sorted(p for p in root.iterdir() if p.is_file()):
+        suffix = path.suffix.lower()
+        if suffix in ONTOLOGY_SUFFIXES:
+            found["ontology"].append(path)
+        elif suffix in SWRL_SUFFIXES:
+            found["swrl"].append(path)
+    return found
+
+
+def ontology_file(folder: str | Path | None) -> Path | None:
+    """The ontology file of a knowledge folder (None: there is none); several raise ValueError naming them."""
+    files = knowledge_files(folder)["ontology"]
+    if len(files) > 1:
+        raise ValueError(f"knowledge folder {folder} holds {len(files)} ontology files "
+                         f"({', '.join(p.name for p in files)}): keep one")
+    return files[0] if files else None
+
+
 class StreamSettings(BaseModel):
     """Stream reasoning (C-SPARQL) and the teahouse ontology: files, bounds and defaults."""
 
-    ontology_file: str = str(PROJECT_ROOT / "ontology" / "teahouse.ttl")
+    knowledge_dir: str | None = Field(
+        default=str(PROJECT_ROOT / "ontology"),
+        description="The folder whose ontology file (one *.ttl, *.n3, *.owl or *.rdf) and SWRL rules (one *.swrl) "
+        "seed the knowledge of an empty Information State (None: none); a stream engine without the gateway's "
+        "knowledge reads its ontology file.")
     ontology_graph: str = Field(
         default="http://printeps.org/cafe/ontology",
         description="IRI under which the ontology is a static graph for queries (FROM <iri>).",
     )
-    swrl_file: str = str(PROJECT_ROOT / "ontology" / "teahouse.swrl")
     queries_dir: str | None = Field(
         default=str(PROJECT_ROOT / "ontology" / "queries"),
         description="*.rq files (+ <stem>.binding.yaml) that seed an empty Information State (None: none).",
@@ -369,6 +404,28 @@ class StreamSettings(BaseModel):
         "fire goes on on the binding's own thread and reports itself, and while it runs newer windows coalesce "
         "(one waits, the newest; the others are reported as skipped): a slow rule set never holds up the stream.")
     fast_path: bool = Field(default=True, description="Use the vectorised executor where it applies.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _knowledge_files_as_folder(cls, data: Any) -> Any:
+        """Back-compat: ``ontology_file``/``swrl_file`` (before ``knowledge_dir``) name their folder.
+
+        Why one setting: the knowledge is seeded from a folder like the rule sets, workflows,
+        queries and mappings (``seed(folder)``); the files' names are read from the folder."""
+        if not isinstance(data, dict) or not ({"ontology_file", "swrl_file"} & data.keys()):
+            return data
+        data = dict(data)
+        old = {key: data.pop(key) for key in ("ontology_file", "swrl_file") if key in data}
+        if "knowledge_dir" in data:
+            raise ValueError(f"streams: set knowledge_dir only ({', '.join(old)} is its old form, a file in that folder)")
+        folders = {str(Path(value).parent) for value in old.values() if value}
+        if len(folders) > 1:
+            raise ValueError(f"streams: {' and '.join(f'{k} ({v})' for k, v in old.items())} are in different "
+                             "folders: put the ontology and SWRL files in one folder and set streams.knowledge_dir to it")
+        data["knowledge_dir"] = folders.pop() if folders else None
+        log.warning("settings: streams.%s is deprecated: use streams.knowledge_dir: %s (its folder)",
+                    " and streams.".join(old), data["knowledge_dir"])
+        return data
 
 
 class DialogueSettings(BaseModel):

@@ -4,7 +4,7 @@ Why one object: the continuous queries bind parameters from the ontology (``?dis
 workflows read values from it (``pepper1.robotToHumanDistance``), ``POST /api/reason`` runs Pellet
 on it, and the owner edits it. They must all see the same version, and every gateway process
 must follow an edit made through any other. So the texts live in the catalog (kind
-``knowledge``, items ``ontology`` and ``swrl``; the files under ``ontology/`` only seed an empty
+``knowledge``, items ``ontology`` and ``swrl``; the two files of ``streams.knowledge_dir`` only seed an empty
 store), and this object is the one reader in the process: on every change it parses the texts
 once, runs Pellet once, and hands the asserted **and inferred** facts to everyone — so a value an
 SWRL rule infers reaches the queries, bindings and workflows, not only ``/api/reason``.
@@ -30,18 +30,24 @@ from gateway.ontology.reasoner import KnowledgeText, Reasoner, ReasonerError
 from gateway.rdf.terms import Triple
 from gateway.stream.params import OntologySource
 from gateway.base.lifecycle import CatalogLifecycle
+from gateway.config import SWRL_SUFFIXES, knowledge_files
 from gateway.base.versions import Catalog, CatalogConflict, Version, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
 
 KIND = "knowledge"
 NAMES = ("ontology", "swrl")
+DEFAULT_FILES = {"ontology": "teahouse.ttl", "swrl": "teahouse.swrl"}
 XSD = "http://www.w3.org/2001/XMLSchema#"
 RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 
 
 def digest(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+class SeedFolderAmbiguous(ValueError):
+    """A seed folder holding two files of one item (two ontologies): which one is meant is not guessed."""
 
 
 class KnowledgeConflict(Exception):
@@ -64,14 +70,13 @@ class KnowledgeBase(CatalogLifecycle):
     """Current ontology + SWRL texts, their versions, and everything derived from them."""
 
     kind = KIND
-    failures = (OSError, UnicodeDecodeError)
+    failures = (OSError, UnicodeDecodeError, SeedFolderAmbiguous)
 
-    def __init__(self, catalog: Catalog | None = None, *, files: dict[str, str] | None = None,
-                 infer: bool = True) -> None:
-        """``files``: the file name of each item (``ontology``, ``swrl``), as a seed folder holds
-        it and as errors name it."""
+    def __init__(self, catalog: Catalog | None = None, *, infer: bool = True) -> None:
         super().__init__(catalog)
-        self.files = dict(files or {"ontology": "teahouse.ttl", "swrl": "teahouse.swrl"})
+        # each item's file name, as errors name it and export writes it: the served version's
+        # (the name of the file it was seeded from), the defaults until one is served
+        self.files = dict(DEFAULT_FILES)
         self.infer = infer
         self._text = KnowledgeText(0, "", "", self.files["ontology"], self.files["swrl"])
         self._infos: dict[str, VersionInfo] = {}
@@ -153,7 +158,7 @@ class KnowledgeBase(CatalogLifecycle):
                                               comment=comment, hash=digest(text), base_version=base_version)
             except CatalogConflict as conflict:
                 raise KnowledgeConflict(kind, digest(current), conflict.current) from None
-            self._serve({kind: (info, seq, text)})
+            self._serve({kind: (info, seq, text, self.files[kind])})
             return info
 
     def rollback(self, kind: str, version: int, *, author: str, comment: str = "") -> VersionInfo:
@@ -165,7 +170,7 @@ class KnowledgeBase(CatalogLifecycle):
                 raise KnowledgeInvalid(kind, errors)
             info, seq = self.catalog.set_current(KIND, kind, int(version), author=author,
                                                  comment=comment or f"rollback to version {version}")
-            self._serve({kind: (info, seq, stored.payload["text"])})
+            self._serve({kind: (info, seq, stored.payload["text"], stored.payload.get("file"))})
             return info
 
     def versions(self, kind: str) -> list[VersionInfo]:
@@ -180,11 +185,17 @@ class KnowledgeBase(CatalogLifecycle):
 
     # ---- the shared life cycle's hooks -------------------------------------------------------
     def _seed_paths(self, folder: Path) -> list[Path]:
-        """The ontology and SWRL files (by their names in :attr:`files`) the folder holds."""
-        return [folder / self.files[kind] for kind in NAMES if (folder / self.files[kind]).is_file()]
+        """The ontology file (``*.ttl``, ``*.n3``, ``*.owl``, ``*.rdf``) and the SWRL file
+        (``*.swrl``) of the folder (``streams.knowledge_dir``), whatever their names."""
+        return [path for kind in NAMES for path in knowledge_files(folder)[kind]]
 
     def _read_seed(self, path: Path) -> tuple[str, Path]:
-        return ("ontology" if path.name == self.files["ontology"] else "swrl"), path
+        kind = "swrl" if path.suffix.lower() in SWRL_SUFFIXES else "ontology"
+        others = [p.name for p in knowledge_files(path.parent)[kind] if p != path]
+        if others:
+            raise SeedFolderAmbiguous(f"the folder {path.parent} holds more than one {kind} file ({path.name}, "
+                                      f"{', '.join(others)}): keep one")
+        return kind, path
 
     def _store_seed(self, name: str, item: Path, path: Path) -> int:
         """Stored as the repository holds it (not checked: the seed is the reference)."""
@@ -197,21 +208,24 @@ class KnowledgeBase(CatalogLifecycle):
     def _apply_all(self, stale: list[tuple[Version, int]], *, elsewhere: bool) -> dict[str, str]:
         """Both texts at once when both are new: Pellet runs once."""
         with self._lock:
-            self._serve({_kind(s.info.name): (s.info, seq, s.payload["text"]) for s, seq in stale})
+            self._serve({_kind(s.info.name): (s.info, seq, s.payload["text"], s.payload.get("file"))
+                         for s, seq in stale})
         return {s.info.name: f"serving v{s.info.version}" for s, _ in stale}
 
     def _withdraw(self, name: str, seq: int) -> None:
         """The knowledge cannot be deleted: keep serving what we have."""
 
     # ---- deriving ------------------------------------------------------------------------------
-    def _serve(self, changes: dict[str, tuple[VersionInfo, int, str]]) -> None:
-        """Make new texts current unless a newer change is served; re-derive facts and values."""
+    def _serve(self, changes: dict[str, tuple[VersionInfo, int, str, str | None]]) -> None:
+        """Make new texts (and their file names) current unless a newer change is served;
+        re-derive facts and values."""
         applied = []
         texts = {"ontology": self._text.ontology, "swrl": self._text.swrl}
-        for kind, (info, seq, text) in changes.items():
+        for kind, (info, seq, text, file) in changes.items():
             if not self._served.set(kind, info.version, seq):
                 continue
             self._infos[kind] = info
+            self.files[kind] = file or self.files[kind]
             texts[kind] = text
             applied.append(kind)
         if not applied:

@@ -24,6 +24,7 @@ from typing import Any
 import yaml
 
 from gateway.base.versions import Catalog
+from gateway.config import knowledge_files
 from gateway.engine.ruleset import write_file
 from gateway.stream.query import ParamSpec, parse_query
 from gateway.stream.rules import RuleBinding
@@ -47,12 +48,10 @@ def _current(catalog: Catalog, kind: str) -> list[tuple[str, Any]]:
 def seed_folders(settings: Any) -> dict[str, list[Path]]:
     """The folders a gateway with ``settings`` seeds from, by catalog kind: what a start passes to
     each service's ``seed(folder)`` (:mod:`gateway.base.lifecycle`) and where :func:`export_to`
-    finds the seed files' names. The knowledge has one folder, or two when the ontology and the
-    SWRL files sit apart (the ontology's first)."""
+    finds the seed files' names. One folder per kind (a list: none when a setting is None)."""
     streams = settings.streams
-    knowledge = [Path(streams.ontology_file).parent, Path(streams.swrl_file).parent]
     return {"ruleset": [Path(settings.engine.rules_dir)],
-            "knowledge": list(dict.fromkeys(knowledge)),
+            "knowledge": [Path(streams.knowledge_dir)] if streams.knowledge_dir else [],
             "workflow": [Path(settings.workflows.source_dir)],
             "query": [Path(streams.queries_dir)] if streams.queries_dir else [],
             "mapping": [Path(streams.mappings_dir)] if streams.mappings_dir else []}
@@ -173,9 +172,12 @@ def import_from(gateway: Any, folder: Path, *, author: str, comment: str,
             attempt(f"rule set {sub.name}",
                     lambda sub=sub: gateway.engine.import_folder(sub, author, comment, role=role))
     knowledge = gateway.knowledge
-    for kind, suffixes in (("ontology", (".ttl", ".owl", ".rdf")), ("swrl", (".swrl",))):
-        files = sorted(p for p in (folder / ONTOLOGY).glob("*") if p.suffix in suffixes) if (folder / ONTOLOGY).is_dir() else []
-        for path in files[:1]:
+    for kind, files in knowledge_files(folder / ONTOLOGY).items():  # the seed folder's layout (streams.knowledge_dir)
+        if len(files) > 1:
+            report.append((f"{kind} {', '.join(p.name for p in files)}",
+                           f"failed: {folder / ONTOLOGY} holds {len(files)} {kind} files: keep one"))
+            continue
+        for path in files:
             attempt(f"{kind} {path.name}", lambda kind=kind, path=path: _import_knowledge(knowledge, kind, path, author, comment))
     workflows = folder / WORKFLOWS
     if workflows.is_dir():

@@ -39,7 +39,7 @@ from typing import Any
 
 from pyoxigraph import Literal, NamedNode
 
-from gateway.config import StreamSettings
+from gateway.config import StreamSettings, ontology_file
 from gateway.rdf.terms import DEFAULT_PREFIXES, Term, Triple, canonical_triple, parse_node
 from gateway.stream.analysis import construct_fields, relevant_predicates
 from gateway.stream.evaluate import WindowData, check_sparql
@@ -77,7 +77,7 @@ class StreamEngine:
         self.settings = settings or StreamSettings()
         self.rules_engine = rules_engine
         self.providers = dict(providers or {})  # context facts a binding can ask for (e.g. "robots")
-        self.ontology = ontology if ontology is not None else OntologySource(self.settings.ontology_file)
+        self.ontology = ontology if ontology is not None else OntologySource(ontology_file(self.settings.knowledge_dir))
         self._queries: dict[str, QueryRuntime] = {}
         self._subscribers: dict[int, tuple[Subscriber, str | None, bool]] = {}
         self._input_listeners: list[InputListener] = []

@@ -28,7 +28,7 @@ def _new_stats() -> dict[str, int]:
     return {
         "windows": 0, "reported": 0, "empty_windows": 0, "skipped_windows": 0, "fast": 0, "general": 0,
         "fallbacks": 0, "results": 0, "late_dropped": 0, "overflow_dropped": 0, "errors": 0, "rule_fires": 0,
-        "rule_errors": 0, "derived_triples": 0, "rule_skipped": 0, "rule_late": 0,
+        "rule_errors": 0, "derived_triples": 0, "rule_skipped": 0, "rule_late": 0, "fast_skipped": 0,
     }
 
 
@@ -49,6 +49,8 @@ class QueryRuntime:
     plan: Plan | None = None
     plan_text: str | None = None
     not_compilable: str | None = None
+    fast_skip: int = 0  # windows still left to the general path after a fallback (gateway.stream.evaluator)
+    fast_backoff: int = 0  # how many the last fallback left there (doubles while windows keep falling back)
     binding: RuleBinding | None = None
     field_types: dict[str, dict[str, str]] = field(default_factory=dict)  # fact type -> field -> java type
     handled: dict[str, int] = field(default_factory=dict)  # suppress_repeats: key -> window end it fired

@@ -136,10 +136,15 @@ class WorkflowService:
 
 def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, store: Any = None,
                   ontology_lookup: Callable[[str], Any] | None = None,
-                  ros_modules: Adapter | None = None, seed: bool = True, dialogue: Any = None) -> WorkflowService:
+                  ros_modules: Adapter | None = None, dialogue: Any = None) -> WorkflowService:
     """Assemble the service from ``settings.workflows`` and what the gateway runs: its catalog
     (versions), engine (``fire_rules``), knowledge (``ontology_value``), ROS node (robot modules;
-    simulated robots without one) and Information State (runs recorded)."""
+    simulated robots without one) and Information State (runs recorded).
+
+    The registry serves nothing yet: like the other catalog-backed services, the composition root
+    seeds it from its folder and loads it (``registry.seed(folder)``, ``registry.load()``; see
+    :mod:`gateway.base.lifecycle` and ``gateway.runtime.transfer.seed_folders``), so which folders
+    seed a gateway is said in one place."""
     cfg = settings.workflows
     robots: SimulatedRobots | None = None
     adapters: dict[str, Adapter] = {"wait": WaitAdapter()}
@@ -166,7 +171,4 @@ def build_service(settings: Any, *, catalog: Any = None, engine: Any = None, sto
         recorder = FanOutRecorder(memory, CallableRecorder(to_store))
     executor = Executor(adapters, recorder, default_timeout=cfg.default_timeout_s)
     registry = WorkflowRegistry(catalog)
-    if seed:
-        registry.seed(cfg.source_dir)  # a file that is no valid workflow is logged and skipped
-    registry.load()
     return WorkflowService(registry, executor, manual, robots, runs_kept=cfg.runs_kept, recorder=memory)

@@ -119,9 +119,9 @@ def test_post_reason_endpoint(files, mongo, tmp_path):
     from gateway.config import Settings
     from gw_testing import built_gateway
 
-    onto, swrl = files
+    onto, _ = files
     settings = Settings.model_validate({"data_dir": str(tmp_path / "d"), "engine": {"rules_dir": str(tmp_path / "r")},
-                                        "streams": {"ontology_file": str(onto), "swrl_file": str(swrl),
+                                        "streams": {"knowledge_dir": str(onto.parent),
                                                     "queries_dir": None}})
     with built_gateway(settings, mongo, tmp_path) as gateway:
         client = TestClient(gateway.app)

@@ -14,14 +14,15 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture()
 def ontology_copy(tmp_path) -> Path:
     """A private copy of the teahouse ontology the test may edit."""
-    path = tmp_path / "teahouse.ttl"
+    path = tmp_path / "knowledge" / "teahouse.ttl"  # the one ontology file of streams.knowledge_dir
+    path.parent.mkdir()
     shutil.copy(ROOT / "ontology" / "teahouse.ttl", path)
     return path
 
 
 @pytest.fixture()
 def settings(ontology_copy) -> StreamSettings:
-    return StreamSettings(ontology_file=str(ontology_copy), queries_dir=None)
+    return StreamSettings(knowledge_dir=str(ontology_copy.parent), queries_dir=None)
 
 
 @pytest.fixture()

@@ -310,6 +310,41 @@ def test_inexact_numbers_fall_back_to_the_general_path(engine):
     assert engine.query_info("CustomerDetectionQuery")["stats"]["fallbacks"] >= 1
 
 
+def test_after_a_fallback_the_next_windows_skip_the_doomed_fast_try(engine):
+    """Doubles in arithmetic fall back in every window (the ROS Entrance readings): after one
+    fallback the next 1, 2, 4, … windows go to the general path without trying the fast path
+    (a failed try costs more than the general path); exact numbers are on the fast path again
+    after the run of skipped windows, and every window answers as the general path does."""
+    from csparql_scenarios import CUSTOMER_QUERY
+
+    engine.register(CUSTOMER_QUERY)
+    P = "http://printeps.org/cafe/entrance/"
+    xsd = "http://www.w3.org/2001/XMLSchema#"
+    events = collect(engine)
+
+    def reading(k: int, ts: int, distance: str, datatype: str) -> None:
+        customer, node = NamedNode(f"{P}c{k // 5}"), NamedNode(f"{P}r{k}")
+        engine.push("http://printeps.org/cafe/entrance", ts, [
+            (customer, NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type"), NamedNode(P + "Customer")),
+            (customer, NamedNode(P + "positionAtTime"), node),
+            (node, NamedNode(P + "distance"), Literal(distance, datatype=NamedNode(xsd + datatype)))])
+
+    for k in range(20):  # one reading a second, closing one non-empty window each
+        reading(k, 500 + 1000 * k, f"{3.9 - 0.3 * (k % 5):.1f}", "double")
+    stats = engine.query_info("CustomerDetectionQuery")["stats"]
+    # the first window holds one reading (no difference to compute): fast; the 18 others fall back,
+    # and only 4 of them try the fast path first (windows 2, 4, 7 and 12: then 1, 2, 4, 8 skipped)
+    assert stats["windows"] == 19 and stats["fast"] == 1 and stats["general"] == stats["fallbacks"] == 18
+    assert stats["fast_skipped"] == 14
+    for k in range(20, 60):
+        reading(k, 500 + 1000 * k, f"{3.9 - 0.3 * (k % 5):.1f}", "decimal")
+    stats = engine.query_info("CustomerDetectionQuery")["stats"]
+    assert stats["fast"] >= 20 and stats["general"] == stats["fallbacks"]
+    detected = [e for e in events if e["kind"] == "result" and e["rows"]]
+    assert {e["path"] for e in detected} == {"fast", "oxigraph"}
+    assert len({(e["rows"][0]["cnt"], e["path"]) for e in detected}) >= 2  # the same detections on either path
+
+
 def test_triples_the_query_cannot_match_are_not_kept(engine):
     info = engine.register(COUNT_Q.format(name="q", w="[RANGE 1h STEP 1h]"))
     assert info["relevant_predicates"] == [EX + "v"]

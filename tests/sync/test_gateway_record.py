@@ -217,6 +217,11 @@ def test_export_then_import_round_trips_and_bad_items_are_refused(gateway, tmp_p
     assert report["workflow thanking.yaml"].startswith("failed: ") and "actors.pepper.kind" in report["workflow thanking.yaml"]
     assert "Two of you, welcome!" in gateway.engine.current("reception").files["reception.dslr"]
     assert gateway.engine.current("reception").info.author == "git"
+    ontology = tmp_path / "out" / "ontology"
+    (ontology / "draft.owl").write_text("<rdf:RDF/>")  # two ontologies: which one is meant is not guessed
+    report = dict(import_from(gateway, tmp_path / "out", author="git", comment="two ontologies"))
+    assert report["ontology draft.owl, teahouse.ttl"] == f"failed: {ontology} holds 2 ontology files: keep one"
+    assert report["swrl teahouse.swrl"].startswith("unchanged v"), report
 
 
 def test_export_and_import_commands_join_a_running_gateway(tmp_path):

@@ -158,3 +158,73 @@ def test_the_five_services_share_one_life_cycle():
         assert issubclass(service, CatalogLifecycle)
         for verb in ("seed", "load", "sync", "reconcile"):  # one implementation, one signature
             assert getattr(service, verb) is getattr(CatalogLifecycle, verb), f"{service.__name__}.{verb}"
+
+
+def test_every_kind_is_seeded_from_one_folder_setting_by_the_composition_root(tmp_path):
+    """Each kind has one folder setting, and ``seed_folders`` (what ``build_gateway`` passes to
+    each service's ``seed``) is the one place that reads them: building the workflow service seeds
+    nothing by itself any more (it did, from ``workflows.source_dir``)."""
+    from gateway.config import Settings
+    from gateway.runtime.transfer import seed_folders
+    from gateway.workflow.service import build_service
+
+    root = Path(__file__).resolve().parents[2]
+    folders = {kind: tmp_path / kind for kind in ("rules", "workflows", "knowledge", "queries", "mappings")}
+    settings = Settings.model_validate({
+        "data_dir": str(tmp_path / "var"), "engine": {"rules_dir": str(folders["rules"])},
+        "workflows": {"source_dir": str(root / "workflows"), "simulate_robots": True},
+        "streams": {"knowledge_dir": str(folders["knowledge"]), "queries_dir": str(folders["queries"]),
+                    "mappings_dir": str(folders["mappings"])}})
+    assert seed_folders(settings) == {"ruleset": [folders["rules"]], "workflow": [root / "workflows"],
+                                      "knowledge": [folders["knowledge"]], "query": [folders["queries"]],
+                                      "mapping": [folders["mappings"]]}
+    service = build_service(settings)
+    try:
+        assert service.registry.names() == []  # the root seeds and loads it, like the other four kinds
+        report = service.registry.seed(seed_folders(settings)["workflow"][0])
+        assert report["thanking"] == "seeded v1"
+    finally:
+        service.close()
+
+
+def test_the_knowledge_seeds_from_its_folder_whatever_the_files_are_named(tmp_path):
+    from gateway.ontology.knowledge import KnowledgeBase
+
+    root = Path(__file__).resolve().parents[2]
+    (tmp_path / "cafe.ttl").write_bytes((root / "ontology" / "teahouse.ttl").read_bytes())
+    (tmp_path / "cafe.swrl").write_bytes((root / "ontology" / "teahouse.swrl").read_bytes())
+    (tmp_path / "notes.txt").write_text("not knowledge")
+    knowledge = KnowledgeBase(MemoryCatalog(), infer=False)
+    assert knowledge.seed(tmp_path) == {"ontology": "seeded v1", "swrl": "seeded v1"}
+    stored = {kind: knowledge.catalog.load("knowledge", kind, 1).payload["file"] for kind in ("ontology", "swrl")}
+    assert stored == {"ontology": "cafe.ttl", "swrl": "cafe.swrl"}
+
+
+def test_a_knowledge_folder_with_two_ontologies_is_refused_naming_both(tmp_path):
+    from gateway.ontology.knowledge import KnowledgeBase
+
+    (tmp_path / "a.ttl").write_text("@prefix p: <http://x/> .\n")
+    (tmp_path / "b.owl").write_text("<rdf:RDF/>")
+    knowledge = KnowledgeBase(MemoryCatalog(), infer=False)
+    report = knowledge.seed(tmp_path)
+    assert set(report) == {"a.ttl", "b.owl"}
+    assert all(status.startswith("failed:") and "a.ttl" in status and "b.owl" in status for status in report.values())
+    assert knowledge.catalog.head("knowledge", "ontology") is None  # nothing guessed, nothing stored
+
+
+def test_the_old_knowledge_file_settings_name_their_folder(tmp_path, caplog):
+    """Back-compat: ``streams.ontology_file``/``swrl_file`` (public, in docs/operations.md) still
+    load, as ``knowledge_dir`` = their folder, with a warning; what cannot be one folder is refused."""
+    from pydantic import ValidationError
+
+    from gateway.config import Settings
+
+    old = {"ontology_file": str(tmp_path / "k" / "a.ttl"), "swrl_file": str(tmp_path / "k" / "a.swrl")}
+    with caplog.at_level("WARNING", logger="gateway.config"):
+        settings = Settings.model_validate({"streams": old})
+    assert settings.streams.knowledge_dir == str(tmp_path / "k")
+    assert "knowledge_dir" in caplog.text and "deprecated" in caplog.text
+    with pytest.raises(ValidationError, match="different folders.*knowledge_dir"):
+        Settings.model_validate({"streams": {**old, "swrl_file": str(tmp_path / "elsewhere" / "a.swrl")}})
+    with pytest.raises(ValidationError, match="set knowledge_dir only"):
+        Settings.model_validate({"streams": {**old, "knowledge_dir": str(tmp_path)}})

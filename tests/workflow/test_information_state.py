@@ -10,6 +10,8 @@ def test_runs_and_steps_are_recorded(store, tmp_path):
     settings = Settings.model_validate({"data_dir": str(tmp_path / "var"),
                                         "workflows": {"simulate_robots": True, "simulate_humans": True}})
     service = build_service(settings, store=store)
+    service.registry.seed(settings.workflows.source_dir)  # what the composition root does for a gateway
+    service.registry.load()
     try:
         result = service.run("thanking")
     finally:
