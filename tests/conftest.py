@@ -26,6 +26,9 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
     "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
     "--disable-sync", "--no-first-run", "--disable-quic",
+    # fewer processes for the same pages (one origin, no GPU): ~9% less chromium CPU measured on
+    # six workflow-editor tests (18.6 -> 16.9 CPU-s)
+    "--in-process-gpu", "--disable-site-isolation-trials",
 ]
 
 

@@ -201,6 +201,26 @@ class EmbeddedMongo:
         except pymongo.errors.PyMongoError:
             return False
 
+    def _wait_waking(self, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
+        """Wait for the daemon to exit, connecting to its port now and then meanwhile.
+
+        Why: on SIGINT the daemon closes its listening socket and joins its accept thread for up
+        to 2 s, but on Linux closing a socket does not wake a thread blocked in ``accept()``: every
+        stop took ~2.3 s of nothing. A connection wakes that thread, which then sees it is told to
+        stop. (One that comes before the signal is handled is served as any other, and closed.)"""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                proc.wait(timeout=0.05)
+                return
+            except subprocess.TimeoutExpired:
+                if time.monotonic() >= deadline:
+                    raise
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.05).close()
+            except OSError:
+                pass  # not listening (any more): nothing to wake
+
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop with SIGINT (a clean WiredTiger close), escalating only if it does not exit."""
         proc, self.proc = self.proc, None
@@ -210,7 +230,7 @@ class EmbeddedMongo:
             for sig, wait in ((signal.SIGINT, timeout_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
                 try:
                     proc.send_signal(sig)
-                    proc.wait(timeout=wait)
+                    self._wait_waking(proc, wait)
                     return
                 except subprocess.TimeoutExpired:
                     log.warning("embedded database did not stop on %s", sig.name)

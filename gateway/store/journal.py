@@ -31,6 +31,7 @@ import fcntl
 import itertools
 import logging
 import os
+import re
 import threading
 import time
 from collections import deque
@@ -44,6 +45,9 @@ log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 SEGMENT_BYTES = 4 * 1024 * 1024
+#: A segment's name, ``<pid>-<start ms>-<n>.jsonl``: only such files are adopted (the folder also
+#: holds ``refused.jsonl``, which adopting would ship again, refuse again and set aside twice).
+SEGMENT_NAME = re.compile(r"\d+-\d+-\d+\.jsonl")
 NEW_SUFFIX = ".new"  # a segment being created (locked, then renamed to ``*.jsonl``)
 ADOPTED_SUFFIX = ".adopted"  # a dead writer's segment another process holds and is shipping
 STALE_NEW_S = 60.0  # a ``*.new`` file this old was left by a creator that died
@@ -464,6 +468,8 @@ class Journal:
             return True
         # *.jsonl.adopted: an adopter died before it had shipped all of a dead writer's segment
         for path in sorted([*self.folder.glob("*.jsonl"), *self.folder.glob("*.jsonl" + ADOPTED_SUFFIX)]):
+            if not SEGMENT_NAME.fullmatch(path.name.removesuffix(ADOPTED_SUFFIX)):
+                continue  # not a segment: refused.jsonl (what the database refused, kept as it is)
             if self._segment is not None and path == self._segment.path:
                 continue
             adopted = _lock_orphan(path)

@@ -167,6 +167,25 @@ def test_unreadable_lines_of_an_adopted_segment_are_skipped_and_the_rest_shipped
         j.close()
 
 
+def test_what_the_database_refused_is_not_adopted_as_a_dead_writers_segment(tmp_path: Path) -> None:
+    """refused.jsonl sits beside the segments, unlocked: it is kept as it is, never shipped again
+    (it was: the document was refused and set aside a second time, and the file replaced)."""
+    journal = Journal(tmp_path, lambda db, c, lines: None)
+    journal.set_aside("db", "c", {"_id": "too-big"}, "DocumentTooLarge")
+    kept = (tmp_path / "refused.jsonl").read_bytes()
+    (tmp_path / "7-1-1.jsonl").write_bytes(encode("db", "c", {"_id": "orphan"}))  # a dead writer's segment
+    shipped: list[str] = []
+    other = Journal(tmp_path, lambda db, c, lines: shipped.extend(json.loads(x)["d"]["_id"] for x in lines),
+                    adopt_interval_s=0.01)
+    try:
+        assert other.catch_up(5)  # adopts every unlocked segment there is, and ships it
+        assert shipped == ["orphan"]
+        assert (tmp_path / "refused.jsonl").read_bytes() == kept and journal.set_aside_count == 1
+    finally:
+        other.close()
+        journal.close()
+
+
 def test_a_new_segment_is_locked_before_adopters_can_see_it(tmp_path: Path, monkeypatch) -> None:
     """A segment is created and locked under ``*.jsonl.new`` and only then renamed: at no moment
     is an unlocked ``*.jsonl`` of a live writer there for an adopter to take."""

@@ -46,6 +46,9 @@ def test_nested_filters_and_newest_first(store: InformationState) -> None:
     (lambda s: s.record("bad name", {}, stored_type="x"), "collection 'bad name'"),
     (lambda s: s.record("actions", {"$where": 1}, stored_type="x"), "field name '$where'"),
     (lambda s: s.record("actions", {"a": {"b.c": 1}}, stored_type="x"), "actions.a: field name 'b.c'"),
+    # after values that look like keys to a naive search (escaped quotes, commas, colons, dots)
+    (lambda s: s.record("actions", {"v": 'x.y\\",\\"z:' * 1000, "w": ['p.q",', "r"], "n": {"ok": 1, "$set": 2}},
+                        stored_type="x"), "actions.n: field name '$set'"),
     (lambda s: s.query("actions", filters={"$or": []}), "filter field '$or'"),
     (lambda s: s.query("actions", limit=0), "limit 0"),
     (lambda s: s.query("actions", since=datetime(2030, 1, 1, tzinfo=timezone.utc),
@@ -54,6 +57,15 @@ def test_nested_filters_and_newest_first(store: InformationState) -> None:
 def test_bad_input_is_a_clear_error(store: InformationState, call, message: str) -> None:
     with pytest.raises(StoreError, match=message.replace("$", r"\$").replace(".", r"\.")):
         call(store)
+
+
+def test_values_that_look_like_bad_keys_are_stored_as_they_are(store: InformationState) -> None:
+    """Only keys are refused: a value holding '"a.b":' or '{"$x":' is text like any other."""
+    doc = {"id": "v1", "text": '{"$where": 1, "a.b": 2},"c.d":', "list": ['",".":', "$x"]}
+    store.record("actions", doc, stored_type="x")
+    assert store.flush()
+    stored = store.query("actions", filters={"id": "v1"})[0]
+    assert {k: stored[k] for k in doc} == doc
 
 
 def test_nan_is_stored_as_null_not_lost(store: InformationState) -> None:
