@@ -28,8 +28,9 @@ log = logging.getLogger(__name__)
 FORWARDED_BY = "x-printeps-forwarded-by"
 _HOP_HEADERS = {"host", "content-length", "connection", "keep-alive", "transfer-encoding", "te", "upgrade",
                 "proxy-authorization", "proxy-connection", "accept-encoding"}
+# retry-after: the owner's 503 (the session being rebuilt there, a bulkhead full) tells when to retry
 _PASS_BACK = ("content-type", "x-ruleset-version", "x-decision-id", "x-kie-conversationid", "x-session-id",
-              "x-session-owner", "location")
+              "x-session-owner", "location", "retry-after")
 
 
 class OwnerUnreachable(Exception):
