@@ -102,14 +102,26 @@ def fire_latency(engine, n: int, variants: dict[int, int] | None = None) -> dict
     for k in range(WARM_FIRES):
         engine.fire("growth", facts[k % 50])
     samples = []
+    cpu = time.thread_time()  # the calling thread's CPU (JPype runs the Java work on it): what load does not inflate
     for k in range(REQUESTS):
         t = time.perf_counter()
         engine.fire("growth", facts[k % 50])
         samples.append((time.perf_counter() - t) * 1000)
+    cpu_ms = (time.thread_time() - cpu) * 1000 / REQUESTS
     correct = all(_counts(engine.fire("growth", facts[k])) == expected_firings(n, facts[k], variants) for k in range(10))
     firings = statistics.fmean(len(engine.fire("growth", f).fired) for f in facts)
     return {"p50_ms": percentile(samples, 0.5), "p99_ms": percentile(samples, 0.99), "mean_ms": statistics.fmean(samples),
-            "max_ms": max(samples), "correct": correct, "firings_per_request": firings, "requests": REQUESTS}
+            "max_ms": max(samples), "cpu_ms_per_request": cpu_ms, "load": os.getloadavg()[0], "correct": correct, "firings_per_request": firings, "requests": REQUESTS}
+
+
+def _warm_stats(files) -> dict:
+    """How the live version was warmed before the swap (fires, seconds, first and last ms)."""
+    from gateway.engine import compiler
+    from gateway.engine.ruleset import content_hash
+
+    compiled = compiler._cache.get(content_hash(files))
+    stats = getattr(compiled, "warm_stats", None)
+    return dict(stats.__dict__) if stats is not None else {}
 
 
 def _counts(result) -> dict[str, int]:
@@ -126,8 +138,11 @@ def redeploys(engine, n: int, edits: int = EDITS) -> dict:
         rule = (n * (2 * k + 1)) // (2 * edits)  # spread over the files
         files = drl_files(n, {rule: k + 1})
         done = deploy(engine, files)
+        cpu = time.thread_time()
         with Clock() as wall:
             result = engine.fire("growth", sample_facts(k, n))
+        out.setdefault("first_fire_cpu_ms", []).append((time.thread_time() - cpu) * 1000)
+        out.setdefault("warm", []).append(_warm_stats(files))
         out["seconds"].append(done["seconds"])
         out["rules_compiled"].append(done["stats"].get("rules_compiled"))
         out["stats"].append(done["stats"])
@@ -146,7 +161,7 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     first = deploy(engine, files)
     with Clock() as wall:
         result = engine.fire("growth", sample_facts(0, n))
-    first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000}
+    first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000, "warm": _warm_stats(files)}
     out = {"peer": "gateway", "generator": GENERATOR, "mode": "incremental" if incremental else "whole", "rules": n,
            "jvm_start_s": jvm_s,
            "cold_deploy": first, "first_fire_after_cold_deploy": first_fire}
