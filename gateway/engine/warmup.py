@@ -70,9 +70,10 @@ class WarmStats:
 
 def warm(compiled: CompiledRuleSet, files: dict[str, str] | None = None, budget_s: float = 0.25,
          max_fires: int = 300, fire_limit: int = 1000, recent: list[str] | None = None) -> WarmStats:
-    """Fires ``compiled`` on sample facts until it answers as fast as it is going to (the last
-    rounds no slower than twice the best), ``max_fires`` or ``budget_s``; once per compiled rule
-    set (later calls return at once).
+    """Fires ``compiled`` on sample facts, in rounds over all samples, until it answers as fast
+    as it is going to (three rounds in a row not 10% faster than the best), ``max_fires`` or
+    ``budget_s`` (checked after each round: every sample is fired at least once); once per
+    compiled rule set (later calls return at once).
 
     After a one-rule edit little is new (the other rules' classes are the ones the JIT already
     knows): a few rounds do. After a cold build every rule's classes are new: it takes the budget."""
