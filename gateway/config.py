@@ -87,6 +87,12 @@ class EngineSettings(BaseModel):
         default=30.0, description="Shared rule units not used for this long are removed (TTL).")
     warm_budget_s: float = Field(
         default=0.25, description="Time spent firing a new version on sample facts before it serves.")
+    warm_build_share: float = Field(
+        default=0.2, ge=0.0, description="A build that took long gets up to this share of its own time to warm "
+        "(more than warm_budget_s): a cold build of many new rules leaves the JIT cold, and its first requests "
+        "would run interpreted code. Warming stops earlier once its rounds stop getting faster.")
+    warm_max_s: float = Field(
+        default=5.0, ge=0.0, description="The most any warm-up of a new version takes.")
     explain_prebuild: bool = Field(
         default=True, description="After a deploy (rollback, load, sync) build the version's explain queries on "
         "the explain thread, so the first explanation of it does not compile them (seconds, one core).")

@@ -145,8 +145,15 @@ class Engine(CatalogLifecycle):
             raise CompileFailed(problems)
         _keep(self._declared, compiled.hash, kmodule.declarations(files), DECLARED_KEPT)
         if warm:
-            warmup.warm(compiled, files, budget_s=self.settings.engine.warm_budget_s, recent=self.recent_requests(label))
+            warmup.warm(compiled, files, budget_s=self._warm_budget(compiled), recent=self.recent_requests(label))
         return compiled
+
+    def _warm_budget(self, compiled: CompiledRuleSet) -> float:
+        """``warm_budget_s``, or for a build that took long a share of its time (at most
+        ``warm_max_s``): see gateway.engine.warmup."""
+        settings = self.settings.engine
+        built_s = compiled.stats.total_s if compiled.stats is not None else 0.0
+        return min(settings.warm_max_s, max(settings.warm_budget_s, settings.warm_build_share * built_s))
 
     RECENT_REQUESTS = warmup.RecentRequests.KEPT  # per rule set: the warm-up samples a new version gets
 

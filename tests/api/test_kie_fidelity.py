@@ -338,6 +338,30 @@ def test_doc_negative_pattern_sound_the_alarm(kie):
     dispose(kie, "cepdocs")
 
 
+def test_doc_sound_the_alarm_expires_the_sprinkler_as_plain_drools_does(kie):
+    """The sprinkler event has no @expires: Drools infers its expiry from the rule (it can only
+    match earlier fires), so it is retracted once the clock passes it, and the kitchen's `not`
+    holds again when its 10 s window closes: 4 s, 5.999 s, 0.002 s fires "alarm kitchen" too,
+    where 4 s then 7 s (both expiries in one advance) does not. Plain Drools does exactly this,
+    with the same jars, outside the gateway (bench/drools_plain/cep_alarm.py; docs/engine-api.md)."""
+    D = f"{CEP}.docs"
+    commands = [
+        {"insert": {"object": {f"{D}.FireDetected": {"room": "kitchen"}}}},
+        {"insert": {"object": {f"{D}.FireDetected": {"room": "hall"}}}},
+        {"fire-all-rules": {"out-identifier": "at0"}},
+        {"advance-session-time": {"amount": 4, "unit": "SECONDS"}},
+        {"insert": {"object": {f"{D}.SprinklerActivated": {"room": "kitchen"}}}},
+        {"fire-all-rules": {"out-identifier": "at4"}},
+        {"advance-session-time": {"amount": 5999}},
+        {"fire-all-rules": {"out-identifier": "at9999"}},
+        {"advance-session-time": {"amount": 2}},
+        {"fire-all-rules": {"out-identifier": "at10001"}},
+    ]
+    out = results(batch(kie, "cepdocs", commands))
+    assert (out["at0"], out["at4"], out["at9999"], out["at10001"]) == (0, 0, 0, 2)
+    assert sorted(a["params"]["text"] for a in out["actions"]) == ["alarm hall", "alarm kitchen"]
+
+
 def test_doc_sliding_window_of_time(client):
     base, sid = _docs_session(client)
     try:

@@ -25,7 +25,7 @@ from gateway.engine.artifacts import (
 from gateway.engine.build import CompileOptions
 from gateway.engine.errors import CompileFailed, CompileResourceError, says_out_of_memory
 from gateway.engine.results import encode_facts
-from gateway.engine.warmup import plain_facts, warm
+from gateway.engine.warmup import literal_facts, plain_facts, warm
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench" / "peers"))
@@ -669,6 +669,19 @@ def test_warming_fires_the_examples_once(options):
     assert stats.fires >= 3 and compiled.warmed
     assert warm(compiled, files).fires == 0
     assert {f["type"] for f in plain_facts(compiled.types)} == {"Customer", "Order", "Product"}
+
+
+def test_warming_samples_made_of_the_rules_literals_reach_their_joins(options):
+    """A fresh set with no examples and no traffic: the literal samples pass the rules' alpha
+    tests, so the join and its consequence are warmed too (plain values alone reach neither)."""
+    rules = HEADER + ('rule "vip order" when $c : Customer( tier == "vip", age >= 30 ) '
+                      'Order( customer == $c.id, amount > 750.0 ) then actions.say("bot", "vip"); end\n')
+    files = {"types.drl": TYPES.format(extra=""), "rules.drl": rules}
+    compiled = compiler.compile_files(files, "literals", options)
+    samples = literal_facts(compiled.types, files)
+    assert samples and all({f["type"] for f in facts} == {"Customer", "Order"} for facts in samples)
+    assert any(fire(compiled, facts)["fired"] == ["vip order"] for facts in samples)
+    assert fire(compiled, plain_facts(compiled.types))["fired"] == []
 
 
 # --------------------------------------------------------------------------- helpers

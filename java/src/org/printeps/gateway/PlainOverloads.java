@@ -38,7 +38,7 @@ final class PlainOverloads {
         final boolean varargs;  // chosen in phase 3: the trailing arguments go in one array
 
         Chosen(Method method, boolean varargs) {
-            this.method = method;
+            this.method = PlainValues.direct(method);
             this.params = method.getParameterTypes();
             this.varargs = varargs;
         }

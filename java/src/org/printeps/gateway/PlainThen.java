@@ -179,7 +179,8 @@ final class PlainThen {
         }
         if (read.getReturnType() == void.class || Modifier.isStatic(read.getModifiers())) throw new Reject(getter + "() is not a getter");
         if (PlainOverloads.generic(read)) throw new Reject(getter + "() has a generic type");
-        return new Expr(read.getReturnType(), facts -> PlainValues.invoke(read, facts[index], PlainValues.NO_ARGS));
+        final Method direct = PlainValues.direct(read);
+        return new Expr(read.getReturnType(), facts -> PlainValues.invoke(direct, facts[index], PlainValues.NO_ARGS));
     }
 
     /** A literal with its Java type: text, boolean, int, long ({@code 1L}) or double ({@code 2.5}). */
