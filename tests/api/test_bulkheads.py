@@ -113,7 +113,9 @@ def _fire(url: str, name: str, facts: list[dict[str, Any]], timeout: float = 60.
 
 
 def test_a_slow_rule_set_does_not_hold_up_another_or_health(api_gateway, api_settings, rule_sets, tmp_path):
-    server = _serve(api_gateway, api_settings, fire_workers=1)
+    # max_wait_s: the queued slow fire must still be served after the test's 20 fast fires, however
+    # busy the machine (at the default 5 s it was refused with 503 at load 30)
+    server = _serve(api_gateway, api_settings, fire_workers=1, max_wait_s=120)
     gates = [Gate(tmp_path, f"slow{k}") for k in range(2)]
     try:
         bulkheads = server.server.config.app.state.bulkheads
@@ -193,9 +195,13 @@ def test_a_fire_that_waited_too_long_is_refused_with_503(api_gateway, api_settin
     try:
         blocking = _in_background(lambda: _fire(server.url, SLOW, first.facts()))
         assert wait_for(first.started.exists, 60)
-        queued_at = time.monotonic()
         late = _in_background(lambda: _fire(server.url, SLOW, second.facts()))
-        assert wait_for(lambda: time.monotonic() - queued_at > 1.0, 5)  # past api.max_wait_s in the queue
+        # queued on the server (not only sent: on a busy machine the request may take a while to get
+        # there, and a fire queued less than 0.5 s before its turn runs), then past api.max_wait_s
+        bulkheads = server.server.config.app.state.bulkheads
+        assert wait_for(lambda: bulkheads.stats().get(SLOW, {}).get("waiting") == 1, 60), bulkheads.stats()
+        queued_at = time.monotonic()
+        assert wait_for(lambda: time.monotonic() - queued_at > 1.0, 5)
         first.open()
         for thread, _ in (blocking, late):
             thread.join(60)
