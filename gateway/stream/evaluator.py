@@ -222,13 +222,13 @@ class Evaluator:
             if runtime.empty_cache is not None and runtime.empty_cache[0] == key:
                 cached = runtime.empty_cache[1]
                 return Evaluation(list(cached.variables), list(cached.rows), cached.path)
-            evaluation = self._run_uncached(runtime, data)
+            evaluation = self._run_uncached(runtime, data, may_skip=False)  # cached: tried as itself, never skipped
             runtime.empty_cache = (key, evaluation)
             return evaluation
         return self._run_uncached(runtime, data)
 
     @staticmethod
-    def _run_uncached(runtime: QueryRuntime, data: WindowData) -> Evaluation:
+    def _run_uncached(runtime: QueryRuntime, data: WindowData, may_skip: bool = True) -> Evaluation:
         """The fast path's answer, or the general path's when the fast path cannot decide exactly.
 
         Why the back-off: what makes a window fall back is usually the shape of the stream's data
@@ -238,9 +238,11 @@ class Evaluator:
         fallback the next 1, 2, 4, … up to :data:`MAX_FAST_SKIP` windows go to the general path
         straight away (``stats.fast_skipped``; counted in ``stats.fallbacks`` too: left to the
         general path), and one window that the fast path decides starts the count again at 1.
-        Both paths answer the same, so this changes only what a window costs."""
+        Both paths answer the same, so this changes only what a window costs. An empty window is
+        never skipped (``may_skip``): its answer is cached with the path that gave it, so a skipped
+        one would count every later empty window as left to the general path."""
         if runtime.plan is not None:
-            if runtime.fast_skip > 0:
+            if may_skip and runtime.fast_skip > 0:
                 runtime.fast_skip -= 1
                 runtime.stats["fast_skipped"] += 1
                 runtime.stats["fallbacks"] += 1
