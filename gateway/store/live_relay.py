@@ -101,14 +101,35 @@ class LiveRelay:
         self.following.set()
         try:
             while not self._stop.is_set() and self._watched():
-                for name in RELAYED:
-                    for doc in self.db[name].find({"_id": {"$gt": since[name]}, "_meta.process": {"$ne": self.process}}
-                                                  ).sort("_id", 1).limit(1000):
-                        since[name] = doc["_id"]
-                        self.relay(name, doc)
+                for name, doc in self._poll_once(since):
+                    self.relay(name, doc)
                 self._stop.wait(self.poll_interval_s)
         finally:
             self.following.clear()
+
+    def _poll_once(self, since: dict[str, ObjectId]) -> list[tuple[str, dict[str, Any]]]:
+        """The documents written since the last tick, in the order they were recorded.
+
+        Why two passes: reading the collections one after the other is no snapshot; a decision
+        shipped while its collection had already been read would be relayed a tick after the
+        detection recorded behind it. So first the newest ``_id`` anywhere (``top``), then each
+        collection up to ``top``: a writer ships in the order it records (ObjectIds are made at
+        record time), so everything recorded before ``top`` is in by then."""
+        top = None
+        for name in RELAYED:
+            newest = self.db[name].find_one({"_id": {"$gt": since[name]}}, sort=[("_id", -1)], projection={"_id": 1})
+            if newest is not None and (top is None or newest["_id"] > top):
+                top = newest["_id"]
+        if top is None:
+            return []
+        found = []
+        for name in RELAYED:
+            query = {"_id": {"$gt": since[name], "$lte": top}, "_meta.process": {"$ne": self.process}}
+            docs = list(self.db[name].find(query).sort("_id", 1).limit(1000))
+            found.extend((doc["_id"], name, doc) for doc in docs)
+            # all of it up to top is in: past top (own documents included), or to the last one read
+            since[name] = top if len(docs) < 1000 else docs[-1]["_id"]
+        return [(name, doc) for _, name, doc in sorted(found, key=lambda item: item[0])]
 
     # ---- one document --------------------------------------------------------------------------------
     def relay(self, collection: str, doc: dict[str, Any]) -> None:
