@@ -25,8 +25,7 @@ import org.kie.api.time.SessionPseudoClock;
  * session's snapshot and restore ({@link #snapshot}, {@link #restoreFacts}, {@link #refract},
  * {@link #takePending}). Both check everything first (a state that does not fit changes nothing),
  * then insert the facts in their order into their entry points, set the clock, globals and the
- * agenda-group focus stack,
- * keep the fact handles clients hold as aliases, and carry refraction (see {@link Refraction}):
+ * agenda-group focus stack, keep the fact handles clients hold as aliases, and carry refraction (see {@link Refraction}):
  * the matches that had fired do not fire again, the pending ones do.
  */
 final class Carry {
@@ -230,7 +229,11 @@ final class Carry {
         }, "the new version");
         if (error != null) return problem(error);
         plan.now = old.clock.getCurrentTime();
-        plan.stack = DroolsInternals.focusStack(old.session);
+        try {
+            plan.stack = DroolsInternals.focusStack(old.session);
+        } catch (RuntimeException e) {
+            return problem("the agenda's focus stack cannot be read: " + Runner.rootMessage(e));
+        }
         // the state fits: from here on nothing can refuse
         applyClockAndGlobals(into, plan);
         Map<Object, Object> mapped = new IdentityHashMap<Object, Object>();
@@ -293,7 +296,12 @@ final class Carry {
     static String snapshot(Session s) {
         if (s.disposed) return problem("the session is disposed");
         TypeRegistry types = s.runner.types();
-        List<String> stack = DroolsInternals.focusStack(s.session);  // first: a later walk of the agenda changes it
+        List<String> stack;
+        try {
+            stack = DroolsInternals.focusStack(s.session);  // first: a later walk of the agenda changes it
+        } catch (RuntimeException e) {
+            return problem("the agenda's focus stack cannot be read: " + Runner.rootMessage(e));
+        }
         StringBuilder b = new StringBuilder(4096).append("{\"ok\":true,\"time\":").append(s.clock.getCurrentTime());
         b.append(",\"facts\":[");
         boolean first = true;
