@@ -14,8 +14,8 @@ plain JSON anyway. So:
 - **Snapshots.** Every ``sessions.snapshot_every`` entries or ``sessions.snapshot_interval_s``
   seconds, after the command that makes one due (any command), the session's state is written:
   facts in insertion order with every handle text clients may hold for them, clock, globals,
-  focus (``Session.snapshot`` in Java) and the matches still pending in every agenda group
-  (``Session.takePending``, keys naming facts by their place). A restore counts every other match
+  the agenda-group focus stack (``Session.snapshot`` in Java) and the matches still pending in
+  every agenda group (``Session.takePending``, keys naming facts by their place). A restore counts every other match
   over those facts as fired (refraction, as a deploy's move carries it). Taking the pending
   matches consumes them, so the live session is then replaced by one restored from the snapshot
   (:meth:`gateway.engine.session.StatefulSession._snapshot`); right after a full fire of rules

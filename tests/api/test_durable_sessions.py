@@ -330,6 +330,103 @@ def test_an_unfocused_agenda_groups_matches_still_fire_after_a_rebuild_and_fired
     assert groups.delete(f"{GROUPS}/sessions/{sid}").status_code == 200
 
 
+STACKED = PREFIX.replace("durable", "stacked")
+STACKED_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+rule "Main"
+when
+    $c : Customer()
+then
+    actions.say("pepper", "Main " + $c.getId());
+end
+
+rule "InA" agenda-group "a"
+when
+    $c : Customer()
+then
+    actions.say("pepper", "A " + $c.getId());
+end
+
+rule "InB" agenda-group "b"
+when
+    $c : Customer()
+then
+    actions.say("pepper", "B " + $c.getId());
+end
+"""
+
+
+@pytest.fixture(scope="module")
+def stacked(rs):
+    from api_helpers import TYPES
+
+    assert rs.put(STACKED, json={"files": {"types.drl": TYPES, "stacked.drl": STACKED_RULES}}).status_code == 201
+    return rs
+
+
+def _in_order(gateway, sid: str, *commands: dict) -> list[str]:
+    """A batch on the live session of "stacked"; what it said, in firing order."""
+    answer = gateway.engine.session_manager.get("stacked", sid).execute(list(commands))
+    return [a["params"]["text"] for a in answer.actions()]
+
+
+def test_the_whole_focus_stack_survives_snapshots_and_a_rebuild(stacked, api_gateway):
+    """Groups pushed under the focus fire after it, in order, after a rebuild as in a session never
+    rebuilt: the snapshot keeps the whole stack (a push not yet fired included), not only its top."""
+    rs = stacked
+    manager = api_gateway.engine.session_manager
+    kept, rebuilt = (rs.post(f"{STACKED}/sessions", json={}).json()["id"] for _ in range(2))
+    manager.find("stacked", kept).durability.every = 1_000_000  # never a snapshot: the reference
+    manager.find("stacked", rebuilt).durability.every = 1  # a snapshot (the session replaced) after every command
+    said: dict[str, list[str]] = {}
+    for sid in (kept, rebuilt):
+        for name in ("x", "y"):
+            r = rs.post(f"{STACKED}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": name, "age": 30}]})
+            assert r.status_code == 201, r.text
+        assert _in_order(api_gateway, sid, {"op": "set_focus", "group": "a"}, {"op": "set_focus", "group": "b"}) == []
+        if sid == rebuilt:
+            _crash(api_gateway, sid, "stacked")  # rebuilt (below) from the snapshot taken right after the pushes
+            manager.get("stacked", sid).durability.every = 1
+            assert manager.find("stacked", sid).durability.commands_since_snapshot == 0
+        first = _in_order(api_gateway, sid, {"op": "fire", "max": 1})
+        if sid == rebuilt:
+            assert manager.find("stacked", sid).durability.commands_since_snapshot == 0
+            _crash(api_gateway, sid, "stacked")  # one of b's two matches fired: b still on top, a under it
+        said[sid] = first + _in_order(api_gateway, sid, {"op": "fire", "max": -1})
+    assert [text.split()[0] for text in said[kept]] == ["B", "B", "A", "A", "Main", "Main"]
+    assert said[rebuilt] == said[kept]
+    for sid in (kept, rebuilt):
+        assert rs.delete(f"{STACKED}/sessions/{sid}").status_code == 200
+
+
+def test_a_snapshot_written_before_the_stack_was_kept_restores_its_top_alone(stacked, api_gateway):
+    """A snapshot with ``focus`` but no ``stack`` (written by an earlier gateway) still loads, as it
+    did then: the focused group on MAIN, the groups that were under it forgotten."""
+    import hashlib
+
+    rs = stacked
+    sid = rs.post(f"{STACKED}/sessions", json={}).json()["id"]
+    api_gateway.engine.session_manager.find("stacked", sid).durability.every = 1
+    assert rs.post(f"{STACKED}/sessions/{sid}/facts", json={"facts": [{"type": "Customer", "id": "z", "age": 3}]}).status_code == 201
+    assert _in_order(api_gateway, sid, {"op": "set_focus", "group": "a"}, {"op": "set_focus", "group": "b"}) == []
+    api_gateway.store.flush()
+    db, mine = api_gateway.store.db, {"key": {"$regex": f"^stacked/{sid}/"}}
+    newest = max(db[SNAPSHOTS].find(mine), key=lambda d: d["seq"])
+    state = json.loads(newest["state"])
+    assert state["stack"] == ["MAIN", "a", "b"] and state["focus"] == "b"
+    del state["stack"]
+    text = json.dumps(state)
+    db[SNAPSHOTS].update_one({"_id": newest["_id"]}, {"$set": {"state": text,
+                                                               "digest": hashlib.sha256(text.encode("utf-8")).hexdigest()}})
+    _crash(api_gateway, sid, "stacked")
+    assert _in_order(api_gateway, sid, {"op": "fire", "max": -1}) == ["B z", "Main z"]
+    assert rs.delete(f"{STACKED}/sessions/{sid}").status_code == 200
+
+
 GLOBALS = PREFIX.replace("durable", "durglobals")
 GLOBAL_RULES = """package org.printeps.apitest;
 

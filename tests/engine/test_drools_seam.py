@@ -308,6 +308,26 @@ def test_fact_handles_and_the_agenda_focus(seam, module_kbase):
         session.dispose()
 
 
+def test_the_focus_stack_is_read_whole_bottom_to_top_with_queued_pushes_applied(seam, module_kbase):
+    kbase, _, _ = module_kbase
+    session = kbase.newKieSession()
+    try:
+        stack = lambda: [str(g) for g in seam.focusStack(session)]  # noqa: E731
+        assert stack() == ["MAIN"], broken("focusStack", "a fresh session's stack is MAIN alone")
+        for group in ("a", "g", "MAIN", "g"):
+            session.getAgenda().getAgendaGroup(group).setFocus()  # queued: applied by the read
+        assert stack() == ["MAIN", "a", "g", "MAIN", "g"], broken(
+            "focusStack", "the InternalAgenda's flushPropagations runs queued setFocus pushes and its "
+            "StackedAgendaGroupsManager keeps every push in the Deque field focusStack, first = bottom")
+        assert str(seam.focusName(session)) == "g"
+        session.getAgenda().getAgendaGroup("g").setFocus()
+        assert stack()[-2:] == ["MAIN", "g"], broken("focusStack", "a push of the group on top changes nothing")
+        assert int(session.fireAllRules()) == 1  # no fact: "from the initial fact" alone, in MAIN; a fire pops the empty groups
+        assert stack() == ["MAIN"], broken("focusStack", "a fire pops the empty groups off the stack")
+    finally:
+        session.dispose()
+
+
 # --------------------------------------------------------------------------- parsing
 
 

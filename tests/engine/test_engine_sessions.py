@@ -122,6 +122,30 @@ def test_pending_matches_survive_a_move(engine):
     session.close()
 
 
+STACKED = """package org.printeps.sess;
+import org.printeps.gateway.Actions;
+global Actions actions;
+rule "Main" when $g : Guest() then actions.say("pepper", "Main " + $g.getId()); end
+rule "InA" agenda-group "a" when $g : Guest() then actions.say("pepper", "A " + $g.getId()); end
+rule "InB" agenda-group "b" when $g : Guest() then actions.say("pepper", "B " + $g.getId()); end
+"""
+
+
+def test_a_move_keeps_the_whole_focus_stack(engine):
+    """Groups pushed under the focus (set_focus a, then b, not fired yet) still fire after it, in
+    order, once the session moved to a new version: the move carries the stack, not only its top."""
+    engine.deploy("stackmove", {"types.drl": TYPES, "rules.drl": STACKED}, force=True)
+    session = engine.session_manager.open("stackmove", kind="rest")
+    session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "g", "party": 1}]},
+                     {"op": "set_focus", "group": "a"}, {"op": "set_focus", "group": "b"}])
+    engine.deploy("stackmove", {"types.drl": TYPES, "rules.drl": STACKED, "extra.drl": "package org.printeps.sess;\n"},
+                  force=True)
+    assert session.version == 2
+    answer = session.execute([{"op": "fire", "max": -1}])
+    assert [a["params"]["text"] for a in answer.actions() if a["module"] == "say"] == ["B g", "A g", "Main g"]
+    session.close()
+
+
 def _reception_files() -> dict[str, str]:
     from pathlib import Path
 

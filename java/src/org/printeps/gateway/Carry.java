@@ -24,8 +24,8 @@ import org.kie.api.time.SessionPseudoClock;
  * ({@link #move}, as {@code KieContainer.updateToVersion} does for a live session) and a durable
  * session's snapshot and restore ({@link #snapshot}, {@link #restoreFacts}, {@link #refract},
  * {@link #takePending}). Both check everything first (a state that does not fit changes nothing),
- * then insert the facts in their order into their entry points, set the clock, globals and focus,
- * keep the fact handles clients hold as aliases, and carry refraction (see {@link Refraction}):
+ * then insert the facts in their order into their entry points, set the clock, globals and the
+ * agenda-group focus stack, keep the fact handles clients hold as aliases, and carry refraction (see {@link Refraction}):
  * the matches that had fired do not fire again, the pending ones do.
  */
 final class Carry {
@@ -37,7 +37,8 @@ final class Carry {
         final List<EntryPoint> targets = new ArrayList<EntryPoint>();
         final Map<String, Object> globals = new LinkedHashMap<String, Object>();
         long now;
-        String focus = "MAIN";
+        /** The agenda-group focus stack, bottom (MAIN) to top (the focus); see {@link DroolsInternals#focusStack}. */
+        List<String> stack = Collections.singletonList("MAIN");
         /** The handle texts clients hold per fact (restore), in the order of {@link #built}. */
         final List<Object> keys = new ArrayList<Object>();
         /** The snapshot's pending matches (a list of keys), or null: every match had fired. */
@@ -113,8 +114,33 @@ final class Carry {
         });
     }
 
-    private static void setFocus(KieSession ks, String focus) {
-        if (focus != null && !focus.equals("MAIN")) ks.getAgenda().getAgendaGroup(focus).setFocus();
+    /**
+     * Pushes the groups of {@code stack} (bottom to top) onto {@code ks}'s focus stack, which holds
+     * only {@code MAIN} (its bottom, skipped): the groups below the top then fire, in order, once
+     * the ones above are done, as in the session the stack was read from.
+     */
+    private static void setFocusStack(KieSession ks, List<String> stack) {
+        for (int k = 0; k < stack.size(); k++) {
+            String group = stack.get(k);
+            if (k == 0 && "MAIN".equals(group)) continue;
+            ks.getAgenda().getAgendaGroup(group).setFocus();
+        }
+    }
+
+    /**
+     * A snapshot's focus stack: its {@code stack} list (bottom to top), or, in a snapshot written
+     * before the stack was kept, {@code MAIN} under its {@code focus} (only the top was kept then).
+     */
+    private static List<String> savedStack(Map<?, ?> snap) {
+        List<String> out = new ArrayList<String>();
+        if (snap.get("stack") instanceof List && !((List<?>) snap.get("stack")).isEmpty()) {
+            for (Object group : (List<?>) snap.get("stack")) out.add(String.valueOf(group));
+            return out;
+        }
+        out.add("MAIN");
+        Object focus = snap.get("focus");
+        if (focus != null && !"MAIN".equals(String.valueOf(focus))) out.add(String.valueOf(focus));
+        return out;
     }
 
     /**
@@ -203,7 +229,11 @@ final class Carry {
         }, "the new version");
         if (error != null) return problem(error);
         plan.now = old.clock.getCurrentTime();
-        plan.focus = DroolsInternals.focusName(old.session);
+        try {
+            plan.stack = DroolsInternals.focusStack(old.session);
+        } catch (RuntimeException e) {
+            return problem("the agenda's focus stack cannot be read: " + Runner.rootMessage(e));
+        }
         // the state fits: from here on nothing can refuse
         applyClockAndGlobals(into, plan);
         Map<Object, Object> mapped = new IdentityHashMap<Object, Object>();
@@ -249,7 +279,7 @@ final class Carry {
         Map<String, Integer> fired = probe(into, plan, unchangedRules, plan.restored, places);
         Refraction.subtract(fired, pending);
         into.refraction = new Refraction(unchangedRules, plan.restored, fired, places);
-        setFocus(into.session, plan.focus);
+        setFocusStack(into.session, plan.stack);
         return "{\"ok\":true,\"facts\":" + count + "}";
     }
 
@@ -266,6 +296,12 @@ final class Carry {
     static String snapshot(Session s) {
         if (s.disposed) return problem("the session is disposed");
         TypeRegistry types = s.runner.types();
+        List<String> stack;
+        try {
+            stack = DroolsInternals.focusStack(s.session);  // first: a later walk of the agenda changes it
+        } catch (RuntimeException e) {
+            return problem("the agenda's focus stack cannot be read: " + Runner.rootMessage(e));
+        }
         StringBuilder b = new StringBuilder(4096).append("{\"ok\":true,\"time\":").append(s.clock.getCurrentTime());
         b.append(",\"facts\":[");
         boolean first = true;
@@ -300,8 +336,9 @@ final class Carry {
             }
         }
         b.append("},\"focus\":");
-        String focus = DroolsInternals.focusName(s.session);
-        Json.quote(b, focus == null ? "MAIN" : focus);
+        Json.quote(b, stack.get(stack.size() - 1));
+        b.append(",\"stack\":");
+        Json.write(b, stack, null);
         return b.append('}').toString();
     }
 
@@ -365,7 +402,7 @@ final class Carry {
             return null;
         }
         plan.now = ((Number) snap.get("time")).longValue();
-        plan.focus = snap.get("focus") == null ? "MAIN" : String.valueOf(snap.get("focus"));
+        plan.stack = savedStack(snap);
         plan.pending = snap.get("pending");
         answer.append("{\"ok\":true,\"facts\":").append(plan.built.size()).append('}');
         return plan;
@@ -409,7 +446,7 @@ final class Carry {
     }
 
     /**
-     * See {@link Session#refract}: restores the checked plan (clock, globals, facts, handles, focus)
+     * See {@link Session#refract}: restores the checked plan (clock, globals, facts, handles, focus stack)
      * so that every match of the restored facts, in every agenda group, counts as fired but the
      * {@code pending} ones (a list of keys; null: none was pending).
      *
@@ -448,7 +485,7 @@ final class Carry {
             Refraction.subtract(fired, still);
             if (!fired.isEmpty()) into.refraction = new Refraction(rules, plan.restored, fired, places);
         }
-        setFocus(into.session, plan.focus);
+        setFocusStack(into.session, plan.stack);
         into.recorder.reset();
     }
 

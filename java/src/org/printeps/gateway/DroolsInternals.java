@@ -158,6 +158,54 @@ public final class DroolsInternals {
         return ((InternalAgenda) session.getAgenda()).getFocusName();
     }
 
+    /** The private field of Drools' stacked agenda-groups manager that holds the focus stack (see {@link #focusStack}). */
+    private static final String FOCUS_STACK_CLASS = "org.drools.core.common.AgendaGroupsManager$StackedAgendaGroupsManager";
+    private static final String FOCUS_STACK_FIELD = "focusStack";
+    private static volatile java.lang.reflect.Field focusStackField;
+
+    /**
+     * The agenda-group focus stack, bottom ({@code MAIN}) to top (the focus), groups that are
+     * empty included (a fire pops them): a durable session's snapshot keeps it whole, since the
+     * groups below the top fire, in order, once the top one is done; the public {@code Agenda}
+     * can push onto it but not tell it. Runs the {@code setFocus()} calls still queued first (the
+     * public one only queues its push, which the next fire, or this read, applies), so a focus
+     * set and not yet fired is in the stack.
+     * Assumes: {@code KieSession.getAgenda()} is the {@code InternalAgenda}, whose
+     * {@code flushPropagations()} runs the queued pushes, and whose {@code AgendaGroupsManager} is
+     * either a {@code StackedAgendaGroupsManager} keeping the stack in its private {@code Deque}
+     * field {@code focusStack} (first = bottom), or a {@code SimpleAgendaGroupsManager} (a rule
+     * base without agenda groups: only {@code MAIN}). Another manager fails here, by name.
+     */
+    public static List<String> focusStack(KieSession session) {
+        InternalAgenda agenda = (InternalAgenda) session.getAgenda();
+        agenda.flushPropagations();
+        org.drools.core.common.AgendaGroupsManager groups = agenda.getAgendaGroupsManager();
+        List<String> out = new ArrayList<String>();
+        if (groups instanceof org.drools.core.common.AgendaGroupsManager.SimpleAgendaGroupsManager) {
+            out.add(groups.getFocusName());
+            return out;
+        }
+        Object stack;
+        try {
+            stack = focusStackField(groups.getClass()).get(groups);
+        } catch (ReflectiveOperationException | RuntimeException e) {
+            throw new IllegalStateException("Drools' agenda-groups manager " + groups.getClass().getName()
+                    + " has no readable focus stack (" + FOCUS_STACK_CLASS + "." + FOCUS_STACK_FIELD + "): " + e, e);
+        }
+        for (Object group : (Deque<?>) stack) out.add(((org.drools.core.common.InternalAgendaGroup) group).getName());
+        return out;
+    }
+
+    private static java.lang.reflect.Field focusStackField(Class<?> manager) throws ReflectiveOperationException {
+        java.lang.reflect.Field f = focusStackField;
+        if (f != null && f.getDeclaringClass() == manager) return f;
+        if (!manager.getName().equals(FOCUS_STACK_CLASS)) throw new ClassNotFoundException("not " + FOCUS_STACK_CLASS);
+        f = manager.getDeclaredField(FOCUS_STACK_FIELD);
+        f.setAccessible(true);
+        focusStackField = f;
+        return f;
+    }
+
     /**
      * The agenda groups other than {@code MAIN} that the rules of {@code base} name (the public
      * {@code Rule} does not tell its group; a walk of a whole agenda must focus each in turn).

@@ -449,7 +449,7 @@ public final class Session {
      * Takes over {@code old}'s state, as {@code KieContainer.updateToVersion} does for a live
      * session: its facts (re-built as this version's types, into the same entry points), the clock
      * (a pseudo clock is advanced to the old one's time), its globals but {@code actions}, the
-     * agenda focus and the fact handles clients hold (kept as aliases). Matches the old session had
+     * agenda-group focus stack and the fact handles clients hold (kept as aliases). Matches the old session had
      * already fired do not fire again (see {@link Refraction}: {@code unchangedRulesJson} lists the
      * rules whose text is the same in both versions). Call on a fresh session; {@code old} is
      * left as it was unless the move succeeds, and must then be disposed by the caller.
@@ -466,7 +466,8 @@ public final class Session {
     /**
      * The session's state as JSON, for a durable session's snapshot: its facts in insertion order
      * (each with its entry point and every "id:hash" text clients may hold for it), the clock, the
-     * globals but {@code actions}, and the agenda focus. Reads only; what is pending on the agenda
+     * globals but {@code actions}, and the agenda-group focus stack (bottom to top; {@code focus} is
+     * its top). Reads only (queued {@code setFocus} pushes are applied first); what is pending on the agenda
      * is {@link #takePending}'s. Returns {"ok":false,"message"} naming a fact that cannot be written.
      */
     public synchronized String snapshot() { return Carry.snapshot(this); }
