@@ -319,15 +319,22 @@ def _texts(answer: dict) -> list:
     return [a["params"]["text"] for a in answer["actions"]]
 
 
-def test_doc_negative_pattern_sound_the_alarm(kie):
+def _fire_in_two_rooms_then_the_kitchen_sprinkler_at_4s() -> list[dict]:
+    """The start of Drools' "Sound the alarm" example: fires at 0 s, the kitchen's sprinkler at 4 s."""
     D = f"{CEP}.docs"
-    commands = [
+    return [
         {"insert": {"object": {f"{D}.FireDetected": {"room": "kitchen"}}}},
         {"insert": {"object": {f"{D}.FireDetected": {"room": "hall"}}}},
         {"fire-all-rules": {"out-identifier": "at0"}},
         {"advance-session-time": {"amount": 4, "unit": "SECONDS"}},
         {"insert": {"object": {f"{D}.SprinklerActivated": {"room": "kitchen"}}}},
         {"fire-all-rules": {"out-identifier": "at4"}},
+    ]
+
+
+def test_doc_negative_pattern_sound_the_alarm(kie):
+    commands = [
+        *_fire_in_two_rooms_then_the_kitchen_sprinkler_at_4s(),
         {"advance-session-time": {"amount": 7, "unit": "SECONDS"}},
         {"fire-all-rules": {"out-identifier": "at11"}},
     ]
@@ -344,14 +351,8 @@ def test_doc_sound_the_alarm_expires_the_sprinkler_as_plain_drools_does(kie):
     holds again when its 10 s window closes: 4 s, 5.999 s, 0.002 s fires "alarm kitchen" too,
     where 4 s then 7 s (both expiries in one advance) does not. Plain Drools does exactly this,
     with the same jars, outside the gateway (bench/drools_plain/cep_alarm.py; docs/engine-api.md)."""
-    D = f"{CEP}.docs"
     commands = [
-        {"insert": {"object": {f"{D}.FireDetected": {"room": "kitchen"}}}},
-        {"insert": {"object": {f"{D}.FireDetected": {"room": "hall"}}}},
-        {"fire-all-rules": {"out-identifier": "at0"}},
-        {"advance-session-time": {"amount": 4, "unit": "SECONDS"}},
-        {"insert": {"object": {f"{D}.SprinklerActivated": {"room": "kitchen"}}}},
-        {"fire-all-rules": {"out-identifier": "at4"}},
+        *_fire_in_two_rooms_then_the_kitchen_sprinkler_at_4s(),
         {"advance-session-time": {"amount": 5999}},
         {"fire-all-rules": {"out-identifier": "at9999"}},
         {"advance-session-time": {"amount": 2}},
