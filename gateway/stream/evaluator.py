@@ -223,7 +223,10 @@ class Evaluator:
                 cached = runtime.empty_cache[1]
                 return Evaluation(list(cached.variables), list(cached.rows), cached.path)
             evaluation = self._run_uncached(runtime, data)
-            runtime.empty_cache = (key, evaluation)
+            if evaluation.path == "fast" or runtime.plan is None:
+                # a general answer while the fast path is skipped (after a fallback) is not kept: the
+                # next empty window tries the fast path, so only fallbacks leave it (stats agree)
+                runtime.empty_cache = (key, evaluation)
             return evaluation
         return self._run_uncached(runtime, data)
 
