@@ -222,8 +222,11 @@ class Evaluator:
             if runtime.empty_cache is not None and runtime.empty_cache[0] == key:
                 cached = runtime.empty_cache[1]
                 return Evaluation(list(cached.variables), list(cached.rows), cached.path)
-            evaluation = self._run_uncached(runtime, data, may_skip=False)  # cached: tried as itself, never skipped
-            runtime.empty_cache = (key, evaluation)
+            evaluation = self._run_uncached(runtime, data, may_skip=False)  # tried as itself, never skipped
+            if evaluation.path == "fast" or runtime.plan is None:
+                # a general answer of a query with a fast path (it fell back) is not kept: the next
+                # empty window tries the fast path again, so only fallbacks leave it (stats agree)
+                runtime.empty_cache = (key, evaluation)
             return evaluation
         return self._run_uncached(runtime, data)
 

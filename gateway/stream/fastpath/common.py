@@ -19,7 +19,11 @@ MAX_ABS_UNITS = 10**15  # |value| <= 10**6 at SCALE
 LIMIT = 2**62  # headroom below int64 for every intermediate
 NO_TS = np.iinfo(np.int64).min
 MAX_ROWS = 30_000_000  # intermediate solutions; beyond this the window goes the general way
-MAX_TERMS = 2_000_000
+TERMS_FLOOR = 4_096
+TERMS_SLACK = 4
+"""A plan's term table is emptied before a window when it holds more than ``TERMS_SLACK`` times the
+terms that window can need (two per triple, its own and the static graph's), and at least
+``TERMS_FLOOR``: see :func:`gateway.stream.fastpath.executor.run_plan`."""
 # what a term is, per id: an exact integer / decimal (fixed-point value known), an IRI or blank
 # node, a simple string, anything else (doubles, dates, language strings …: never decided here)
 KIND_INT = 0

@@ -9,8 +9,9 @@ from pyoxigraph import NamedNode
 
 from gateway.stream.evaluate import Evaluation, WindowData
 from gateway.stream.fastpath.common import (
-    MAX_TERMS,
     NO_TS,
+    TERMS_FLOOR,
+    TERMS_SLACK,
     TermTable,
 )
 from gateway.stream.fastpath.compiler import (
@@ -36,7 +37,7 @@ from gateway.stream.fastpath.values import (
 def run_plan(plan: Plan, window: WindowData) -> Evaluation:
     """Evaluate ``plan`` on ``window``; raises :class:`Fallback` when the data needs the general path."""
     table = plan.table
-    if len(table) > MAX_TERMS:
+    if len(table) > term_limit(window):
         table.reset()
         plan._static = None
     relations = _relations(plan, window)
@@ -59,6 +60,21 @@ def run_plan(plan: Plan, window: WindowData) -> Evaluation:
     else:
         rows = _plain_rows(plan, frame, ctx)
     return Evaluation(list(plan.project), rows, path="fast")
+
+
+def term_limit(window: WindowData) -> int:
+    """How many terms the plan's table may hold before ``window`` is encoded.
+
+    Why a limit tied to the window: the table gives every term it has seen an id, and a stream
+    names new terms all the time (each Entrance reading its own message node and one node per
+    customer's position at that time). Kept for ever, that was the soak's leak: ~3 pyoxigraph
+    nodes per reading while the fast path ran on every window (docs/benchmarks.md, "Soak"). A
+    window needs at most two new terms per triple it holds (its own and the static graph's), so a
+    table past :data:`TERMS_SLACK` times that is mostly terms of windows gone by: it is emptied and
+    this window's terms get new ids (the sealed panes' cached encodings are keyed by the table's
+    generation, so they are encoded again). Emptying costs one window's encoding, once every
+    ``TERMS_SLACK - 1`` windows' worth of new terms at most."""
+    return max(TERMS_FLOOR, TERMS_SLACK * 2 * (len(window.stamped) + len(window.static)))
 
 
 def _relations(plan: Plan, window: WindowData) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
