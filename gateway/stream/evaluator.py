@@ -242,8 +242,8 @@ class Evaluator:
         straight away (``stats.fast_skipped``; counted in ``stats.fallbacks`` too: left to the
         general path), and one window that the fast path decides starts the count again at 1.
         Both paths answer the same, so this changes only what a window costs. An empty window is
-        never skipped (``may_skip``): its answer is cached with the path that gave it, so a skipped
-        one would count every later empty window as left to the general path."""
+        never skipped (``may_skip``): its answer is cached for the empty windows after it, which
+        must not count as left to the general path when nothing made them fall back."""
         if runtime.plan is not None:
             if may_skip and runtime.fast_skip > 0:
                 runtime.fast_skip -= 1
