@@ -187,7 +187,8 @@ class KnowledgeBase(CatalogLifecycle):
     def _seed_paths(self, folder: Path) -> list[Path]:
         """The ontology file (``*.ttl``, ``*.n3``, ``*.owl``, ``*.rdf``) and the SWRL file
         (``*.swrl``) of the folder (``streams.knowledge_dir``), whatever their names."""
-        return [path for kind in NAMES for path in knowledge_files(folder)[kind]]
+        files = knowledge_files(folder)  # one listing of the folder for both items
+        return [path for kind in NAMES for path in files[kind]]
 
     def _read_seed(self, path: Path) -> tuple[str, Path]:
         kind = "swrl" if path.suffix.lower() in SWRL_SUFFIXES else "ontology"
