@@ -83,14 +83,19 @@ def fired(url: str) -> list[str]:
     return sorted(str(a.get("params", {}).get("text")) for d in r.json()["decisions"] for a in d.get("actions", []))
 
 
+def bind(url: str, query: str) -> None:
+    """Deploys the sensors rule set on ``url`` and registers ``query`` with the stateful binding."""
+    assert httpx.put(f"{url}/api/rulesets/sensors", json={"files": {"sensors.drl": DRL}},
+                     timeout=180).status_code in (200, 201)
+    r = httpx.post(f"{url}/api/queries", json={"query": query, "rules": BINDING}, timeout=60)
+    assert r.status_code == 201, r.text
+
+
 def test_a_stateful_binding_keeps_its_facts_and_clock_across_restarts(home):
     folder, config, env = home
     p = Process("SA", config, env, folder).start().ready()
     try:
-        assert httpx.put(f"{p.url}/api/rulesets/sensors", json={"files": {"sensors.drl": DRL}},
-                         timeout=180).status_code in (200, 201)
-        r = httpx.post(f"{p.url}/api/queries", json={"query": QUERY, "rules": BINDING}, timeout=60)
-        assert r.status_code == 201, r.text
+        bind(p.url, QUERY)
         post(p.url, 500, "r1")
         post(p.url, 1500, "r2")  # closes the window ending at 1000: r1 fires
         post(p.url, 2500)  # closes the one ending at 2000: r2
@@ -133,10 +138,7 @@ def test_a_window_firing_in_a_process_that_does_not_own_the_bindings_session_is_
     owner = Process("OA", config, env, folder).start().ready()
     other: Process | None = None
     try:
-        assert httpx.put(f"{owner.url}/api/rulesets/sensors", json={"files": {"sensors.drl": DRL}},
-                         timeout=180).status_code in (200, 201)
-        r = httpx.post(f"{owner.url}/api/queries", json={"query": query, "rules": BINDING}, timeout=60)
-        assert r.status_code == 201, r.text
+        bind(owner.url, query)
         post(owner.url, 500, "o1")
         post(owner.url, 1500)  # closes the window ending at 1000: o1 fires, and this process owns the session
         assert wait_for(lambda: call("GET", f"{owner.url}{owned}/facts").status_code == 200, 60) is not None
