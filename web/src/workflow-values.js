@@ -65,40 +65,44 @@ export function valueChoices(doc, path) {
   return [...inputChoices(doc.inputs), ...earlierChoices(doc, path)];
 }
 
+/** What one `${expression}` refers to: {choice} (one offered), {input} (an input the run is not
+ *  given), {name} (a first name neither given nor found earlier), or {} (some other expression). */
+function resolveReference(expression, choices) {
+  const choice = choices.find((c) => c.expression === expression);
+  if (choice) return { choice };
+  const input = /^input\.([A-Za-z_]\w*)/.exec(expression);
+  if (input) {
+    const given = choices.some((c) => c.group === "given" && c.expression.split(".")[1] === input[1]);
+    return given ? {} : { input: input[1] };
+  }
+  const first = expression.split(".")[0];
+  const named = choices.some((c) => c.expression.split(".")[0] === first);
+  return !named && /^[A-Za-z_][\w.]*$/.test(expression) ? { name: first } : {};
+}
+
 /** The references in a field's text in words: {known: ["the table (table1)"], unknown: ["tabel"]}.
  *  A reference is unknown when its first name is neither an input, nor a name found earlier. */
 export function describeReferences(text, choices) {
   const known = [];
   const unknown = [];
   if (typeof text !== "string") return { known, unknown };
-  const names = new Set(choices.map((c) => c.expression.split(".")[0]));
-  const inputs = new Set(choices.filter((c) => c.group === "given").map((c) => c.expression.split(".")[1]));
   for (const match of text.matchAll(REFERENCE)) {
-    const expression = match[1];
-    const exact = choices.find((c) => c.expression === expression);
-    if (exact) {
-      known.push(exact.label);
-      continue;
-    }
-    const input = /^input\.([A-Za-z_]\w*)/.exec(expression);
-    if (input && !inputs.has(input[1])) unknown.push(input[1]);
-    else if (!input && /^[A-Za-z_]\w*$/.test(expression.split(".")[0]) && !names.has(expression.split(".")[0])
-      && /^[A-Za-z_][\w.]*$/.test(expression)) unknown.push(expression.split(".")[0]);
+    const { choice, input, name } = resolveReference(match[1], choices);
+    if (choice) known.push(choice.label);
+    else if (input || name) unknown.push(input || name);
   }
   return { known, unknown };
 }
 
 /** A step's summary line in words: each `${…}` it holds becomes what it stands for, in brackets
- *  ("say: Table [the table] is free"); a name neither given nor found says so; any other
+ *  ("say: Table [the table] is free"); an input the run is not given says so; any other
  *  expression is shown without its `${ }`. Why: the canvas is read by the owner, not the engine. */
 export function referencesInWords(text, choices) {
   if (typeof text !== "string") return text;
-  const inputs = new Set(choices.filter((c) => c.group === "given").map((c) => c.expression.split(".")[1]));
   return text.replace(REFERENCE, (_, expression) => {
-    const exact = choices.find((c) => c.expression === expression);
-    if (exact) return `[${exact.words}]`;
-    const input = /^input\.([A-Za-z_]\w*)/.exec(expression);
-    if (input && !inputs.has(input[1])) return `[${words(input[1])}: not given]`;
+    const { choice, input } = resolveReference(expression, choices);
+    if (choice) return `[${choice.words}]`;
+    if (input) return `[${words(input)}: not given]`;
     return `[${expression}]`;
   });
 }
