@@ -168,6 +168,14 @@ class StoreSettings(BaseModel):
         description="The embedded DB's cache (resident only as data fills it). Not smaller: its storage engine "
         "holds each insert in cache until it commits, and wedges when concurrent inserts fill a fifth of it.",
     )
+    embedded_oplog_max_entries: int = Field(
+        default=20_000, ge=100,
+        description="Entries the embedded DB keeps in its replication log (change streams read it). Each decision "
+        "writes about two; nothing in the gateway resumes a change stream from an old position (followers re-read "
+        "the catalog's change log by number), so a short log is safe and keeps the database's memory flat.")
+    embedded_oplog_retention_s: int = Field(
+        default=600, ge=60, description="Seconds the embedded DB keeps a replication-log entry (whichever bound, "
+        "this or the entry count, comes first prunes).")
     timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation.")
     spool_max_docs: int = Field(default=200_000, description="Bound of the on-disk write buffer (documents).")
     retry_interval_s: float = Field(

@@ -30,8 +30,7 @@ from typing import Any
 from gateway.app import build_gateway
 from gateway.base.malloc import limit_arenas
 from gateway.config import Settings, load_settings
-from gateway.store.embedded import EmbeddedMongo
-from gateway.store.factory import embedded_dir, store_uri
+from gateway.store.factory import embedded_database, store_uri
 
 log = logging.getLogger(__name__)
 
@@ -180,7 +179,7 @@ class Supervisor:
         """The embedded database, once for all workers, unless a MongoDB URI is configured."""
         if store_uri(settings):
             return
-        self.embedded = EmbeddedMongo(embedded_dir(settings), settings.store.embedded_port, settings.store.embedded_cache)
+        self.embedded = embedded_database(settings)
         self.env["MONGO_URI"] = self.embedded.start()
         print(f"embedded database at {self.env['MONGO_URI']} (shared by {self.workers} workers)", flush=True)
 

@@ -125,10 +125,13 @@ def _daemon_path() -> str:
 class EmbeddedMongo:
     """One SecantusDB daemon process: start(), uri, stop(). Restartable on the same port and data."""
 
-    def __init__(self, data_dir: Path, port: int = 0, cache: str = "256M") -> None:
+    def __init__(self, data_dir: Path, port: int = 0, cache: str = "256M", *, oplog_max_entries: int = 20_000,
+                 oplog_retention_s: int = 600) -> None:
         self.data_dir = Path(data_dir)
         self.port = port or free_port()
         self.cache = cache
+        self.oplog_max_entries = oplog_max_entries
+        self.oplog_retention_s = oplog_retention_s
         self.proc: subprocess.Popen[bytes] | None = None
         self._lock_fd: int | None = None
 
@@ -145,7 +148,9 @@ class EmbeddedMongo:
         _wait_for_previous_daemon(self.data_dir, timeout_s)
         logfile = open(self.data_dir / "secantusd.log", "ab")
         cmd = [_daemon_path(), "--host", "127.0.0.1", "--port", str(self.port), "--storage-path",
-               str(self.data_dir / "data"), "--cache-size", self.cache, "--log-level", "WARNING"]
+               str(self.data_dir / "data"), "--cache-size", self.cache, "--log-level", "WARNING",
+               "--oplog-max-entries", str(self.oplog_max_entries),
+               "--oplog-retention-seconds", str(self.oplog_retention_s)]
         log.info("starting embedded database: %s", " ".join(cmd))
         self.proc = subprocess.Popen(cmd, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      env=dict(os.environ), start_new_session=True,

@@ -50,7 +50,7 @@ def open_store(settings: Any, *, join_running: bool = False) -> ManagedStore:
         owner = running_owner(embedded_dir(settings))
         uri = owner.get("uri") if owner else None
     if not uri:
-        embedded = EmbeddedMongo(embedded_dir(settings), cfg.embedded_port, cfg.embedded_cache)
+        embedded = embedded_database(settings)
         uri = embedded.start()
     store = ManagedStore(uri, cfg.database, Path(settings.data_dir) / "store" / "journal",
                          backend="embedded" if embedded else "external", timeout_ms=cfg.timeout_ms,
@@ -60,3 +60,12 @@ def open_store(settings: Any, *, join_running: bool = False) -> ManagedStore:
     store.embedded = embedded
     store.apply_retention()
     return store
+
+
+def embedded_database(settings: Any) -> EmbeddedMongo:
+    """The embedded SecantusDB of ``settings`` (not started): one place for its options, whether one
+    gateway process starts it or ``printeps serve --workers`` starts it for all of them."""
+    cfg = settings.store
+    return EmbeddedMongo(embedded_dir(settings), cfg.embedded_port, cfg.embedded_cache,
+                         oplog_max_entries=cfg.embedded_oplog_max_entries,
+                         oplog_retention_s=cfg.embedded_oplog_retention_s)

@@ -7,6 +7,7 @@ import threading
 import time
 from datetime import datetime, timedelta, timezone
 
+import pymongo
 import pytest
 from gw_testing import wait_for
 
@@ -219,6 +220,28 @@ def test_open_store_starts_the_embedded_db_and_stops_it(settings, monkeypatch) -
     finally:
         store.close()
     assert proc.poll() is not None
+
+
+def test_the_embedded_db_keeps_its_replication_log_to_the_configured_bound(settings, monkeypatch) -> None:
+    """Each decision writes about two replication-log entries; the daemon's own default keeps 100,000
+    (about 80 minutes of a busy gateway) in memory. The launcher passes the gateway's bound; the daemon
+    prunes to it every 1,000 writes."""
+    monkeypatch.delenv("MONGO_URI", raising=False)
+    settings.store.embedded_oplog_max_entries = 100
+    store = open_store(settings)
+    try:
+        for i in range(2500):
+            store.record("actions", {"a": i}, stored_type="printeps/Action")
+        assert store.flush()
+        assert store.count("actions") == 2500
+        client = pymongo.MongoClient(store.embedded.uri)
+        try:
+            kept = client.local["oplog.rs"].count_documents({})
+            assert kept <= 100 + 1000, kept  # 2,500+ without the bound
+        finally:
+            client.close()
+    finally:
+        store.close()
 
 
 def test_mongo_uri_selects_an_external_db(settings, mongo, monkeypatch) -> None:
