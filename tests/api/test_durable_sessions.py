@@ -663,3 +663,32 @@ def test_a_deleted_and_reinserted_order_is_a_new_match_after_a_rebuild(reactive,
     kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 1}]], [again, FIRE_ALL, LATER])
     assert kept == ["Open o1", "Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
     assert rebuilt == kept
+
+
+def test_a_snapshotted_session_that_moves_to_a_new_version_does_not_fire_what_had_fired(rs, api_gateway):
+    """A snapshot replaces the live session by one restored from it, whose fired matches wait on its
+    agenda to be dropped at the next fire; a deploy before that fire moves the session: those
+    matches had fired, not pending, and do not fire on the new version (as in a session never
+    snapshotted)."""
+    name = "reactmove"
+    files = {"types.drl": REACTIVE_TYPES, "rules.drl": REACTIVE_RULES}
+    assert rs.put(f"/api/rulesets/{name}", json={"files": files}).status_code == 201
+    manager = api_gateway.engine.session_manager
+    sids = {}
+    for snapshotted in (False, True):
+        sid = rs.post(f"/api/rulesets/{name}/sessions", json={}).json()["id"]
+        manager.find(name, sid).durability.every = 1 if snapshotted else 1_000_000
+        manager.get(name, sid).execute([{"op": "insert", "facts": [{"type": "Order", "id": "o1", "status": "open", "note": ""}]},
+                                        {"op": "fire", "max": 1}])  # "Open o1" fired, the rest waits
+        sids[snapshotted] = sid
+    assert manager.find(name, sids[True]).durability.commands_since_snapshot == 0
+    moved = rs.put(f"/api/rulesets/{name}", json={"files": {**files, "extra.drl": "package org.printeps.apitest;\n"}})
+    assert moved.status_code in (200, 201), moved.text
+    said = {}
+    for snapshotted, sid in sids.items():
+        session = manager.get(name, sid)
+        assert session.version == 2
+        said[snapshotted] = [a["params"]["text"] for a in session.execute(FIRE_ALL + LATER).actions()]
+        assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
+    assert said[False] == ["Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
+    assert said[True] == said[False]

@@ -250,11 +250,16 @@ final class Carry {
             }
         }
         Map<Object, Integer> places = Refraction.places(plan.built);
-        // the old session's pending matches, in every group (consumed: it is discarded after the move)
+        // the old session's pending matches, in every group (consumed: it is discarded after the move);
+        // a match the old session's own refraction (from a restore or an earlier move) drops had fired
         final Map<String, Integer> pending = Refraction.emptyKeys();
+        Refraction own = old.refraction;
         try {
-            walkAll(old.session, match -> Refraction.add(pending,
-                    Refraction.key(match.getRule().getName(), match.getObjects(), mapped, plan.restored, places)));
+            walkAll(old.session, match -> {
+                if (own == null || own.accept(match)) {
+                    Refraction.add(pending, Refraction.key(match.getRule().getName(), match.getObjects(), mapped, plan.restored, places));
+                }
+            });
         } catch (RuntimeException e) {
             // an agenda that cannot even be walked: its matches count as pending (they fire here)
         }
