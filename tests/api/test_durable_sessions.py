@@ -692,3 +692,55 @@ def test_a_snapshotted_session_that_moves_to_a_new_version_does_not_fire_what_ha
         assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
     assert said[False] == ["Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
     assert said[True] == said[False]
+
+
+NO_LOOP_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+declare Job
+    id : String
+    rank : int
+end
+
+declare Counter
+    n : int
+end
+
+rule "Bump" no-loop salience ( $j.getRank() )
+when
+    $j : Job()
+    $c : Counter( n >= 0 )
+then
+    actions.say("pepper", "Bump " + $j.getId());
+    modify($c) { setN($c.getN() + 1) };
+end
+"""
+
+
+def test_a_no_loop_rules_own_modify_does_not_fire_its_fired_match_again_after_a_rebuild(rs, api_gateway):
+    """Two matches of a no-loop rule share the counter their consequence modifies: "Bump o1" fired,
+    then "Bump o2" came and waits. Rebuilt from the snapshot then, "Bump o2" fires first (its
+    salience) while "Bump o1" still waits for the filter; its modify, the rule's own, reaches
+    "Bump o1", which Drools updates without re-activating it: it had fired, and does not again."""
+    name = "noloop"
+    made = rs.put(f"/api/rulesets/{name}", json={"files": {"rules.drl": NO_LOOP_RULES}})
+    assert made.status_code == 201, made.text
+    manager = api_gateway.engine.session_manager
+    said = {}
+    for rebuilt in (False, True):
+        sid = rs.post(f"/api/rulesets/{name}/sessions", json={}).json()["id"]
+        manager.find(name, sid).durability.every = 1 if rebuilt else 1_000_000
+        first = manager.get(name, sid).execute([
+            {"op": "insert", "facts": [{"type": "Job", "id": "o1", "rank": 0}, {"type": "Counter", "n": 0}]},
+            {"op": "fire", "max": -1},
+            {"op": "insert", "facts": [{"type": "Job", "id": "o2", "rank": 10}]}]).actions()
+        if rebuilt:
+            _crash(api_gateway, sid, name)
+        rest = manager.get(name, sid).execute(FIRE_ALL).actions()
+        said[rebuilt] = [a["params"]["text"] for a in first + rest]
+        assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
+    assert said[False] == ["Bump o1", "Bump o2"]
+    assert said[True] == said[False]
