@@ -521,3 +521,226 @@ def _facts_of(rs, prefix: str, sid: str) -> list[tuple[str, str | None]]:
     r = rs.get(f"{prefix}/sessions/{sid}/facts")
     assert r.status_code == 200, r.text
     return sorted((f["fact"]["id"], f["fact"]["category"]) for f in r.json()["facts"])
+
+
+REACTIVE = PREFIX.replace("durable", "reactive")
+REACTIVE_TYPES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+declare Order
+    id : String
+    status : String
+    note : String
+end
+"""
+#: Four rules over one order, each watching only ``status`` (property reactivity: a modify of
+#: ``note`` reaches none of them), one of them in an agenda group, one making two matches of one key
+#: (the order joined to the tag "a" twice; the order on the right of the join: a ``from`` over the
+#: order itself would listen to every property of it).
+REACTIVE_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+rule "Open" salience 30
+when
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Open " + $o.getId());
+end
+
+rule "Label" salience 20
+when
+    $t : String() from java.util.Arrays.asList("a", "a")
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Label " + $o.getId() + " " + $t);
+end
+
+rule "Ship" salience 10
+when
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Ship " + $o.getId());
+end
+
+rule "Tag" agenda-group "later"
+when
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Tag " + $o.getId());
+end
+"""
+
+
+@pytest.fixture(scope="module")
+def reactive(rs):
+    assert rs.put(REACTIVE, json={"files": {"types.drl": REACTIVE_TYPES, "rules.drl": REACTIVE_RULES}}).status_code == 201
+    return rs
+
+
+def _twins(rs, gateway, before: list[list[dict]], after: list[list[dict]]) -> tuple[list[str], list[str]]:
+    """What ``after``'s batches say (in firing order) in a session never rebuilt and in its twin,
+    rebuilt between ``before`` and ``after`` from the snapshot taken after ``before``'s last batch
+    plus the replay of the journal since (``after``'s first batch, its modify, is replayed; the
+    fires follow on the rebuilt session). A handle ``"$h"`` in a command stands for the order's."""
+    manager = gateway.engine.session_manager
+    said = []
+    for rebuilt in (False, True):
+        sid = rs.post(f"{REACTIVE}/sessions", json={}).json()["id"]
+        manager.find("reactive", sid).durability.every = 1 if rebuilt else 1_000_000
+        made = manager.get("reactive", sid).execute([{"op": "insert", "facts": [
+            {"type": "Order", "id": "o1", "status": "open", "note": ""}]}])
+        handle = made.results[0]["handles"][0]
+
+        def run(batch: list[dict]) -> list[str]:
+            commands = [{**c, "handle": handle} if c.get("handle") == "$h" else c for c in batch]
+            answer = manager.get("reactive", sid).execute(commands)
+            return [a["params"]["text"] for a in answer.actions()]
+
+        for batch in before:
+            run(batch)
+        if rebuilt:
+            assert manager.find("reactive", sid).durability.commands_since_snapshot == 0
+            manager.find("reactive", sid).durability.every = 1_000_000  # what follows is journalled, not snapshotted
+            run(after[0])
+            assert manager.find("reactive", sid).durability.commands_since_snapshot == 1
+            _crash(gateway, sid, "reactive")
+            manager.get("reactive", sid)  # rebuilt: the snapshot restored, the modify replayed
+            assert manager.find("reactive", sid).durability.commands_since_snapshot == 1
+            said.append([text for batch in after[1:] for text in run(batch)])
+        else:
+            said.append([text for batch in after for text in run(batch)])
+        assert rs.delete(f"{REACTIVE}/sessions/{sid}").status_code == 200
+    return said[0], said[1]
+
+
+FIRE_ALL = [{"op": "fire", "max": -1}]
+LATER = [{"op": "set_focus", "group": "later"}, {"op": "fire", "max": -1}]
+UNWATCHED = [{"op": "modify", "handle": "$h", "set": [["note", "rush"]]}]
+WATCHED = [{"op": "modify", "handle": "$h", "set": [["status", "open"]]}]
+
+
+def test_a_fired_match_stays_fired_after_a_rebuild_when_its_fact_changed_in_a_property_its_rule_ignores(reactive, api_gateway):
+    """Issue 28's "fired matches stay fired" under property reactivity: "Open" fired over the order
+    while "Label", "Ship" (MAIN) and "Tag" (an unfocused group) still wait on it; the order's
+    ``note``, which no rule listens to, is then changed. A rebuild (snapshot + the modify replayed)
+    fires what the session never rebuilt fires: the waiting matches once, "Open" not again."""
+    kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 1}]], [UNWATCHED, FIRE_ALL, LATER])
+    assert kept == ["Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
+    assert rebuilt == kept
+
+
+def test_a_modify_of_a_watched_property_fires_the_fired_match_again_after_a_rebuild_too(reactive, api_gateway):
+    kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 1}]], [WATCHED, FIRE_ALL, LATER])
+    assert kept == ["Open o1", "Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
+    assert rebuilt == kept
+
+
+def test_a_match_fired_in_an_agenda_group_stays_fired_while_main_waits(reactive, api_gateway):
+    """Fired in "later" (focused, one fire), pending in MAIN; the unwatched modify; then MAIN fires
+    and "later", focused again, has nothing left."""
+    kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "set_focus", "group": "later"}, {"op": "fire", "max": 1}]],
+                           [UNWATCHED, FIRE_ALL, LATER])
+    assert kept == ["Open o1", "Label o1 a", "Label o1 a", "Ship o1"]
+    assert rebuilt == kept
+
+
+def test_two_matches_of_one_key_one_fired_one_waiting_stay_so_across_the_unwatched_modify(reactive, api_gateway):
+    """"Label" makes two matches of one key (the tag "a" twice): one fired, one waits."""
+    kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 2}]], [UNWATCHED, FIRE_ALL, LATER])
+    assert kept == ["Label o1 a", "Ship o1", "Tag o1"]
+    assert rebuilt == kept
+
+
+def test_a_deleted_and_reinserted_order_is_a_new_match_after_a_rebuild(reactive, api_gateway):
+    again = [{"op": "delete", "handle": "$h"},
+             {"op": "insert", "facts": [{"type": "Order", "id": "o1", "status": "open", "note": ""}]}]
+    kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 1}]], [again, FIRE_ALL, LATER])
+    assert kept == ["Open o1", "Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
+    assert rebuilt == kept
+
+
+def test_a_snapshotted_session_that_moves_to_a_new_version_does_not_fire_what_had_fired(rs, api_gateway):
+    """A snapshot replaces the live session by one restored from it, whose fired matches wait on its
+    agenda to be dropped at the next fire; a deploy before that fire moves the session: those
+    matches had fired, not pending, and do not fire on the new version (as in a session never
+    snapshotted)."""
+    name = "reactmove"
+    files = {"types.drl": REACTIVE_TYPES, "rules.drl": REACTIVE_RULES}
+    assert rs.put(f"/api/rulesets/{name}", json={"files": files}).status_code == 201
+    manager = api_gateway.engine.session_manager
+    sids = {}
+    for snapshotted in (False, True):
+        sid = rs.post(f"/api/rulesets/{name}/sessions", json={}).json()["id"]
+        manager.find(name, sid).durability.every = 1 if snapshotted else 1_000_000
+        manager.get(name, sid).execute([{"op": "insert", "facts": [{"type": "Order", "id": "o1", "status": "open", "note": ""}]},
+                                        {"op": "fire", "max": 1}])  # "Open o1" fired, the rest waits
+        sids[snapshotted] = sid
+    assert manager.find(name, sids[True]).durability.commands_since_snapshot == 0
+    moved = rs.put(f"/api/rulesets/{name}", json={"files": {**files, "extra.drl": "package org.printeps.apitest;\n"}})
+    assert moved.status_code in (200, 201), moved.text
+    said = {}
+    for snapshotted, sid in sids.items():
+        session = manager.get(name, sid)
+        assert session.version == 2
+        said[snapshotted] = [a["params"]["text"] for a in session.execute(FIRE_ALL + LATER).actions()]
+        assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
+    assert said[False] == ["Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
+    assert said[True] == said[False]
+
+
+NO_LOOP_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+declare Job
+    id : String
+    rank : int
+end
+
+declare Counter
+    n : int
+end
+
+rule "Bump" no-loop salience ( $j.getRank() )
+when
+    $j : Job()
+    $c : Counter( n >= 0 )
+then
+    actions.say("pepper", "Bump " + $j.getId());
+    modify($c) { setN($c.getN() + 1) };
+end
+"""
+
+
+def test_a_no_loop_rules_own_modify_does_not_fire_its_fired_match_again_after_a_rebuild(rs, api_gateway):
+    """Two matches of a no-loop rule share the counter their consequence modifies: "Bump o1" fired,
+    then "Bump o2" came and waits. Rebuilt from the snapshot then, "Bump o2" fires first (its
+    salience) while "Bump o1" still waits for the filter; its modify, the rule's own, reaches
+    "Bump o1", which Drools updates without re-activating it: it had fired, and does not again."""
+    name = "noloop"
+    made = rs.put(f"/api/rulesets/{name}", json={"files": {"rules.drl": NO_LOOP_RULES}})
+    assert made.status_code == 201, made.text
+    manager = api_gateway.engine.session_manager
+    said = {}
+    for rebuilt in (False, True):
+        sid = rs.post(f"/api/rulesets/{name}/sessions", json={}).json()["id"]
+        manager.find(name, sid).durability.every = 1 if rebuilt else 1_000_000
+        first = manager.get(name, sid).execute([
+            {"op": "insert", "facts": [{"type": "Job", "id": "o1", "rank": 0}, {"type": "Counter", "n": 0}]},
+            {"op": "fire", "max": -1},
+            {"op": "insert", "facts": [{"type": "Job", "id": "o2", "rank": 10}]}]).actions()
+        if rebuilt:
+            _crash(api_gateway, sid, name)
+        rest = manager.get(name, sid).execute(FIRE_ALL).actions()
+        said[rebuilt] = [a["params"]["text"] for a in first + rest]
+        assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
+    assert said[False] == ["Bump o1", "Bump o2"]
+    assert said[True] == said[False]

@@ -14,6 +14,7 @@ import re
 import uuid
 from pathlib import Path
 
+import jpype
 import pytest
 
 from gateway.base import jvm
@@ -103,6 +104,15 @@ rule "on a calendar"
 when
     Customer()
 then
+end
+
+rule "no loop"
+    no-loop
+when
+    Customer(tier == "loop")
+    $o: Order(id == "shared", amount >= 0.0)
+then
+    modify($o) {{ setAmount($o.getAmount() + 1.0) }};
 end
 """
 
@@ -324,6 +334,75 @@ def test_the_focus_stack_is_read_whole_bottom_to_top_with_queued_pushes_applied(
         assert stack()[-2:] == ["MAIN", "g"], broken("focusStack", "a push of the group on top changes nothing")
         assert int(session.fireAllRules()) == 1  # no fact: "from the initial fact" alone, in MAIN; a fire pops the empty groups
         assert stack() == ["MAIN"], broken("focusStack", "a fire pops the empty groups off the stack")
+    finally:
+        session.dispose()
+
+
+def _reached(session, rule: str, accept: bool = False) -> list[int]:
+    """``lastReachedBy`` of each match of ``rule`` a fire of MAIN meets (each rejected unless ``accept``)."""
+    seam = jvm.helper_class("DroolsInternals")
+    seen: list[int] = []
+
+    @jpype.JImplements("org.kie.api.runtime.rule.AgendaFilter")
+    class Record:
+        @jpype.JOverride
+        def accept(self, match):
+            if str(match.getRule().getName()) != rule:
+                return False
+            seen.append(int(seam.lastReachedBy(match)))
+            return accept
+
+    session.fireAllRules(Record())
+    return seen
+
+
+def test_a_match_keeps_the_number_of_the_last_propagation_that_reached_it(seam, module_kbase):
+    """What Refraction tells a match carried into a session (fired before, stays fired) from one
+    something re-created or re-activated since by: a modify of a property its patterns do not
+    listen to (property reactivity) leaves the match's number, on the left input (the first
+    pattern) and on the right one (a join's); a modify they listen to gives it a later one; a
+    no-loop rule's own modify marks it -1 (Drools updates it without re-activating it)."""
+    kbase, _, _ = module_kbase
+    session = kbase.newKieSession()
+    try:
+        customer_type, order_type = kbase.getFactType(PACKAGE, "Customer"), kbase.getFactType(PACKAGE, "Order")
+        customer, order = customer_type.newInstance(), order_type.newInstance()
+        customer_type.set(customer, "id", "c1")
+        customer_type.set(customer, "age", jpype.JInt(40))
+        order_type.set(order, "id", "o1")
+        order_type.set(order, "amount", 60.0)
+        before = int(seam.propagationMark(session))
+        c, o = session.insert(customer), session.insert(order)
+        mark = int(seam.propagationMark(session))
+        assert before < mark, broken("propagationMark", "the session's propagation numbers grow")
+        customer_type.set(customer, "tier", "silver")
+        session.update(c, customer, "tier")  # "from facts" listens to age (Customer) and amount (Order) only
+        order_type.set(order, "customer", "c9")
+        session.update(o, order, "customer")
+        inserted = _reached(session, "from facts")
+        assert len(inserted) == 1 and before < inserted[0] < mark, broken(
+            "lastReachedBy", f"a match keeps its insert's propagation number ({before} < n < {mark}) through modifies "
+            f"of properties its patterns do not listen to, left or right: {inserted}")
+        for handle, fact, fact_type, prop, value in ((c, customer, customer_type, "age", jpype.JInt(41)), (o, order, order_type, "amount", 61.0)):
+            mark = int(seam.propagationMark(session))
+            fact_type.set(fact, prop, value)
+            session.update(handle, fact, prop)
+            reached = _reached(session, "from facts")
+            assert len(reached) == 1 and reached[0] > mark, broken(
+                "lastReachedBy", f"a modify of {prop}, which the rule listens to, re-activates the match with its own, "
+                f"later number (> {mark}): {reached}")
+        for name in ("k1", "k2"):
+            looping = customer_type.newInstance()
+            customer_type.set(looping, "id", name)
+            customer_type.set(looping, "tier", "loop")
+            session.insert(looping)
+        shared = order_type.newInstance()
+        order_type.set(shared, "id", "shared")
+        session.insert(shared)
+        fired = _reached(session, "no loop", accept=True)
+        assert len(fired) == 2 and fired[0] > 0 and fired[1] == -1, broken(
+            "lastReachedBy", "the first of two matches of a no-loop rule fires and modifies the fact both hold; the "
+            f"update reaches the second with its context's terminal node origin the rule's own: -1 ({fired})")
     finally:
         session.dispose()
 

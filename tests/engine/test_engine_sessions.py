@@ -122,6 +122,55 @@ def test_pending_matches_survive_a_move(engine):
     session.close()
 
 
+TABLES = """package org.printeps.sess;
+import org.printeps.gateway.Actions;
+global Actions actions;
+declare Table
+    id : String
+    state : String
+    note : String
+end
+rule "Free" salience 1
+when
+    $t : Table( state == "free" )
+then
+    actions.say("pepper", "Free " + $t.getId());
+end
+rule "Clean"
+when
+    $t : Table( state == "free" )
+then
+    actions.say("pepper", "Clean " + $t.getId());
+end
+"""
+
+
+@pytest.mark.parametrize("changed, again", [("note", []), ("state", ["Free t"])])
+def test_after_a_move_a_fired_match_fires_again_only_if_a_modify_reaches_it(engine, changed, again):
+    """A match that fired before a move (rule unchanged) stays fired through a modify, after the
+    move, of a property its rule does not listen to (property reactivity), as in a session that
+    never moved; a modify of one it listens to fires it again, in both."""
+    engine.deploy("tables", {"tables.drl": TABLES}, force=True)
+    said = {}
+    for on_deploy in ("pin", "follow"):
+        session = engine.session_manager.open("tables", kind="rest", on_deploy=on_deploy)
+        handle = session.execute([{"op": "insert", "facts": [{"type": "Table", "id": "t", "state": "free", "note": ""}]},
+                                  {"op": "fire", "max": 1}]).results[0]["handles"][0]  # "Free t" fired, "Clean t" waits
+        said[on_deploy] = session
+        said[on_deploy, "handle"] = handle
+    engine.deploy("tables", {"tables.drl": TABLES, "extra.drl": "package org.printeps.sess;\n"}, force=True)  # rules unchanged
+    assert said["follow"].version > said["pin"].version
+    for on_deploy in ("pin", "follow"):
+        session = said[on_deploy]
+        value = "free" if changed == "state" else "by the window"
+        answer = session.execute([{"op": "modify", "handle": said[on_deploy, "handle"], "set": [[changed, value]]},
+                                  {"op": "fire", "max": -1}])
+        said[on_deploy] = [a["params"]["text"] for a in answer.actions() if a["module"] == "say"]
+        session.close()
+    assert said["pin"] == again + ["Clean t"]
+    assert said["follow"] == said["pin"]
+
+
 STACKED = """package org.printeps.sess;
 import org.printeps.gateway.Actions;
 global Actions actions;

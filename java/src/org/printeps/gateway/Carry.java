@@ -44,6 +44,8 @@ final class Carry {
         /** The snapshot's pending matches (a list of keys), or null: every match had fired. */
         Object pending;
         final Set<Object> restored = Collections.newSetFromMap(new IdentityHashMap<Object, Boolean>());
+        /** The handle each fact went in with -> its place in {@link #built} (identity): what {@link Refraction} keys carried matches by. */
+        final Map<FactHandle, Integer> handles = new IdentityHashMap<FactHandle, Integer>();
     }
 
     static String problem(String message) {
@@ -97,21 +99,6 @@ final class Carry {
     private static void applyClockAndGlobals(Session into, Plan plan) {
         if (into.clock instanceof SessionPseudoClock) into.advanceTo(plan.now);
         for (Map.Entry<String, Object> g : plan.globals.entrySet()) into.session.setGlobal(g.getKey(), g.getValue());
-    }
-
-    /** Keeps {@code unchanged} (the facts that came across) current: an update or delete takes a fact out. */
-    private static void trackUnchanged(Session into, Set<Object> unchanged) {
-        if (into.handles != null) {
-            into.handles.setUnchangedSinceMove(unchanged);
-            return;
-        }
-        into.session.addEventListener(new org.kie.api.event.rule.DefaultRuleRuntimeEventListener() {
-            @Override public void objectUpdated(org.kie.api.event.rule.ObjectUpdatedEvent e) {
-                unchanged.remove(e.getOldObject());
-                unchanged.remove(e.getObject());
-            }
-            @Override public void objectDeleted(org.kie.api.event.rule.ObjectDeletedEvent e) { unchanged.remove(e.getOldObject()); }
-        });
     }
 
     /**
@@ -244,6 +231,7 @@ final class Carry {
             Object fact = plan.built.get(k);
             if (fact == null) continue;
             FactHandle nh = plan.targets.get(k).insert(fact);
+            plan.handles.put(nh, k);
             FactHandle oh = oldHandles.get(k);
             moved.put(oh, nh);
             mapped.put(DroolsInternals.objectOf(oh), fact);
@@ -261,13 +249,17 @@ final class Carry {
                 into.handles.alias(Long.parseLong(idHash[0]), Integer.parseInt(idHash[1]), nh);
             }
         }
-        trackUnchanged(into, plan.restored);
         Map<Object, Integer> places = Refraction.places(plan.built);
-        // the old session's pending matches, in every group (consumed: it is discarded after the move)
+        // the old session's pending matches, in every group (consumed: it is discarded after the move);
+        // a match the old session's own refraction (from a restore or an earlier move) drops had fired
         final Map<String, Integer> pending = Refraction.emptyKeys();
+        Refraction own = old.refraction;
         try {
-            walkAll(old.session, match -> Refraction.add(pending,
-                    Refraction.key(match.getRule().getName(), match.getObjects(), mapped, plan.restored, places)));
+            walkAll(old.session, match -> {
+                if (own == null || own.accept(match)) {
+                    Refraction.add(pending, Refraction.key(match.getRule().getName(), match.getObjects(), mapped, plan.restored, places));
+                }
+            });
         } catch (RuntimeException e) {
             // an agenda that cannot even be walked: its matches count as pending (they fire here)
         }
@@ -278,7 +270,7 @@ final class Carry {
         // what had fired: the new version's first agenda over the facts that came across, minus the pending
         Map<String, Integer> fired = probe(into, plan, unchangedRules, plan.restored, places);
         Refraction.subtract(fired, pending);
-        into.refraction = new Refraction(unchangedRules, plan.restored, fired, places);
+        into.refraction = new Refraction(unchangedRules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session));
         setFocusStack(into.session, plan.stack);
         return "{\"ok\":true,\"facts\":" + count + "}";
     }
@@ -413,6 +405,7 @@ final class Carry {
         TypeRegistry mine = into.runner.types();
         Object fact = plan.built.get(k);
         FactHandle nh = plan.targets.get(k).insert(fact);
+        plan.handles.put(nh, k);
         plan.restored.add(fact);
         String id = mine.idOf(fact);
         if (id != null && !mine.isEvent(fact)) into.byId.put(id, nh);
@@ -454,10 +447,12 @@ final class Carry {
      * walked at once, every match dropped: those had all fired (no filter is left for them, so a
      * later modify that their rules do not react to leaves them fired, as in the original). Then
      * the facts the pending matches name go in; of the matches they make, the ones that are not
-     * pending are dropped by a filter as they come up (a probe session lists them). Why not leave
+     * pending are dropped by a filter as they come up (a probe session lists them), unless a
+     * propagation after the restore reached them (see {@link Refraction}: a modify their rules do
+     * not react to leaves them fired, one they react to fires them again). Why not leave
      * everything to the filter: the restored facts' matches are only evaluated at the next fire, so
      * the first fire after a rebuild evaluated and dropped every one of them (2.8 s for 11,000
-     * facts), and a fired match left on the agenda would fire again after a modify of its fact.
+     * facts).
      */
     static void refract(Session into, Plan plan, Object pending) {
         List<?> waiting = pending instanceof List ? (List<?>) pending : Collections.emptyList();
@@ -473,7 +468,6 @@ final class Carry {
             }
         }
         for (int k = 0; late != null && k < plan.built.size(); k++) if (late.contains(k)) insert(into, plan, k);
-        trackUnchanged(into, plan.restored);
         into.refraction = null;
         if (!walked || !late.isEmpty()) {
             Set<String> rules = ruleNames(into.session);
@@ -483,7 +477,7 @@ final class Carry {
             Map<String, Integer> still = Refraction.emptyKeys();
             for (Object key : waiting) Refraction.add(still, String.valueOf(key));
             Refraction.subtract(fired, still);
-            if (!fired.isEmpty()) into.refraction = new Refraction(rules, plan.restored, fired, places);
+            if (!fired.isEmpty()) into.refraction = new Refraction(rules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session));
         }
         setFocusStack(into.session, plan.stack);
         into.recorder.reset();

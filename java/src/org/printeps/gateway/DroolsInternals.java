@@ -20,8 +20,11 @@ import java.util.Map;
 import org.drools.compiler.kie.builder.impl.InternalKieModule;
 import org.drools.core.base.ClassObjectType;
 import org.drools.core.base.accumulators.SumAccumulateFunction;
+import org.drools.core.common.AgendaItem;
 import org.drools.core.common.InternalAgenda;
 import org.drools.core.common.InternalFactHandle;
+import org.drools.core.common.PropagationContext;
+import org.drools.core.common.ReteEvaluator;
 import org.drools.core.definitions.rule.impl.QueryImpl;
 import org.drools.core.definitions.rule.impl.RuleImpl;
 import org.drools.core.impl.RuleBase;
@@ -62,6 +65,7 @@ import org.kie.api.definition.rule.Query;
 import org.kie.api.definition.rule.Rule;
 import org.kie.api.runtime.KieSession;
 import org.kie.api.runtime.rule.FactHandle;
+import org.kie.api.runtime.rule.Match;
 import org.kie.internal.builder.conf.LanguageLevelOption;
 
 /**
@@ -221,6 +225,48 @@ public final class DroolsInternals {
             }
         }
         return out;
+    }
+
+    // ------------------------------------------------------------------ propagations (refraction after a carry)
+
+    /**
+     * A mark in a session's propagations: every propagation (insert, update, delete) that starts
+     * after this call has a number at least this, every one before it a smaller one. A carried
+     * session's {@link Refraction} takes it once its facts are in, to tell the matches nothing
+     * has reached since from those something re-created or re-activated (see {@link #lastReachedBy}).
+     * Assumes: the {@code KieSession} is a {@code ReteEvaluator} whose
+     * {@code getNextPropagationIdCounter()} hands out the increasing numbers the
+     * {@code PropagationContext}s of its inserts, updates and deletes carry (it takes one: harmless).
+     */
+    public static long propagationMark(KieSession session) {
+        return ((ReteEvaluator) session).getNextPropagationIdCounter();
+    }
+
+    /**
+     * The number of the last propagation that reached a match's tuple and could re-activate it:
+     * the insert that made it, or a later update of a fact it holds in a property one of its
+     * rule's patterns listens to (property reactivity: an update of another property does not reach
+     * it, and it keeps its number); or -1 when that last propagation came from its own rule's
+     * consequence and the rule is {@code no-loop} (Drools then updates the tuple but does not
+     * re-activate it). {@link Long#MAX_VALUE} for a match this does not know how to read (counted
+     * as reached: it fires, rather than one being lost).
+     * Assumes: the {@code Match} an {@code AgendaFilter} sees is the terminal tuple itself, an
+     * {@code AgendaItem} whose {@code getPropagationContext()} is the context of the last
+     * propagation staged on it: set by {@code PhreakRuleTerminalNode} at its insert
+     * ({@code init}) and at each update ({@code update}, no-loop blocked or not), from the staged
+     * tuple's {@code findMostRecentPropagationContext()}; an update whose modification mask the
+     * pattern does not intersect is never staged ({@code LeftInputAdapterNode.modifyObject},
+     * {@code BetaNode.modifyObject}), so the tuple keeps the context it had.
+     */
+    public static long lastReachedBy(Match match) {
+        if (!(match instanceof AgendaItem)) return Long.MAX_VALUE;
+        AgendaItem item = (AgendaItem) match;
+        PropagationContext context = item.getPropagationContext();
+        if (context == null) return Long.MAX_VALUE;
+        RuleImpl rule = item.getRule();
+        if (rule != null && rule.isNoLoop() && context.getTerminalNodeOrigin() != null
+                && context.getTerminalNodeOrigin().equals(item.getTerminalNode())) return -1;
+        return context.getPropagationNumber();
     }
 
     // ------------------------------------------------------------------ rule and query definitions

@@ -41,11 +41,6 @@ final class Handles implements RuleRuntimeEventListener {
     private final Map<Long, Entry> byId = new HashMap<Long, Entry>();
     /** "id:identityHash" of a handle from before a move -> the entry of its fact now. */
     private final Map<String, Entry> aliases = new HashMap<String, Entry>();
-    /** Facts that came across in a move and were not changed since (see Refraction). */
-    private Set<Object> unchangedSinceMove;
-
-    void setUnchangedSinceMove(Set<Object> objects) { this.unchangedSinceMove = objects; }
-
     @Override
     public void objectInserted(ObjectInsertedEvent event) {
         FactHandle h = event.getFactHandle();
@@ -57,10 +52,6 @@ final class Handles implements RuleRuntimeEventListener {
         FactHandle h = event.getFactHandle();
         Entry e = byId.get(DroolsInternals.handleId(h));
         if (e != null) e.hashes.add(DroolsInternals.identityHashCode(h));
-        if (unchangedSinceMove != null) {
-            unchangedSinceMove.remove(event.getOldObject());
-            unchangedSinceMove.remove(event.getObject());
-        }
     }
 
     @Override
@@ -68,7 +59,6 @@ final class Handles implements RuleRuntimeEventListener {
         FactHandle h = event.getFactHandle();
         Entry e = byId.remove(DroolsInternals.handleId(h));
         if (e != null) aliases.values().removeIf(x -> x == e);
-        if (unchangedSinceMove != null) unchangedSinceMove.remove(event.getOldObject());
     }
 
     /** Registers a handle from before a move as an alias of the fact's handle now. */

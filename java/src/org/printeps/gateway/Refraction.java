@@ -6,6 +6,7 @@ import java.util.Map;
 import java.util.Set;
 
 import org.kie.api.runtime.rule.AgendaFilter;
+import org.kie.api.runtime.rule.FactHandle;
 import org.kie.api.runtime.rule.Match;
 
 /**
@@ -28,18 +29,29 @@ import org.kie.api.runtime.rule.Match;
  * restored facts, in every agenda group, minus the ones pending when the snapshot was taken.
  * It applies until each of its keys was dropped once: a key of an agenda group that has no focus
  * waits for the group to be focused and fired.
+ *
+ * <p>Which matches it keys: only those no propagation reached since the carry ({@link
+ * DroolsInternals#lastReachedBy} below the mark taken once the facts were in), and those by the
+ * place of their fact handles, whatever was changed in the facts since. A fact modified in a
+ * property its rule does not listen to (property reactivity) leaves the match as it was: it had
+ * fired, and stays fired, as in a session never carried. A match something reached since (an
+ * insert made it, or a modify its rule listens to re-activated it) is let through: in a session
+ * never carried it is on the agenda too.
  */
 final class Refraction implements AgendaFilter {
     private final Set<String> unchangedRules;
-    private final Set<Object> unchangedFacts;   // identity set, shared with Handles
     private final Map<String, Integer> fired;    // keys (a multiset: query rows can share one) of matches fired already
     private final Map<Object, Integer> places;   // a fact's place in the carried state (identity map)
+    private final Map<FactHandle, Integer> handles;  // the place of the fact each carried handle was made for (identity map)
+    private final long mark;                     // propagations numbered at least this came after the carry
 
-    Refraction(Set<String> unchangedRules, Set<Object> unchangedFacts, Map<String, Integer> fired, Map<Object, Integer> places) {
+    Refraction(Set<String> unchangedRules, Map<String, Integer> fired, Map<Object, Integer> places, Map<FactHandle, Integer> handles,
+               long mark) {
         this.unchangedRules = unchangedRules;
-        this.unchangedFacts = unchangedFacts;
         this.fired = fired;
         this.places = places;
+        this.handles = handles;
+        this.mark = mark;
     }
 
     /** Whether every key was dropped (the filter has nothing left to do). */
@@ -92,7 +104,25 @@ final class Refraction implements AgendaFilter {
     public boolean accept(Match match) {
         String rule = match.getRule().getName();
         if (!unchangedRules.contains(rule)) return true;
-        return !take(fired, key(rule, match.getObjects(), null, unchangedFacts, places));
+        if (DroolsInternals.lastReachedBy(match) >= mark) return true;  // made or re-activated since the carry
+        return !take(fired, carriedKey(rule, match.getFactHandles()));
+    }
+
+    /**
+     * The key of a match nothing reached since the carry, by its handles: a carried handle names its
+     * fact's place even if the fact was changed since (in a property the rule does not listen to,
+     * or the match would have been reached); any other object (an accumulate's result, a
+     * {@code from}'s element) is named as {@link #key} names it.
+     */
+    private String carriedKey(String rule, List<? extends FactHandle> matched) {
+        StringBuilder b = new StringBuilder(rule);
+        for (FactHandle h : matched) {
+            b.append('|');
+            Integer place = handles.get(h);
+            if (place != null) b.append('#').append(place);
+            else part(b, DroolsInternals.objectOf(h), null, places.keySet(), places, 0);
+        }
+        return b.toString();
     }
 
     /** A multiset of keys (two matches can have one key: rows of a query without outputs). */
