@@ -619,19 +619,34 @@ class _Builder:
         return list(self.engine.unchanged_rules(self.ruleset, old, new))
 
 
-_RULE = re.compile(r"""^[ \t]*rule\s+("(?:[^"\\]|\\.)*"|'[^']*'|\S+)(.*?)^[ \t]*end\b""", re.MULTILINE | re.DOTALL)
+# A top-level DRL unit starts a line: a rule (its name), or what ends the rule before it.
+_UNIT_HEAD = re.compile(r"""^[ \t]*(rule|query|declare|function|import|global|package|dialect)\b[ \t]*"""
+                        r"""("(?:[^"\\]|\\.)*"|'[^']*'|[^\s"']+)?""", re.MULTILINE)
+_END = re.compile(r"\bend\b")
 _COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.DOTALL)
 
 
 def rule_fingerprints(drl_texts: list[str]) -> dict[str, str]:
-    """Rule name -> its text with comments and spacing normalised (to tell unchanged rules)."""
+    """Rule name -> its text with comments and spacing normalised (to tell unchanged rules).
+
+    A rule's text runs from its ``rule`` line to the last ``end`` before the next top-level unit:
+    a rule written on one line (``rule "r" when … then … end``) is one rule too, where matching up
+    to an ``end`` at the start of a line took it with the next rule's text (so it counted as changed
+    by every edit of its neighbour, and its fired matches fired again after each such move)."""
     import hashlib
 
     out: dict[str, str] = {}
     for text in drl_texts:
-        for match in _RULE.finditer(_COMMENT.sub(" ", text)):
-            name = match.group(1).strip("\"'")
-            out[name] = hashlib.sha256(" ".join(match.group(0).split()).encode()).hexdigest()
+        clean = _COMMENT.sub(" ", text)
+        heads = list(_UNIT_HEAD.finditer(clean))
+        for i, head in enumerate(heads):
+            if head.group(1) != "rule" or not head.group(2):
+                continue
+            body = clean[head.start(): heads[i + 1].start() if i + 1 < len(heads) else len(clean)]
+            ends = list(_END.finditer(body))
+            if ends:
+                body = body[: ends[-1].end()]
+            out[head.group(2).strip("\"'")] = hashlib.sha256(" ".join(body.split()).encode()).hexdigest()
     return out
 
 

@@ -9,6 +9,7 @@ import pytest
 from gateway.engine import kmodule
 from gateway.engine.errors import CompileFailed
 from gateway.engine.session import CommandFailed
+from gateway.engine.sessions import rule_fingerprints
 
 TYPES = """package org.printeps.sess;
 import org.printeps.gateway.Actions;
@@ -169,6 +170,36 @@ def test_after_a_move_a_fired_match_fires_again_only_if_a_modify_reaches_it(engi
         session.close()
     assert said["pin"] == again + ["Clean t"]
     assert said["follow"] == said["pin"]
+
+
+ONE_LINE = """package org.printeps.sess;
+import org.printeps.gateway.Actions;
+global Actions actions;
+rule "Greet" when $g : Guest() then actions.say("pepper", "Greet " + $g.getId()); end
+rule "Offer" when $g : Guest() then actions.say("pepper", "%s " + $g.getId()); end
+"""
+
+
+def test_a_move_tells_unchanged_one_line_rules_from_changed_ones(engine):
+    """Rules written on one line each: after a deploy that changes only "Offer", a following session
+    fires "Offer" again (a changed rule's matches are new) and not "Greet", which had fired."""
+    engine.deploy("oneline", {"types.drl": TYPES, "rules.drl": ONE_LINE % "Tea"}, force=True)
+    session = engine.session_manager.open("oneline", kind="rest", on_deploy="follow")
+    first = session.execute([{"op": "insert", "facts": [{"type": "Guest", "id": "g", "party": 1}]},
+                             {"op": "fire", "max": -1}])
+    assert sorted(a["params"]["text"] for a in first.actions()) == ["Greet g", "Tea g"]
+    engine.deploy("oneline", {"types.drl": TYPES, "rules.drl": ONE_LINE % "Cake"}, force=True)
+    again = session.execute([{"op": "fire", "max": -1}])
+    assert [a["params"]["text"] for a in again.actions()] == ["Cake g"]
+    session.close()
+
+
+def test_rule_fingerprints_take_each_rule_alone_however_it_is_laid_out():
+    one_line = 'rule "A" when Guest() then x(); end\nrule "B" when Guest() then y(); end\n'
+    laid_out = 'rule "A"\nwhen\n  Guest()\nthen\n  x();\nend\n\nrule "B" when Guest() then z(); end\ndeclare T end\n'
+    first, second = rule_fingerprints([one_line]), rule_fingerprints([laid_out])
+    assert set(first) == set(second) == {"A", "B"}
+    assert first["A"] == second["A"] and first["B"] != second["B"]
 
 
 STACKED = """package org.printeps.sess;
