@@ -37,10 +37,11 @@ log = logging.getLogger(__name__)
 
 JAVA_SOURCES = PROJECT_ROOT / "java" / "src"
 
-# Jars of the optapy wheel that Drools does not need (or that would fight with our logging).
+# Jars of the optapy wheel that Drools does not need (or that would fight with our logging). ASM
+# itself stays: the plain rules write their getter readers with it (PlainValues.generated).
 _EXCLUDED_JAR_PREFIXES = (
     "optaplanner", "optapy", "jpyinterpreter", "logback", "junit", "mockito", "assertj",
-    "opentest4j", "apiguardian", "byte-buddy", "asm", "gizmo", "jandex", "micrometer",
+    "opentest4j", "apiguardian", "byte-buddy", "asm-analysis", "asm-tree", "asm-util", "gizmo", "jandex", "micrometer",
     "HdrHistogram", "LatencyUtils", "objenesis",
 )
 

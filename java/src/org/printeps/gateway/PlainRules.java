@@ -94,6 +94,20 @@ public final class PlainRules {
         return new Built(new ArrayList<Model>(byPackage.values()), rejected);
     }
 
+    /**
+     * How a plain rule reads {@code getter} (its constraints, bindings, indexes and then-parts): a
+     * generated function that calls it directly, or reflection where none can be made (see
+     * {@link PlainValues#reader}). Public for the tests, which check both and what they return.
+     */
+    public static java.util.function.Function<Object, Object> reader(java.lang.reflect.Method getter) {
+        return PlainValues.reader(getter);
+    }
+
+    /** Whether {@link #reader} calls {@code getter} directly (false: through {@code Method.invoke}). */
+    public static boolean readsDirectly(java.lang.reflect.Method getter) {
+        return PlainValues.readsDirectly(getter);
+    }
+
     // ------------------------------------------------------------------ shared state of one build
 
     static final class Context {

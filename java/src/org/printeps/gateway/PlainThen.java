@@ -179,6 +179,10 @@ final class PlainThen {
         }
         if (read.getReturnType() == void.class || Modifier.isStatic(read.getModifiers())) throw new Reject(getter + "() is not a getter");
         if (PlainOverloads.generic(read)) throw new Reject(getter + "() has a generic type");
+        // called directly where it can be (PlainValues.generated: a checked exception escapes as
+        // itself, as it does from PlainValues.invoke), else by reflection
+        final java.util.function.Function<Object, Object> generated = PlainValues.generated(read);
+        if (generated != null) return new Expr(read.getReturnType(), facts -> generated.apply(facts[index]));
         final Method direct = PlainValues.direct(read);
         return new Expr(read.getReturnType(), facts -> PlainValues.invoke(direct, facts[index], PlainValues.NO_ARGS));
     }
