@@ -79,16 +79,20 @@ def start_server(tmp: Path, port: int, record_fires: bool = True, workers: int =
         sections.setdefault(section, {}).update(values)
     config.write_text(yaml.safe_dump({"data_dir": str(tmp / "var"), **sections}))
     server_env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"} | (env or {})
-    proc = subprocess.Popen(
-        [*(launcher or [sys.executable, "-m", "gateway.cli"]), "serve", "--port", str(port), "--config", str(config),
-         "--workers", str(workers)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=server_env,
-    )
+    # The server's log goes to a file: a pipe nobody drains fills at 64 KiB (the soak once stalled
+    # on it before the gateway logged off its serving threads: gateway.base.logs)
+    log_file = tmp / "server.log"
+    with log_file.open("ab") as log_out:
+        proc = subprocess.Popen(
+            [*(launcher or [sys.executable, "-m", "gateway.cli"]), "serve", "--port", str(port), "--config", str(config),
+             "--workers", str(workers)],
+            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=log_out, env=server_env,
+        )
     deadline = time.monotonic() + start_timeout_s
     seen: set[str] = set()
     while len(seen) < workers:  # each new connection may land on any worker: wait until all answered
         if proc.poll() is not None:
-            raise RuntimeError(f"server exited: {proc.stderr.read().decode()[-2000:]}")
+            raise RuntimeError(f"server exited: {log_file.read_text(errors='replace')[-2000:]}")
         if time.monotonic() > deadline:
             proc.kill()
             raise RuntimeError(f"only {len(seen)} of {workers} workers answered in {start_timeout_s:g} s")

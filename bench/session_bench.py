@@ -73,12 +73,14 @@ def serve_visits(home: Path, port: int, sessions: dict) -> subprocess.Popen:
     config.write_text(yaml.safe_dump({
         "data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "rules")}, "ros": {"enabled": False},
         "streams": {"queries_dir": None}, "sessions": sessions}))
-    proc = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config", str(config)],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    log_file = home / "server.log"  # not a pipe: one nobody drains fills at 64 KiB
+    with log_file.open("ab") as log_out:
+        proc = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--port", str(port), "--config",
+                                 str(config)], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=log_out)
     deadline = time.monotonic() + 300
     while True:
         if proc.poll() is not None:
-            raise RuntimeError(proc.stderr.read().decode()[-2000:])
+            raise RuntimeError(log_file.read_text(errors="replace")[-2000:])
         try:
             if httpx.get(f"http://127.0.0.1:{port}/health", timeout=2).status_code == 200:
                 return proc

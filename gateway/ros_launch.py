@@ -12,7 +12,6 @@ Information State ships its journal (or keeps it on disk) and the embedded datab
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from gateway.config import load_settings
@@ -26,7 +25,6 @@ def main(argv: list[str] | None = None) -> int:
     settings = load_settings(args.config)
     settings.ros.args = ros_args  # --ros-args -p name:=value ... reach the node (start-up overrides)
     sys.setswitchinterval(0.001)  # GIL hand-offs between executor and worker threads: see docs/ros.md
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     run(settings, rest=False, ros=True)
     return 0
 

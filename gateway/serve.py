@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.app import build_gateway
+from gateway.base.logs import log_off_thread
 from gateway.base.malloc import limit_arenas
 from gateway.config import Settings, load_settings
 from gateway.store.factory import embedded_database, store_uri
@@ -94,8 +95,10 @@ def serve(gateway: Any, host: str, port: int, *, sockets: list[socket.socket] | 
     # found: make that an orderly exit, so the caller's ``gateway.close()`` runs (journal shipped,
     # ROS node destroyed, embedded database stopped) instead of the process dying on the spot.
     signal.signal(signal.SIGTERM, _exit_quietly)
+    # log_config=None: uvicorn's loggers propagate to the process's queued handler (gateway.base.logs)
+    # instead of writing to stderr themselves, under their own lock, in the serving threads
     config = uvicorn.Config(gateway.app, host=host, port=port, loop="auto", http="auto", log_level="info",
-                            access_log=False)
+                            access_log=False, log_config=None)
     closing_server(config, on_exit=gateway.live.close).run(sockets=sockets)
 
 
@@ -263,7 +266,7 @@ def worker_main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-ros", dest="ros", action="store_false")
     args = ap.parse_args(argv)
     sys.setswitchinterval(0.001)
-    logging.basicConfig(level=logging.INFO, format=f"%(asctime)s worker{args.index} %(levelname)s %(name)s: %(message)s")
+    log_off_thread(fmt=f"%(asctime)s worker{args.index} %(levelname)s %(name)s: %(message)s")
     settings = load_settings(args.config)
     limit_arenas(settings.malloc_arena_max)  # before the JVM's and the servers' threads allocate
     gateway = build_gateway(settings, ros=args.ros)
@@ -298,6 +301,7 @@ def run(settings: Settings, *, rest: bool = True, ros: bool | None = None, host:
     With ``rest`` uvicorn serves the app (and handles the signals); without, the process waits on
     the signals itself (the ROS launcher).
     """
+    log_off_thread()  # no serving thread ever waits on a slow stderr
     limit_arenas(settings.malloc_arena_max)  # before the JVM's and the servers' threads allocate
     gateway = build_gateway(settings, rest=rest, ros=ros)
     try:

@@ -40,6 +40,8 @@ from bson import ObjectId
 from bson.errors import InvalidDocument
 from pymongo.errors import BulkWriteError, DuplicateKeyError, OperationFailure, PyMongoError
 
+from gateway.base.logs import log_off_thread
+
 log = logging.getLogger(__name__)
 
 META_INDEX = [("_meta.stored_type", 1), ("_meta.inserted_at", 1)]
@@ -220,6 +222,6 @@ def main() -> None:
     """The shipper process (started by :class:`ShipperProcess`; argv: URI, timeout in ms)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when it ends: end of input
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    logging.basicConfig(level=logging.WARNING, format="shipper %(process)d: %(message)s")
+    log_off_thread(logging.WARNING, "shipper %(process)d: %(message)s")  # shipping never waits on stderr
     serve(sys.argv[1], int(sys.argv[2]), sys.stdin.buffer, sys.stdout.buffer)
 
