@@ -46,7 +46,7 @@ MAX_INDIVIDUALS = 10_000
 #: then reuse it instead of paying owlready2 and Pellet again (about half a second each).
 #: It is also kept on disk (:func:`_plain_file`), so a process that starts on texts some process
 #: of the host has already reasoned over (every restart, every ``--workers`` process, every
-#: gateway process a test starts) skips rdflib, owlready2 and Pellet: ~3 CPU-s of a cold start.
+#: gateway process a test starts) skips rdflib, owlready2 and Pellet: ~1 CPU-s of a cold start.
 _PLAIN_KEEP = 4
 _PLAIN_FILES_KEPT = 16
 #: Part of the disk key: a new answer format or reasoner version must not read old answers.
