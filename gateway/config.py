@@ -96,7 +96,7 @@ class EngineSettings(BaseModel):
     process_warm_up: bool = Field(
         default=True, description="At start, compile a small rule set twice and fire each live rule set on its "
         "examples in the background, so the first edit and the first customer do not meet a cold JIT (false: "
-        "skip it, as the test suite's short-lived processes do; it costs a few seconds of a core per start).")
+        "skip it, as the test suite's short-lived processes do; it costs ~2 s of a core per start).")
     explain_prebuild: bool = Field(
         default=True, description="After a deploy (rollback, load, sync) build the version's explain queries on "
         "the explain thread, so the first explanation of it does not compile them (seconds, one core).")

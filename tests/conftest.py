@@ -21,7 +21,7 @@ os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printep
 # same for the gateways built in-process; the tests of the prebuild turn it on).
 os.environ.setdefault("PRINTEPS_EXPLAIN_PREBUILD", "0")
 # Nor do they warm the JIT up at start (engine.process_warm_up): two builds of a small rule set and
-# fires of every live set, ~3 CPU-s a process, which its shutdown then waited for (4.4 s of a
+# fires of every live set, ~2 CPU-s a process, which its shutdown then waited for (4.4 s of a
 # cluster process's 10 s stop). The tests of the warm-up call it themselves.
 os.environ.setdefault("PRINTEPS_PROCESS_WARM_UP", "0")
 
