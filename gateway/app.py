@@ -272,7 +272,7 @@ def _build(settings: Settings, closers: list[tuple[str, Callable[[], None]]], *,
         from gateway.api.main import create_app
 
         gateway.app = create_app(gateway)
-    if warm_up:
+    if warm_up and settings.engine.process_warm_up:
         engine.warm_up()
         closers.append(("engine warm-up", engine.stop_warm_up))  # closed first: it reads the store
     return gateway

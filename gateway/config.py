@@ -93,6 +93,10 @@ class EngineSettings(BaseModel):
         "would run interpreted code. Warming stops earlier once its rounds stop getting faster.")
     warm_max_s: float = Field(
         default=5.0, ge=0.0, description="The most any warm-up of a new version takes.")
+    process_warm_up: bool = Field(
+        default=True, description="At start, compile a small rule set twice and fire each live rule set on its "
+        "examples in the background, so the first edit and the first customer do not meet a cold JIT (false: "
+        "skip it, as the test suite's short-lived processes do; it costs ~2 s of a core per start).")
     explain_prebuild: bool = Field(
         default=True, description="After a deploy (rollback, load, sync) build the version's explain queries on "
         "the explain thread, so the first explanation of it does not compile them (seconds, one core).")
@@ -510,6 +514,7 @@ ENV_OVERRIDES: dict[str, tuple[str, ...]] = {
     "PRINTEPS_COMPILE_WORKERS": ("engine", "compile_workers"),
     "PRINTEPS_EXPLAIN_PREBUILD": ("engine", "explain_prebuild"),
     "PRINTEPS_EXPLAIN_PREBUILD_MAX_RULES": ("engine", "explain_prebuild_max_rules"),
+    "PRINTEPS_PROCESS_WARM_UP": ("engine", "process_warm_up"),
     "PRINTEPS_RULE_CACHE_DIR": ("engine", "compile_cache_dir"),
     "PRINTEPS_TOKENS": ("api", "tokens"),
     "PRINTEPS_BASIC_USERS": ("api", "basic_users"),

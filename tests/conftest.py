@@ -20,6 +20,10 @@ os.environ.setdefault("PRINTEPS_CACHE_DIR", os.path.expanduser("~/.cache/printep
 # advance: each would spend seconds of a core per rule set it loads (tests/gw_testing.py does the
 # same for the gateways built in-process; the tests of the prebuild turn it on).
 os.environ.setdefault("PRINTEPS_EXPLAIN_PREBUILD", "0")
+# Nor do they warm the JIT up at start (engine.process_warm_up): two builds of a small rule set and
+# fires of every live set, ~2 CPU-s a process, which its shutdown then waited for (4.4 s of a
+# cluster process's 10 s stop). The tests of the warm-up call it themselves.
+os.environ.setdefault("PRINTEPS_PROCESS_WARM_UP", "0")
 
 
 CHROMIUM = "/usr/bin/chromium"
@@ -85,10 +89,17 @@ def _in_ros_unit(path: Path | str) -> bool:
     return any(relative == Path(unit) or Path(unit) in relative.parents for unit in ROS_UNIT)
 
 
+# The longest files that hold no `slow` test, measured (docs/operations.md "Where the suite's time
+# goes"): 30-75 CPU-s each, or one test of 25-55 s. Handed out right after the long units.
+LONG_FAST_FILES = ("workbench/test_workflow_editor.py", "stream/test_fastpath_agreement.py",
+                   "knowledge/test_knowledge_api.py", "engine/test_plain_shapes.py",
+                   "engine/test_engine_sessions.py", "workbench/test_workbench_authoring.py")
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """On pytest-xdist workers (`make test`), the long units are handed out first: the files
-    holding `slow` tests and the ROS unit.
+    holding `slow` tests and the ROS unit, then LONG_FAST_FILES (the long ones of `make test-fast`).
 
     Why: `--dist loadfile` gives each worker a whole file at a time, in collection order; a browser
     story or cluster file of minutes handed out last leaves the other worker idle that long. The
@@ -100,7 +111,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if item.get_closest_marker("ros") and not _in_ros_unit(item.path):
             item.add_marker(pytest.mark.outside_ros_unit)
     long_files = {item.path for item in items if item.get_closest_marker("slow") or _in_ros_unit(item.path)}
-    items.sort(key=lambda item: item.path not in long_files)  # stable: files and tests keep their order
+    # then the longest files without `slow` tests (what make test-fast ends on otherwise)
+    long_fast_files = {TESTS / name for name in LONG_FAST_FILES}
+    items.sort(key=lambda item: 0 if item.path in long_files else 1 if item.path in long_fast_files else 2)
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

@@ -17,8 +17,12 @@ Turtle (owlready2 cannot parse Turtle).
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
 import logging
+import os
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -40,7 +44,13 @@ MAX_INDIVIDUALS = 10_000
 #: always give the same answer; gateways built one after another in one process (the test suite
 #: builds over a hundred, each from the shipped teahouse files) and reloads that change nothing
 #: then reuse it instead of paying owlready2 and Pellet again (about half a second each).
+#: It is also kept on disk (:func:`_plain_file`), so a process that starts on texts some process
+#: of the host has already reasoned over (every restart, every ``--workers`` process, every
+#: gateway process a test starts) skips rdflib, owlready2 and Pellet: ~1 CPU-s of a cold start.
 _PLAIN_KEEP = 4
+_PLAIN_FILES_KEPT = 16
+#: Part of the disk key: a new answer format or reasoner version must not read old answers.
+_PLAIN_FORMAT = "1"
 _plain: "dict[tuple[str, str, str, str], tuple[list[dict[str, Any]], list[dict[str, str]]]]" = {}
 _plain_lock = threading.Lock()
 
@@ -49,20 +59,78 @@ def _plain_key(text: "KnowledgeText") -> tuple[str, str, str, str]:
     return (text.ontology, text.swrl, text.ontology_file, text.swrl_file)
 
 
+def _plain_dir() -> Path:
+    """The per-user cache shared by the host's gateway processes (as the compiled rule units')."""
+    return Path(os.environ.get("PRINTEPS_CACHE_DIR", Path.home() / ".cache" / "printeps")) / "reasoner"
+
+
+def _plain_file(text: "KnowledgeText") -> Path:
+    """The disk copy of one answer: named by a digest of the texts, their file names, the answer
+    format and the owlready2 release (whose bundled Pellet jars do the reasoning)."""
+    try:
+        from importlib.metadata import version
+
+        release = version("owlready2")
+    except Exception:  # metadata missing: a name no other release shares is still safe
+        release = "unknown"
+    digest = hashlib.sha256()
+    for part in (_PLAIN_FORMAT, release, *_plain_key(text)):
+        digest.update(part.encode("utf-8"))
+        digest.update(b"\0")
+    return _plain_dir() / f"{digest.hexdigest()[:32]}.json"
+
+
 def _plain_known(text: "KnowledgeText") -> dict[str, Any] | None:
     with _plain_lock:
         found = _plain.get(_plain_key(text))
     if found is None:
-        return None
+        found = _plain_read(text)
+        if found is None:
+            return None
+        with _plain_lock:
+            _plain_keep(text, found)
     inferred, types = found
     return {"inferred": [dict(t) for t in inferred], "types": [dict(t) for t in types]}
 
 
+def _plain_read(text: "KnowledgeText") -> tuple[list[dict[str, Any]], list[dict[str, str]]] | None:
+    """The disk copy, or None (missing, or unreadable: then it is reasoned again and rewritten)."""
+    try:
+        data = json.loads(_plain_file(text).read_text(encoding="utf-8"))
+        return list(data["inferred"]), list(data["types"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def _plain_remember(text: "KnowledgeText", inferred: list[dict[str, Any]], types: list[dict[str, str]]) -> None:
     with _plain_lock:
-        _plain[_plain_key(text)] = ([dict(t) for t in inferred], [dict(t) for t in types])
-        while len(_plain) > _PLAIN_KEEP:
-            _plain.pop(next(iter(_plain)))
+        _plain_keep(text, (inferred, types))
+    _plain_write(text, inferred, types)
+
+
+def _plain_keep(text: "KnowledgeText", found: tuple[list[dict[str, Any]], list[dict[str, str]]]) -> None:
+    """Into the in-process copies (caller holds ``_plain_lock``)."""
+    inferred, types = found
+    _plain[_plain_key(text)] = ([dict(t) for t in inferred], [dict(t) for t in types])
+    while len(_plain) > _PLAIN_KEEP:
+        _plain.pop(next(iter(_plain)))
+
+
+def _plain_write(text: "KnowledgeText", inferred: list[dict[str, Any]], types: list[dict[str, str]]) -> None:
+    """Write the disk copy whole (a temporary file renamed over it: readers in other processes
+    never see half of one) and keep the newest few. Best effort: a read-only home only loses time."""
+    target = _plain_file(text)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile("w", encoding="utf-8", dir=target.parent, suffix=".tmp",
+                                         delete=False) as out:
+            json.dump({"inferred": inferred, "types": types}, out)
+        os.replace(out.name, target)
+        kept = sorted(target.parent.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+        for old in kept[_PLAIN_FILES_KEPT:]:
+            old.unlink(missing_ok=True)
+    except OSError as exc:
+        log.debug("the reasoner's answer was not kept on disk: %s", exc)
 
 
 class ReasonerError(ValueError):

@@ -199,3 +199,22 @@ def test_jvm_options_come_from_the_environment_split_like_a_shell(monkeypatch):
     assert load_settings().jvm.extra_options == ["-XX:NativeMemoryTracking=summary", "-Dprinteps.note=two words"]
     monkeypatch.delenv("PRINTEPS_JVM_OPTIONS")
     assert load_settings().jvm.extra_options == []
+
+
+def test_the_start_up_warm_up_is_a_setting_the_suite_turns_off_for_its_processes(monkeypatch, mongo, tmp_path):
+    """`serve` warms the JIT up at start (engine.process_warm_up); the gateway processes the tests
+    start skip it through PRINTEPS_PROCESS_WARM_UP=0 (tests/conftest.py): ~2 CPU-s and ~7 s of
+    shutdown each."""
+    from gw_testing import built_gateway
+
+    monkeypatch.setenv("PRINTEPS_PROCESS_WARM_UP", "0")
+    off = load_settings()
+    assert off.engine.process_warm_up is False
+    monkeypatch.delenv("PRINTEPS_PROCESS_WARM_UP")
+    assert load_settings().engine.process_warm_up is True
+    for settings, warms in ((off, False), (load_settings(), True)):
+        settings.data_dir = str(tmp_path / f"d{warms}")
+        settings.engine.rules_dir = str(tmp_path / "no-rules")
+        settings.streams.queries_dir = None
+        with built_gateway(settings, mongo, tmp_path / f"s{warms}", warm_up=True) as gateway:
+            assert (gateway.engine._warm_up._thread is not None) is warms

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -131,3 +132,36 @@ def test_post_reason_endpoint(files, mongo, tmp_path):
         assert r.status_code == 422 and r.json()["where"] == "body"
         r = client.post("/api/reason", json={"individuals": [{"id": "x", "types": ["Nope"]}]})
         assert r.status_code == 422 and r.json()["where"] == "individuals[0].types[0]"
+
+
+def test_what_the_texts_alone_infer_is_kept_on_disk_for_the_next_process(files, tmp_path, monkeypatch):
+    """A process starting on texts another process has reasoned over reads the answer from the
+    cache folder instead of running Pellet (~3 CPU-s of every gateway start); a damaged copy is
+    reasoned again and rewritten, and other texts are not answered from it."""
+    from gateway.ontology import reasoner as module
+
+    monkeypatch.setenv("PRINTEPS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(module, "_plain", {})
+    onto, swrl = files
+    first = Reasoner.from_files(onto, swrl).reason(None)
+    assert first["inferred"], "the teahouse ontology infers something on its own"
+    (copy,) = (tmp_path / "cache" / "reasoner").glob("*.json")
+
+    pellet_runs: list[int] = []
+    real_pellet = Reasoner._pellet
+    monkeypatch.setattr(Reasoner, "_pellet", lambda self, *a: pellet_runs.append(1) or real_pellet(self, *a))
+    monkeypatch.setattr(module, "_plain", {})  # as a new process
+    again = Reasoner.from_files(onto, swrl).reason(None)
+    assert (again["inferred"], again["types"], pellet_runs) == (first["inferred"], first["types"], [])
+
+    copy.write_text("{not json")
+    monkeypatch.setattr(module, "_plain", {})
+    damaged = Reasoner.from_files(onto, swrl).reason(None)
+    assert (damaged["inferred"], damaged["types"], pellet_runs) == (first["inferred"], first["types"], [1])
+    assert json.loads(copy.read_text())["inferred"] == first["inferred"]
+
+    swrl.write_text("")  # other texts (no SWRL rules: fewer inferences) are reasoned over and kept apart
+    monkeypatch.setattr(module, "_plain", {})
+    other = Reasoner.from_files(onto, swrl).reason(None)
+    assert pellet_runs == [1, 1] and other["inferred"] != first["inferred"]
+    assert len(list((tmp_path / "cache" / "reasoner").glob("*.json"))) == 2
