@@ -46,7 +46,8 @@ class DecisionRecorder:
     ``notify`` tells the engine's listeners (``"fire"``, the document); ``heard()`` says whether
     any listens to decisions: with nothing journalled and nobody listening (an engine of its own,
     or ``store.record_fires`` off without a live feed), a decision gets its id and no document is
-    built, which was a fifth of the Python side of an in-process fire. ``enabled`` is
+    built (the document, its time stamp and the notification were most of the recording's cost:
+    about 15 of 20 us per decision). ``enabled`` is
     ``store.record_fires`` (off: nothing is journalled, listeners still hear); ``max_facts`` is
     ``store.decision_facts_max`` (the facts kept per decision; their count is always kept)."""
 

@@ -76,7 +76,7 @@ class Journal:
 
 
 def test_a_decision_nobody_journals_or_hears_gets_its_id_and_no_document() -> None:
-    """Why: building the document was a fifth of an in-process fire's Python side, for nobody."""
+    """Why: building the document was most of the recording's cost on every in-process fire, for nobody."""
     heard: list[dict[str, Any]] = []
     listening = [False]
     rec = DecisionRecorder(lambda kind, doc: heard.append(doc), heard=lambda: listening[0])
