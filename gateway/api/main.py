@@ -63,7 +63,7 @@ def create_app(gateway: Any, api: ApiSettings | None = None) -> FastAPI:
     app.state.metrics.watch_bulkheads(app.state.bulkheads.stats, settings.api.max_queue)
     app.state.stream_posts = threading.BoundedSemaphore(settings.streams.max_pending_posts)
     app.state.rejected_stream_posts = 0
-    gateway.engine.add_listener(app.state.metrics.on_engine_event)
+    gateway.engine.add_listener(app.state.metrics.on_engine_event, fires=False)  # it counts deploys, not decisions
     install_error_handlers(app)
     # the hot routes first, so they are matched before any other (see gateway.api.lean_route)
     app.router.routes[0:0] = [rulesets.FIRE_ROUTE, kie_server.BATCH_ROUTE]
