@@ -76,7 +76,9 @@ def parse_json(raw: bytes, max_depth: int) -> Any:
         raise BadBody(
             f"the request body is not valid JSON: {exc.msg}", line=exc.lineno, column=exc.colno
         ) from None
-    if not json_depth_ok(value, max_depth):
+    # A body with no more container openers than the limit cannot nest deeper (brackets inside
+    # strings only make the count larger): two C-speed counts spare the walk on nearly every request.
+    if raw.count(b"[") + raw.count(b"{") > max_depth and not json_depth_ok(value, max_depth):
         raise BadBody(f"the request body nests deeper than {max_depth} levels")
     return value
 

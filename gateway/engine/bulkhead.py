@@ -14,16 +14,19 @@ refused when its turn comes instead of running late (``waited``, 503). Both carr
 ``Retry-After``. Nothing refused has been fired, so nothing is lost: the caller retries.
 
 The hand-off is the cheapest measured (docs/benchmarks.md): a C ``SimpleQueue`` the workers block
-on, and for an asyncio caller one ``call_soon_threadsafe`` back to the loop.
+on, and for an asyncio caller the answers handed back to the loop in batches (one
+``call_soon_threadsafe`` for the answers that finish while the loop is busy, :class:`_Inbox`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import math
 import queue
 import threading
 import time
+import weakref
 from typing import Any, Callable
 
 from gateway.engine.errors import Overloaded
@@ -75,9 +78,10 @@ class Bulkhead:
         """``fn()``'s result, computed on a worker while the event loop goes on."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
+        inbox = _inbox_of(loop)
 
         def done(result: Any, error: BaseException | None) -> None:
-            loop.call_soon_threadsafe(_settle, future, result, error)
+            inbox.deliver(future, result, error)
 
         self.submit(fn, done)
         return await future
@@ -138,6 +142,48 @@ class Bulkhead:
         with self._lock:
             return {"waiting": self.waiting, "running": self.running, "threads": self.threads,
                     "mean_fire_ms": round(self.mean_s * 1000, 3), "refused": dict(self.refused)}
+
+
+class _Inbox:
+    """The answers of every bulkhead for one event loop, settled there in batches.
+
+    Why: each ``call_soon_threadsafe`` writes to the loop's wake-up pipe (a system call, and a
+    wake-up the loop reads back). Answers that finish while a drain is already scheduled join it,
+    so a busy loop is woken once for them all instead of once per fire."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._answers: collections.deque[tuple[asyncio.Future[Any], Any, BaseException | None]] = collections.deque()
+        self._scheduled = False
+
+    def deliver(self, future: asyncio.Future[Any], result: Any, error: BaseException | None) -> None:
+        """From a worker: settle ``future`` on the loop (raises RuntimeError once the loop closed)."""
+        self._answers.append((future, result, error))
+        if not self._scheduled:  # two workers may both schedule a drain: the second finds it done
+            self._scheduled = True
+            try:
+                self._loop.call_soon_threadsafe(self._drain)
+            except RuntimeError:
+                self._scheduled = False
+                raise
+
+    def _drain(self) -> None:
+        self._scheduled = False  # first: an answer added from now on schedules the next drain
+        answers = self._answers
+        while answers:
+            _settle(*answers.popleft())
+
+
+_inboxes: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Inbox] = weakref.WeakKeyDictionary()
+_inboxes_lock = threading.Lock()
+
+
+def _inbox_of(loop: asyncio.AbstractEventLoop) -> _Inbox:
+    found = _inboxes.get(loop)
+    if found is None:
+        with _inboxes_lock:
+            found = _inboxes.setdefault(loop, _Inbox(loop))
+    return found
 
 
 def _settle(future: asyncio.Future[Any], result: Any, error: BaseException | None) -> None:

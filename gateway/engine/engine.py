@@ -102,6 +102,7 @@ class Engine(CatalogLifecycle):
         jvm.configure(self.settings.jvm)
         self._live: dict[str, LiveRuleSet] = {}
         self._listeners: list[Listener] = []
+        self._fire_listeners: list[Listener] = []  # those of _listeners that hear decisions ("fire")
         self._declared: OrderedDict[str, kmodule.Declarations] = OrderedDict()  # compiled hash -> its sessions
         self._recent = warmup.RecentRequests()  # each rule set's last requests' facts (warm-up samples)
         self._unchanged: OrderedDict[tuple[str, int, int], list[str]] = OrderedDict()
@@ -111,19 +112,24 @@ class Engine(CatalogLifecycle):
         self._warm_up = warmup.ProcessWarmUp(self)
         self.session_manager = SessionManager(self, self.settings.sessions)
         self._fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)
-        self.add_listener(self.session_manager.on_engine_event)  # sessions follow deploys (their policy)
+        # sessions follow deploys (their policy); decisions are nothing to them
+        self.add_listener(self.session_manager.on_engine_event, fires=False)
         store = self.settings.store  # every decision, from every origin, is recorded by this one recorder
-        self.recorder = DecisionRecorder(self._notify, enabled=store.record_fires, max_facts=store.decision_facts_max)
+        self.recorder = DecisionRecorder(self._notify, enabled=store.record_fires, max_facts=store.decision_facts_max,
+                                         heard=lambda: bool(self._fire_listeners))
 
     # ------------------------------------------------------------------ events
 
-    def add_listener(self, listener: Listener) -> None:
-        """``listener(kind, payload)`` for "deploy", "rollback", "delete", "sync", and "fire" (its payload
-        the recorded decision's document, see gateway.engine.recorder); errors are logged."""
+    def add_listener(self, listener: Listener, *, fires: bool = True) -> None:
+        """``listener(kind, payload)`` for "deploy", "rollback", "delete", "sync", and, unless ``fires``
+        is False, "fire" (its payload the recorded decision's document, see gateway.engine.recorder);
+        errors are logged. Why ``fires``: a decision nobody journals or hears is not built at all."""
         self._listeners.append(listener)
+        if fires:
+            self._fire_listeners.append(listener)
 
     def _notify(self, kind: str, payload: dict[str, Any]) -> None:
-        for listener in list(self._listeners):
+        for listener in list(self._fire_listeners if kind == "fire" else self._listeners):
             try:
                 listener(kind, payload)
             except Exception:  # a broken listener must not break firing

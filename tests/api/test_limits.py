@@ -75,3 +75,18 @@ def test_garbage_on_the_socket_does_not_kill_the_server(http, live_server):
         except OSError:
             pass
     _still_up(http)
+
+
+def test_the_depth_limit_holds_at_its_edge_with_or_without_the_walk():
+    """parse_json skips the depth walk when the body has no more '[' and '{' than the limit; at the
+    limit a body passes, one level more is refused, and brackets inside strings change neither."""
+    from gateway.api.jsonio import BadBody, parse_json
+
+    def nested(levels: int, text: str = "x") -> bytes:
+        return ("[" * (levels - 1) + '{"a": "' + text + '"}' + "]" * (levels - 1)).encode()
+
+    assert parse_json(nested(8), 8) is not None  # 8 openers: no walk
+    assert parse_json(nested(8, "[[[[{{{{"), 8) is not None  # 16 openers, 8 levels: the walk says yes
+    for body in (nested(9), nested(9, "[[[[")):
+        with pytest.raises(BadBody, match="deeper than 8 levels"):
+            parse_json(body, 8)

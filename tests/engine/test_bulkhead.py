@@ -65,3 +65,34 @@ def test_idle_threads_go_away():
     done.clear()
     bulkhead.submit(lambda: None, lambda r, e: done.set())  # a new thread starts on demand
     assert done.wait(10)
+
+
+def test_answers_that_finish_while_the_loop_is_busy_wake_it_once():
+    """The hand-back is batched: three fires finishing while the loop is busy cost one
+    call_soon_threadsafe (one write to the loop's wake-up pipe), and each caller gets its own answer."""
+    import asyncio
+
+    from gateway.engine import bulkhead as module
+
+    bulkhead = Bulkhead("set", workers=3, max_queue=8, max_wait_s=60)
+    gate = threading.Barrier(3)
+
+    async def main() -> tuple[list[object], int]:
+        loop = asyncio.get_running_loop()
+        wakes: list[object] = []
+        real = loop.call_soon_threadsafe
+
+        def counted(callback, *args, **kwargs):  # type: ignore[no-untyped-def]
+            wakes.append(callback)
+            return real(callback, *args, **kwargs)
+
+        loop.call_soon_threadsafe = counted  # type: ignore[method-assign]
+        tasks = [asyncio.ensure_future(bulkhead.run(lambda k=k: (gate.wait(10), k)[1])) for k in range(3)]
+        await asyncio.sleep(0)  # the three are submitted; the loop now stays busy until all three answered
+        inbox = module._inbox_of(loop)
+        assert wait_for(lambda: len(inbox._answers) == 3, 10)
+        answers = await asyncio.gather(*tasks)
+        return answers, len(wakes)
+
+    answers, wakes = run_async(main())
+    assert answers == [0, 1, 2] and wakes == 1

@@ -131,7 +131,7 @@ def test_reused_sessions_fire_agenda_groups_in_the_order_of_fresh_ones(options):
     rules = BusinessRules(1, 300, regions=6, segments=3, purposes=3, domains=3)
     assert sum(r.attribute == "agenda-group" for r in rules.rules()) >= 10
     compiled = compiler.compile_files(rules.drl_files(), "groups", options)
-    assert compiled.runner.reusesSessions()
+    assert compiled.runner.reusesSessions() and compiled.runner.settlesDeletions()
     runner_class = jvm.helper_class("Runner")
     for k in range(80):
         facts = encode_facts(rules.facts(k, applicants=4, loans=6), 10_000)

@@ -270,6 +270,8 @@ def test_rule_and_query_definitions_are_read_as_the_engine_expects(seam, module_
         "hasCalendarAttributes", "rules are RuleImpls with date-effective/date-expires")
     assert [bool(seam.matchesOnlyFromFacts(r)) for r in rule.values()] == [True, False, True, True], broken(
         "matchesOnlyFromFacts", "rules are RuleImpls whose LHS opens with a Pattern (not/exists start from InitialFact)")
+    assert [bool(seam.movesFocus(r)) for r in rule.values()] == [False, False, True, False], broken(
+        "movesFocus", "rules are RuleImpls whose agenda group is MAIN unless declared")
     query = next(q for q in kbase.getKiePackage(PACKAGE).getQueries() if str(q.getName()) == "olderThan")
     assert [str(t.getName()) for t in seam.queryParameterTypes(query)] == ["int"], broken(
         "queryParameterTypes", "queries are QueryImpls whose parameters are typed Declarations")

@@ -375,11 +375,13 @@ def test_rules_dir_only_seeds_what_the_catalog_never_had(tmp_path, simple_files)
 
 def test_listener_sees_deploys_and_fires(engine, simple_files):
     seen: list[str] = []
+    deaf: list[str] = []  # a listener to the life cycle only (as the session manager): decisions pass it by
+    engine.add_listener(lambda kind, payload: deaf.append(kind), fires=False)
     engine.add_listener(lambda kind, payload: seen.append(kind))
     engine.add_listener(lambda kind, payload: 1 / 0)  # a broken listener does not break firing
     engine.deploy("t", simple_files)
     engine.fire("t", FIVE_FACTS)
-    assert seen == ["deploy", "fire"]
+    assert seen == ["deploy", "fire"] and deaf == ["deploy"]
 
 
 def test_the_process_warm_up_fires_the_live_sets_and_records_no_decision(engine, simple_files):

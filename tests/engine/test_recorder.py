@@ -59,3 +59,39 @@ def test_a_kie_batch_is_all_its_fires_and_no_fire_is_no_decision() -> None:
     assert doc["decision_id"] == decision_id
     assert (doc["fired"], doc["fire_count"], doc["duration_ms"]) == (["x", "y", "z"], 3, 1.5)
     assert doc["actions"] == [{"module": "a"}, {"module": "b"}]
+
+
+class Journal:
+    """A stand-in for the Information State's decision record: what the recorder hands it."""
+
+    def __init__(self) -> None:
+        self.kept: list[dict[str, Any]] = []
+        self.store = self
+
+    def remember(self, doc: dict[str, Any]) -> None:
+        self.kept.append(doc)
+
+    def record(self, collection: str, doc: dict[str, Any], **_: Any) -> None:
+        assert collection == "decisions" and doc is self.kept[-1]
+
+
+def test_a_decision_nobody_journals_or_hears_gets_its_id_and_no_document() -> None:
+    """Why: building the document was most of the recording's cost on every in-process fire, for nobody."""
+    heard: list[dict[str, Any]] = []
+    listening = [False]
+    rec = DecisionRecorder(lambda kind, doc: heard.append(doc), heard=lambda: listening[0])
+    built: list[str] = []
+    document = rec.document
+    rec.document = lambda decision_id, *rest: built.append(decision_id) or document(decision_id, *rest)  # type: ignore[method-assign]
+    result = FireResult("r", 1, [], [{"rule": "a"}], fire_count=1, duration_ms=0.1)
+    decision_id = rec.record(result, [{"type": "T"}], origin="api")
+    assert ObjectId.is_valid(decision_id) and result.decision_id == decision_id
+    assert built == [] and heard == []
+    journal = Journal()
+    rec.journal_to(journal)  # type: ignore[arg-type]
+    journalled = rec.record(result, [{"type": "T"}], origin="api")
+    assert built == [journalled] and [d["_id"] for d in journal.kept] == [journalled]
+    rec.enabled = False  # store.record_fires off: nothing journalled; a listener still hears
+    listening[0] = True
+    live = rec.record(result, [{"type": "T"}], origin="api")
+    assert built == [journalled, live] and heard[-1]["_id"] == live and len(journal.kept) == 1

@@ -311,3 +311,23 @@ def test_a_trace_reads_its_decisions_through_the_correlation_index(store: Inform
     stats = plan["executionStats"]
     assert stats["totalKeysExamined"] == stats["totalDocsExamined"] == len(expected), plan["queryPlanner"]
     assert "COLLSCAN" not in str(plan["queryPlanner"]["winningPlan"])
+
+
+def test_a_decision_s_at_stamp_is_at_text_of_the_same_instant():
+    """The recorder's cheap stamp (at_text_ns, the second's text kept between calls) writes what
+    at_text writes for the same instant: milliseconds rounded up, a second's carry, any order."""
+    import random
+    from datetime import datetime, timedelta, timezone
+
+    from gateway.store.decisions import at_text, at_text_ns, now_text
+
+    epoch = datetime(1970, 1, 1, tzinfo=timezone.utc)
+    base = 1_795_000_000 * 10**9
+    edges = [0, 1, 999, 1_000, 1_001, 999_999, 1_000_000, 1_000_001, 999_000_000, 999_000_001, 999_999_999]
+    instants = [base + e for e in edges] + [base + random.Random(7).randrange(10**12) for _ in range(2000)]
+    random.Random(8).shuffle(instants)  # the kept second changes back and forth
+    for ns in instants:
+        assert at_text_ns(ns) == at_text(epoch + timedelta(microseconds=ns // 1000)), ns
+    before = at_text(datetime.now(timezone.utc) - timedelta(milliseconds=1))
+    stamp = now_text()
+    assert before <= stamp <= at_text(datetime.now(timezone.utc))

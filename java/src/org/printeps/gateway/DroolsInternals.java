@@ -296,6 +296,20 @@ public final class DroolsInternals {
     }
 
     /**
+     * Whether a rule can move the agenda's focus: it sits in an agenda group other than MAIN or has
+     * auto-focus. Only such rules make the order of propagations matter for which group fires
+     * first, so {@code Runner.giveBack} settles an emptied session's deletions only for a rule base
+     * with one of them. Assumes: rules are {@code RuleImpl}s (another kind: true, the safe answer)
+     * whose {@code getAgendaGroup()} is {@code "MAIN"} (or empty) when none is declared.
+     */
+    public static boolean movesFocus(Rule r) {
+        if (!(r instanceof RuleImpl)) return true;
+        RuleImpl rule = (RuleImpl) r;
+        String group = rule.getAgendaGroup();
+        return rule.getAutoFocus() || (group != null && !group.isEmpty() && !"MAIN".equals(group));
+    }
+
+    /**
      * Whether nothing of a rule survives deleting every fact of a session (see
      * {@code Runner.reusable}): a query, or a rule without timer or rule-flow group, whose
      * condition is an AND that opens with a plain pattern on a class (not {@code from}, not the
