@@ -744,3 +744,105 @@ def test_a_no_loop_rules_own_modify_does_not_fire_its_fired_match_again_after_a_
         assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
     assert said[False] == ["Bump o1", "Bump o2"]
     assert said[True] == said[False]
+
+
+def _twin_firings(rs, gateway, name: str, facts: list[dict], before: list[list[dict]],
+                  after: list[list[dict]]) -> tuple[list[str], list[str]]:
+    """``_twins`` for any ruleset ``name`` and first facts: what ``after``'s batches say in a session
+    never rebuilt and in its twin, snapshotted after ``before`` and rebuilt from that snapshot plus
+    ``after[0]`` replayed. ``"$h<i>"`` in a command stands for the handle of ``facts[i]``."""
+    manager = gateway.engine.session_manager
+    said = []
+    for rebuilt in (False, True):
+        sid = rs.post(f"/api/rulesets/{name}/sessions", json={}).json()["id"]
+        manager.find(name, sid).durability.every = 1 if rebuilt else 1_000_000
+        handles = manager.get(name, sid).execute([{"op": "insert", "facts": facts}]).results[0]["handles"]
+
+        def run(batch: list[dict]) -> list[str]:
+            commands = [{**c, "handle": handles[int(c["handle"][2:])]} if str(c.get("handle", "")).startswith("$h")
+                        else c for c in batch]
+            return [a["params"]["text"] for a in manager.get(name, sid).execute(commands).actions()]
+
+        for batch in before:
+            run(batch)
+        if rebuilt:
+            assert manager.find(name, sid).durability.commands_since_snapshot == 0
+            manager.find(name, sid).durability.every = 1_000_000
+            run(after[0])
+            _crash(gateway, sid, name)
+            manager.get(name, sid)  # rebuilt: the snapshot restored, after[0] replayed
+            assert manager.find(name, sid).durability.commands_since_snapshot == 1
+            said.append([text for batch in after[1:] for text in run(batch)])
+        else:
+            said.append([text for batch in after for text in run(batch)])
+        assert rs.delete(f"/api/rulesets/{name}/sessions/{sid}").status_code == 200
+    return said[0], said[1]
+
+
+LOCK_RULES = """package org.printeps.apitest;
+
+import org.printeps.gateway.Actions;
+
+global Actions actions;
+
+rule "Lock" lock-on-active agenda-group "g" salience 10
+when
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Lock " + $o.getId());
+end
+
+rule "Wait" agenda-group "g"
+when
+    $o : Order( status == "open" )
+then
+    actions.say("pepper", "Wait " + $o.getId());
+end
+"""
+ORDER = {"type": "Order", "id": "o1", "status": "open", "note": ""}
+WATCHED_0 = [{"op": "modify", "handle": "$h0", "set": [["status", "open"]]}]
+LATER_G = [{"op": "set_focus", "group": "g"}, {"op": "fire", "max": -1}]
+
+
+def test_a_lock_on_active_rules_fired_match_reached_while_its_group_is_active_stays_fired_after_a_rebuild(rs, api_gateway):
+    """Issue 28: "Lock" (lock-on-active) fired in "g" by a ``max: 1`` fire, "Wait" still pending
+    there, so "g" stays active; a modify of ``status`` (which "Lock" listens to) then reaches the
+    fired match. Drools discards a lock-on-active rule's re-activation while its group is active:
+    the session never rebuilt fires "Wait" alone, and so does its rebuilt twin."""
+    made = rs.put("/api/rulesets/lockactive", json={"files": {"types.drl": REACTIVE_TYPES, "rules.drl": LOCK_RULES}})
+    assert made.status_code == 201, made.text
+    kept, rebuilt = _twin_firings(rs, api_gateway, "lockactive", [ORDER],
+                                  [[{"op": "set_focus", "group": "g"}, {"op": "fire", "max": 1}]],
+                                  [WATCHED_0, FIRE_ALL, LATER_G])
+    assert kept == ["Wait o1"]
+    assert rebuilt == kept
+
+
+def test_a_no_loop_rules_fired_match_reached_by_another_commands_modify_then_its_own_fires_as_if_never_rebuilt(rs, api_gateway):
+    """Issue 28: "Bump o1" (no-loop) fired, "Bump o2" waits; another command's modify of the
+    counter re-activates "Bump o1", then "Bump o2" fires first (its salience) and its own modify,
+    the rule's own, reaches "Bump o1" before it fires: Drools updates the waiting match without
+    taking it off the agenda, so it fires again. The rebuilt twin, whose match shows only that last
+    (no-loop) update, must still know the other modify put it on the agenda: it fires it too."""
+    made = rs.put("/api/rulesets/noloop2", json={"files": {"rules.drl": NO_LOOP_RULES}})
+    assert made.status_code == 201, made.text
+    kept, rebuilt = _twin_firings(rs, api_gateway, "noloop2",
+                                  [{"type": "Job", "id": "o1", "rank": 0}, {"type": "Counter", "n": 0}],
+                                  [[{"op": "fire", "max": -1}], [{"op": "insert", "facts": [{"type": "Job", "id": "o2", "rank": 10}]}]],
+                                  [[{"op": "modify", "handle": "$h1", "set": [["n", 5]]}], FIRE_ALL])
+    assert kept == ["Bump o2", "Bump o1"]
+    assert rebuilt == kept
+
+
+def test_a_lock_on_active_rules_pending_match_reached_while_its_group_is_active_still_fires_after_a_rebuild(rs, api_gateway):
+    """The other side of the test above: two orders, one "Lock" fired, the other's still pending
+    when the modifies of both come while "g" is active. Drools discards the fired one's
+    re-activation but leaves the pending one on the agenda; so does the rebuilt twin."""
+    made = rs.put("/api/rulesets/lockactive2", json={"files": {"types.drl": REACTIVE_TYPES, "rules.drl": LOCK_RULES}})
+    assert made.status_code == 201, made.text
+    both = [{"op": "modify", "handle": f"$h{k}", "set": [["status", "open"]]} for k in (0, 1)]
+    kept, rebuilt = _twin_firings(rs, api_gateway, "lockactive2", [ORDER, {**ORDER, "id": "o2"}],
+                                  [[{"op": "set_focus", "group": "g"}, {"op": "fire", "max": 1}]],
+                                  [both, FIRE_ALL, LATER_G])
+    assert sorted(kept) in (["Lock o1", "Wait o1", "Wait o2"], ["Lock o2", "Wait o1", "Wait o2"])
+    assert rebuilt == kept

@@ -99,6 +99,15 @@ when
 then
 end
 
+rule "locked"
+    agenda-group "g"
+    lock-on-active
+    salience 10
+when
+    Customer(tier == "locked")
+then
+end
+
 rule "on a calendar"
     date-effective "1-Jan-2020"
 when
@@ -336,6 +345,44 @@ def test_the_focus_stack_is_read_whole_bottom_to_top_with_queued_pushes_applied(
         assert stack()[-2:] == ["MAIN", "g"], broken("focusStack", "a push of the group on top changes nothing")
         assert int(session.fireAllRules()) == 1  # no fact: "from the initial fact" alone, in MAIN; a fire pops the empty groups
         assert stack() == ["MAIN"], broken("focusStack", "a fire pops the empty groups off the stack")
+    finally:
+        session.dispose()
+
+
+def test_the_applied_focus_stack_tells_which_group_is_active_for_lock_on_active_rules(seam, module_kbase):
+    """What a durable snapshot keeps so that Refraction drops, after a rebuild, the re-activations
+    of fired lock-on-active matches that Drools discards while their group is active: which groups
+    of the stack Drools has applied are active (a queued push not applied by this read), and which
+    group a lock-on-active rule is in; and the Drools behaviour it mirrors: while the group is
+    active, a modify the rule listens to does not re-activate its fired match."""
+    kbase, _, _ = module_kbase
+    session = kbase.newKieSession()
+    try:
+        applied = lambda: [str(g) for g in seam.appliedFocusStack(session)]  # noqa: E731
+        assert str(seam.lockOnActiveGroup(kbase.getRule(PACKAGE, "locked"))) == "g", broken(
+            "lockOnActiveGroup", "rules are RuleImpls telling isLockOnActive and getAgendaGroup")
+        assert seam.lockOnActiveGroup(kbase.getRule(PACKAGE, "in a group")) is None
+        customer_type = kbase.getFactType(PACKAGE, "Customer")
+        locked = customer_type.newInstance()
+        customer_type.set(locked, "id", "l1")
+        customer_type.set(locked, "tier", "locked")
+        handle = session.insert(locked)
+        session.getAgenda().getAgendaGroup("g").setFocus()
+        assert [g.rstrip("*") for g in applied()] == ["MAIN"], broken(
+            "appliedFocusStack", "setFocus() only queues its push: the StackedAgendaGroupsManager's focusStack lacks it")
+        assert int(session.fireAllRules(1)) == 1  # "locked" (salience 10); "in a group" still waits in "g"
+        assert applied() == ["MAIN", "g*"], broken(
+            "appliedFocusStack", "a push makes its group active (InternalAgendaGroup.isActive) and the one it covers "
+            f"inactive; a fire that stops inside the group leaves it active: {applied()}")
+        session.update(handle, locked, "tier")  # a property "locked" listens to, while "g" is active
+        fired = []
+        listener = jpype.JImplements("org.kie.api.runtime.rule.AgendaFilter")(type("Note", (), {
+            "accept": jpype.JOverride(lambda self, match: fired.append(str(match.getRule().getName())) or True)}))()
+        session.fireAllRules(listener)
+        assert "in a group" in fired and "locked" not in fired, broken(
+            "appliedFocusStack", "Drools discards a lock-on-active rule's re-activation while its group is active "
+            f"(what Refraction mirrors after a rebuild): {fired}")
+        assert applied() == ["MAIN"], broken("appliedFocusStack", "a fire pops the emptied group")
     finally:
         session.dispose()
 

@@ -39,6 +39,8 @@ final class Carry {
         long now;
         /** The agenda-group focus stack, bottom (MAIN) to top (the focus); see {@link DroolsInternals#focusStack}. */
         List<String> stack = Collections.singletonList("MAIN");
+        /** The snapshot's {@code applied} stack ("name", "name*" when active; see {@link DroolsInternals#appliedFocusStack}), or null (an older snapshot). */
+        List<String> applied;
         /** The handle texts clients hold per fact (restore), in the order of {@link #built}. */
         final List<Object> keys = new ArrayList<Object>();
         /** The snapshot's pending matches (a list of keys), or null: every match had fired. */
@@ -112,6 +114,28 @@ final class Carry {
             if (k == 0 && "MAIN".equals(group)) continue;
             ks.getAgenda().getAgendaGroup(group).setFocus();
         }
+    }
+
+    /**
+     * A snapshot's {@code applied} stack if it is the start of its whole {@code stack} (queued
+     * pushes only add on top), else null: the groups' active state then is not restored.
+     */
+    private static List<String> savedApplied(Map<?, ?> snap, List<String> stack) {
+        if (!(snap.get("applied") instanceof List)) return null;
+        List<String> out = new ArrayList<String>();
+        for (Object group : (List<?>) snap.get("applied")) out.add(String.valueOf(group));
+        if (out.isEmpty() || out.size() > stack.size()) return null;
+        for (int k = 0; k < out.size(); k++) if (!stack.get(k).equals(bare(out.get(k)))) return null;
+        return out;
+    }
+
+    private static String bare(String group) { return group.endsWith("*") ? group.substring(0, group.length() - 1) : group; }
+
+    /** The groups a snapshot's {@code applied} stack marks active (none for an older snapshot). */
+    private static Set<String> activeGroups(Plan plan) {
+        Set<String> out = new HashSet<String>();
+        if (plan.applied != null) for (String group : plan.applied) if (group.endsWith("*")) out.add(bare(group));
+        return out;
     }
 
     /**
@@ -270,7 +294,8 @@ final class Carry {
         // what had fired: the new version's first agenda over the facts that came across, minus the pending
         Map<String, Integer> fired = probe(into, plan, unchangedRules, plan.restored, places);
         Refraction.subtract(fired, pending);
-        into.refraction = new Refraction(unchangedRules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session));
+        into.refraction = new Refraction(unchangedRules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session))
+                .attach(into.session);
         setFocusStack(into.session, plan.stack);
         return "{\"ok\":true,\"facts\":" + count + "}";
     }
@@ -289,7 +314,9 @@ final class Carry {
         if (s.disposed) return problem("the session is disposed");
         TypeRegistry types = s.runner.types();
         List<String> stack;
+        List<String> applied;
         try {
+            applied = DroolsInternals.appliedFocusStack(s.session);  // before focusStack runs the queued pushes
             stack = DroolsInternals.focusStack(s.session);  // first: a later walk of the agenda changes it
         } catch (RuntimeException e) {
             return problem("the agenda's focus stack cannot be read: " + Runner.rootMessage(e));
@@ -331,6 +358,8 @@ final class Carry {
         Json.quote(b, stack.get(stack.size() - 1));
         b.append(",\"stack\":");
         Json.write(b, stack, null);
+        b.append(",\"applied\":");
+        Json.write(b, applied, null);
         return b.append('}').toString();
     }
 
@@ -395,6 +424,7 @@ final class Carry {
         }
         plan.now = ((Number) snap.get("time")).longValue();
         plan.stack = savedStack(snap);
+        plan.applied = savedApplied(snap, plan.stack);
         plan.pending = snap.get("pending");
         answer.append("{\"ok\":true,\"facts\":").append(plan.built.size()).append('}');
         return plan;
@@ -477,7 +507,10 @@ final class Carry {
             Map<String, Integer> still = Refraction.emptyKeys();
             for (Object key : waiting) Refraction.add(still, String.valueOf(key));
             Refraction.subtract(fired, still);
-            if (!fired.isEmpty()) into.refraction = new Refraction(rules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session));
+            if (!fired.isEmpty()) {
+                into.refraction = new Refraction(rules, fired, places, plan.handles, DroolsInternals.propagationMark(into.session))
+                        .locking(activeGroups(plan)).attach(into.session);
+            }
         }
         setFocusStack(into.session, plan.stack);
         into.recorder.reset();

@@ -200,6 +200,51 @@ public final class DroolsInternals {
         return out;
     }
 
+    /**
+     * The focus stack as Drools has applied it so far (bottom to top), the {@code setFocus()} calls
+     * still queued <em>not</em> run (unlike {@link #focusStack}), each group with whether it is
+     * <em>active</em>: a group turns active when a push or a fire gives it the focus and stays so
+     * until another push covers it or a fire pops it empty; while it is, Drools discards new
+     * matches of its {@code lock-on-active} rules (those a propagation made after it turned active).
+     * A durable session's snapshot keeps this, read before {@link #focusStack}, so that a rebuilt
+     * session's {@link Refraction} drops the same re-activations of fired matches. Returns "name"
+     * or "name*" (active) per group.
+     * Assumes what {@link #focusStack} does, and that its groups are {@code InternalAgendaGroup}s
+     * whose {@code isActive()} tells it; a {@code SimpleAgendaGroupsManager} gives its one group.
+     */
+    public static List<String> appliedFocusStack(KieSession session) {
+        InternalAgenda agenda = (InternalAgenda) session.getAgenda();
+        org.drools.core.common.AgendaGroupsManager groups = agenda.getAgendaGroupsManager();
+        List<String> out = new ArrayList<String>();
+        if (groups instanceof org.drools.core.common.AgendaGroupsManager.SimpleAgendaGroupsManager) {
+            org.drools.core.common.InternalAgendaGroup main = groups.getAgendaGroup(groups.getFocusName());
+            out.add(main.getName() + (main.isActive() ? "*" : ""));
+            return out;
+        }
+        Object stack;
+        try {
+            stack = focusStackField(groups.getClass()).get(groups);
+        } catch (ReflectiveOperationException | RuntimeException e) {
+            throw new IllegalStateException("Drools' agenda-groups manager " + groups.getClass().getName()
+                    + " has no readable focus stack (" + FOCUS_STACK_CLASS + "." + FOCUS_STACK_FIELD + "): " + e, e);
+        }
+        for (Object g : (Deque<?>) stack) {
+            org.drools.core.common.InternalAgendaGroup group = (org.drools.core.common.InternalAgendaGroup) g;
+            out.add(group.getName() + (group.isActive() ? "*" : ""));
+        }
+        return out;
+    }
+
+    /**
+     * The agenda group of a {@code lock-on-active} rule ({@code MAIN} when it names none), or null
+     * for a rule without it. Assumes: the public {@code Rule} is a {@code RuleImpl}.
+     */
+    public static String lockOnActiveGroup(Rule r) {
+        if (!(r instanceof RuleImpl) || !((RuleImpl) r).isLockOnActive()) return null;
+        String group = ((RuleImpl) r).getAgendaGroup();
+        return group == null || group.isEmpty() ? "MAIN" : group;
+    }
+
     private static java.lang.reflect.Field focusStackField(Class<?> manager) throws ReflectiveOperationException {
         java.lang.reflect.Field f = focusStackField;
         if (f != null && f.getDeclaringClass() == manager) return f;

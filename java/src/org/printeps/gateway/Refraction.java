@@ -5,6 +5,11 @@ import java.util.List;
 import java.util.Map;
 import java.util.Set;
 
+import org.kie.api.event.rule.AgendaGroupPoppedEvent;
+import org.kie.api.event.rule.DefaultAgendaEventListener;
+import org.kie.api.event.rule.MatchCancelledEvent;
+import org.kie.api.event.rule.MatchCreatedEvent;
+import org.kie.api.runtime.KieSession;
 import org.kie.api.runtime.rule.AgendaFilter;
 import org.kie.api.runtime.rule.FactHandle;
 import org.kie.api.runtime.rule.Match;
@@ -39,6 +44,77 @@ import org.kie.api.runtime.rule.Match;
  * never carried it is on the agenda too.
  */
 final class Refraction implements AgendaFilter {
+    /**
+     * The matches Drools put on the agenda (made, or re-activated after they fired) in a
+     * propagation since the carry ({@link DroolsInternals#lastReachedBy} at least the mark when it
+     * did), by identity: they fire, even if a later update from their own {@code no-loop} rule's
+     * consequence (which Drools applies to the match without taking it off the agenda) left them
+     * showing that update as their last. Kept by {@link #attach}'s listener until they fire or are
+     * cancelled.
+     */
+    private final Set<Object> reached = java.util.Collections.newSetFromMap(new java.util.IdentityHashMap<Object, Boolean>());
+    private KieSession attachedTo;
+    private final DefaultAgendaEventListener listener = new DefaultAgendaEventListener() {
+        @Override
+        public void matchCreated(MatchCreatedEvent event) {
+            Match match = event.getMatch();
+            if (unchangedRules.contains(match.getRule().getName()) && DroolsInternals.lastReachedBy(match) >= mark) reached.add(match);
+        }
+
+        @Override
+        public void matchCancelled(MatchCancelledEvent event) {
+            reached.remove(event.getMatch());
+        }
+
+        @Override
+        public void agendaGroupPopped(AgendaGroupPoppedEvent event) {
+            String group = event.getAgendaGroup().getName();
+            if (locked.contains(group)) poppedAt.putIfAbsent(group, DroolsInternals.propagationMark(attachedTo));
+        }
+    };
+
+    /**
+     * The agenda groups that were active (see {@link DroolsInternals#appliedFocusStack}) in the
+     * session a durable snapshot was taken of, and the propagation number at which each was first
+     * popped since. While such a group has not been popped, Drools in that session would discard a
+     * re-activation of a fired match of its {@code lock-on-active} rules; the rebuilt session's
+     * group is not active in that way (making it so would discard its pending matches too: they are
+     * only evaluated at its first fire, after the propagations), so this filter drops those.
+     * Only a pop ends it: a push of another group over it (which makes Drools deactivate it) does
+     * not here (the pushes that restore the stack would look the same) — not reproduced in a test.
+     */
+    private Set<String> locked = java.util.Collections.emptySet();
+    private final Map<String, Long> poppedAt = new HashMap<String, Long>();
+
+    /** See {@link #locked}. */
+    Refraction locking(Set<String> activeGroups) {
+        this.locked = activeGroups;
+        return this;
+    }
+
+    /** Whether a propagation numbered {@code n} reached a match of {@code rule} while its lock-on-active group was still locked. */
+    private boolean lockedOut(Match match, long n) {
+        if (locked.isEmpty()) return false;
+        String group = DroolsInternals.lockOnActiveGroup(match.getRule());
+        if (group == null || !locked.contains(group)) return false;
+        Long popped = poppedAt.get(group);
+        return popped == null || n < popped;
+    }
+
+    /** Listens to {@code session}'s agenda for the matches propagations since the carry put on it (see {@link #reached}). */
+    Refraction attach(KieSession session) {
+        session.addEventListener(listener);
+        attachedTo = session;
+        return this;
+    }
+
+    /** Stops listening (the session drops this filter). */
+    void detach() {
+        if (attachedTo != null) attachedTo.removeEventListener(listener);
+        attachedTo = null;
+        reached.clear();
+    }
+
     private final Set<String> unchangedRules;
     private final Map<String, Integer> fired;    // keys (a multiset: query rows can share one) of matches fired already
     private final Map<Object, Integer> places;   // a fact's place in the carried state (identity map)
@@ -104,7 +180,9 @@ final class Refraction implements AgendaFilter {
     public boolean accept(Match match) {
         String rule = match.getRule().getName();
         if (!unchangedRules.contains(rule)) return true;
-        if (DroolsInternals.lastReachedBy(match) >= mark) return true;  // made or re-activated since the carry
+        boolean put = reached.remove(match);  // put on the agenda by a propagation since the carry
+        long n = DroolsInternals.lastReachedBy(match);
+        if ((put || n >= mark) && !lockedOut(match, n)) return true;  // made or re-activated since the carry
         return !take(fired, carriedKey(rule, match.getFactHandles()));
     }
 

@@ -141,7 +141,10 @@ public final class Session {
      * the agenda of a rule base without agenda groups (no match it could still drop is left).
      */
     private void afterFire(boolean emptied) {
-        if (refraction != null && (refraction.spent() || (emptied && !hasAgendaGroups()))) refraction = null;
+        if (refraction != null && (refraction.spent() || (emptied && !hasAgendaGroups()))) {
+            refraction.detach();
+            refraction = null;
+        }
     }
 
     /** Inserts facts (a JSON list); facts with an "id" can later be updated or retracted by it. */
