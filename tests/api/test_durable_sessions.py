@@ -846,3 +846,18 @@ def test_a_lock_on_active_rules_pending_match_reached_while_its_group_is_active_
                                   [both, FIRE_ALL, LATER_G])
     assert sorted(kept) in (["Lock o1", "Wait o1", "Wait o2"], ["Lock o2", "Wait o1", "Wait o2"])
     assert rebuilt == kept
+
+
+def test_a_group_pushed_over_the_active_one_after_the_snapshot_lets_a_lock_on_active_match_fire_again(rs, api_gateway):
+    """Past the snapshot, ``set_focus h`` pushes "h" over the active "g", and Drools deactivates "g":
+    the modify that then reaches "Lock"'s fired match re-activates it (nothing locks it any more), so
+    when "h" is done and "g" fires again "Lock" fires again, in the session never rebuilt and in its
+    rebuilt twin (whose filter must stop dropping "g"'s lock-on-active re-activations at the push)."""
+    made = rs.put("/api/rulesets/lockactive3", json={"files": {"types.drl": REACTIVE_TYPES, "rules.drl": LOCK_RULES}})
+    assert made.status_code == 201, made.text
+    pushed = [{"op": "set_focus", "group": "h"}, *WATCHED_0]
+    kept, rebuilt = _twin_firings(rs, api_gateway, "lockactive3", [ORDER],
+                                  [[{"op": "set_focus", "group": "g"}, {"op": "fire", "max": 1}]],
+                                  [pushed, FIRE_ALL, LATER_G])
+    assert kept == ["Lock o1", "Wait o1"]
+    assert rebuilt == kept

@@ -464,7 +464,12 @@ final class Batch {
                 o.hasValue = true;
                 break;
             }
-            case "set_focus": ks.getAgenda().getAgendaGroup(String.valueOf(p.cmd.get("group"))).setFocus(); break;
+            case "set_focus": {
+                String group = String.valueOf(p.cmd.get("group"));
+                ks.getAgenda().getAgendaGroup(group).setFocus();
+                if (s.refraction != null) s.refraction.pushed(group);  // a push deactivates the group under it
+                break;
+            }
             case "clear_agenda_group": ks.getAgenda().getAgendaGroup(String.valueOf(p.cmd.get("group"))).clear(); break;
             case "clear_agenda": ks.getAgenda().clear(); break;
             case "clear_activation_group": ks.getAgenda().getActivationGroup(String.valueOf(p.cmd.get("group"))).clear(); break;

@@ -80,11 +80,23 @@ final class Refraction implements AgendaFilter {
      * re-activation of a fired match of its {@code lock-on-active} rules; the rebuilt session's
      * group is not active in that way (making it so would discard its pending matches too: they are
      * only evaluated at its first fire, after the propagations), so this filter drops those.
-     * Only a pop ends it: a push of another group over it (which makes Drools deactivate it) does
-     * not here (the pushes that restore the stack would look the same) — not reproduced in a test.
+     * A pop ends it, and so does a {@code set_focus} command of another group after the carry (see
+     * {@link #pushed}): Drools deactivates the group the push goes over. (The agenda's push events
+     * cannot tell: the pushes that restore the stack look the same.)
      */
     private Set<String> locked = java.util.Collections.emptySet();
     private final Map<String, Long> poppedAt = new HashMap<String, Long>();
+
+    /**
+     * A {@code set_focus} of {@code group} ran after the carry: every other group locked here is
+     * no longer active in a session never rebuilt either (Drools deactivates the focus a push goes
+     * over; a push of the focused group itself changes nothing), so its lock ends now.
+     */
+    void pushed(String group) {
+        for (String g : locked) {
+            if (!g.equals(group)) poppedAt.putIfAbsent(g, DroolsInternals.propagationMark(attachedTo));
+        }
+    }
 
     /** See {@link #locked}. */
     Refraction locking(Set<String> activeGroups) {
