@@ -122,6 +122,9 @@ class SessionManager:
         self.directory: Directory | None = None
         self.log: durable.SessionLog | None = None  # durable sessions' log (gateway.runtime.session_log)
         self._rebuilding: set[tuple[str, str]] = set()
+        # claimed here and being made (its record is ours, the session not registered yet): a call
+        # for it meanwhile must not take the record for a leftover and release it
+        self._opening: set[tuple[str, str]] = set()
         # Sessions this process disposed (or reaped), newest last, bounded: their tombstone may not
         # have reached the Information State yet, so without this the next lookup of a declared
         # ksession after a `dispose` would wait for the journal to catch up (a 503 under load)
@@ -189,6 +192,22 @@ class SessionManager:
         # claimed (and durable when sessions are): conversations, and a stream binding's session under
         # its stable id (binding_session); a stream session opened without an id (open_session) stays ours
         claims = kind in CONVERSATION_KINDS or (kind == STREAM_KIND and session_id is not None)
+        with self._lock:
+            self._opening.add((ruleset, sid))
+        try:
+            session = self._make(ruleset, sid, kind, clock, policy, record_facts, durable_, claims)
+            with self._lock:
+                self._sessions[(ruleset, sid)] = session
+                self._disposed_here.pop((ruleset, sid), None)
+        finally:
+            with self._lock:
+                self._opening.discard((ruleset, sid))
+        self._ensure_reaper()
+        return session
+
+    def _make(self, ruleset: str, sid: str, kind: str, clock: str, policy: str, record_facts: bool,
+              durable_: bool | None, claims: bool) -> StatefulSession:
+        """Claims (when the session is one that is) and makes a session; :meth:`open` registers it."""
         if self.directory is not None and claims:
             owner = self.directory.claim(ruleset, sid, {"kind": kind, "clock": clock, "on_deploy": policy})
             if owner.get("process") != self.directory.process:
@@ -206,10 +225,6 @@ class SessionManager:
             keep = self.settings.durable if durable_ is None else durable_
             if keep and self.log is not None:
                 self._make_durable(session, record_facts)
-        with self._lock:
-            self._sessions[(ruleset, sid)] = session
-            self._disposed_here.pop((ruleset, sid), None)
-        self._ensure_reaper()
         return session
 
     def _refuse_if_stored(self, ruleset: str, session_id: str) -> None:
@@ -268,6 +283,8 @@ class SessionManager:
         with self._lock:
             if (ruleset, session_id) in self._rebuilding:  # claimed by us, being rebuilt: its record is ours
                 raise durable.Rebuilding(f"session {session_id} of {ruleset} is being rebuilt here: retry")
+            if (ruleset, session_id) in self._opening:  # claimed by us, being opened: its record is ours
+                raise durable.Rebuilding(f"session {session_id} of {ruleset} is being opened here: retry")
         owner = self.directory.owner(ruleset, session_id) if self.directory is not None else None
         if owner is not None and self.directory is not None and owner.get("process") != self.directory.process:
             if self.log is None or self.directory.alive(owner):

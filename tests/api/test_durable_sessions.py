@@ -861,3 +861,40 @@ def test_a_group_pushed_over_the_active_one_after_the_snapshot_lets_a_lock_on_ac
                                   [pushed, FIRE_ALL, LATER_G])
     assert kept == ["Lock o1", "Wait o1"]
     assert rebuilt == kept
+
+
+def test_a_call_for_a_session_being_opened_here_waits_and_leaves_its_owner_record(rs, api_gateway, monkeypatch):
+    """A stream binding opens its session (claim, then make it) while a REST read of the same id
+    comes in. The read found the record naming this process and no session in memory, took it for
+    a leftover and released it: the session then lived here with no owner record, and another
+    process's window rebuilt a second copy from the log (a two-process test saw it under load).
+    Now the read gets 503 + retry (Rebuilding) while the session is being opened, and the record stays."""
+    import threading
+
+    from gateway.engine.durable import Rebuilding
+
+    manager = api_gateway.engine.session_manager
+    making, release = threading.Event(), threading.Event()
+    real = api_gateway.engine.new_session
+
+    def slow_new_session(*args, **kwargs):
+        making.set()
+        assert release.wait(30)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(api_gateway.engine, "new_session", slow_new_session)
+    opened: list = []
+    opener = threading.Thread(target=lambda: opened.append(manager.open("durable", session_id="stream.Opening",
+                                                                        kind="stream")))
+    opener.start()
+    try:
+        assert making.wait(30)
+        with pytest.raises(Rebuilding, match="being opened here"):
+            manager.get("durable", "stream.Opening")
+    finally:
+        release.set()
+        opener.join(30)
+    assert opened and manager.get("durable", "stream.Opening") is opened[0]
+    record = manager.directory.owner("durable", "stream.Opening")
+    assert record is not None and record["process"] == manager.directory.process
+    opened[0].close()
