@@ -183,20 +183,8 @@ public final class DroolsInternals {
     public static List<String> focusStack(KieSession session) {
         InternalAgenda agenda = (InternalAgenda) session.getAgenda();
         agenda.flushPropagations();
-        org.drools.core.common.AgendaGroupsManager groups = agenda.getAgendaGroupsManager();
         List<String> out = new ArrayList<String>();
-        if (groups instanceof org.drools.core.common.AgendaGroupsManager.SimpleAgendaGroupsManager) {
-            out.add(groups.getFocusName());
-            return out;
-        }
-        Object stack;
-        try {
-            stack = focusStackField(groups.getClass()).get(groups);
-        } catch (ReflectiveOperationException | RuntimeException e) {
-            throw new IllegalStateException("Drools' agenda-groups manager " + groups.getClass().getName()
-                    + " has no readable focus stack (" + FOCUS_STACK_CLASS + "." + FOCUS_STACK_FIELD + "): " + e, e);
-        }
-        for (Object group : (Deque<?>) stack) out.add(((org.drools.core.common.InternalAgendaGroup) group).getName());
+        for (org.drools.core.common.InternalAgendaGroup group : stackedGroups(agenda)) out.add(group.getName());
         return out;
     }
 
@@ -213,12 +201,23 @@ public final class DroolsInternals {
      * whose {@code isActive()} tells it; a {@code SimpleAgendaGroupsManager} gives its one group.
      */
     public static List<String> appliedFocusStack(KieSession session) {
-        InternalAgenda agenda = (InternalAgenda) session.getAgenda();
-        org.drools.core.common.AgendaGroupsManager groups = agenda.getAgendaGroupsManager();
         List<String> out = new ArrayList<String>();
+        for (org.drools.core.common.InternalAgendaGroup group : stackedGroups((InternalAgenda) session.getAgenda())) {
+            out.add(group.getName() + (group.isActive() ? "*" : ""));
+        }
+        return out;
+    }
+
+    /**
+     * The groups on {@code agenda}'s focus stack as applied so far, bottom to top: the one read of
+     * Drools' private stack that {@link #focusStack} and {@link #appliedFocusStack} share (a
+     * {@code SimpleAgendaGroupsManager} has only its focus, {@code MAIN}).
+     */
+    private static List<org.drools.core.common.InternalAgendaGroup> stackedGroups(InternalAgenda agenda) {
+        org.drools.core.common.AgendaGroupsManager groups = agenda.getAgendaGroupsManager();
+        List<org.drools.core.common.InternalAgendaGroup> out = new ArrayList<org.drools.core.common.InternalAgendaGroup>();
         if (groups instanceof org.drools.core.common.AgendaGroupsManager.SimpleAgendaGroupsManager) {
-            org.drools.core.common.InternalAgendaGroup main = groups.getAgendaGroup(groups.getFocusName());
-            out.add(main.getName() + (main.isActive() ? "*" : ""));
+            out.add(groups.getAgendaGroup(groups.getFocusName()));
             return out;
         }
         Object stack;
@@ -228,10 +227,7 @@ public final class DroolsInternals {
             throw new IllegalStateException("Drools' agenda-groups manager " + groups.getClass().getName()
                     + " has no readable focus stack (" + FOCUS_STACK_CLASS + "." + FOCUS_STACK_FIELD + "): " + e, e);
         }
-        for (Object g : (Deque<?>) stack) {
-            org.drools.core.common.InternalAgendaGroup group = (org.drools.core.common.InternalAgendaGroup) g;
-            out.add(group.getName() + (group.isActive() ? "*" : ""));
-        }
+        for (Object group : (Deque<?>) stack) out.add((org.drools.core.common.InternalAgendaGroup) group);
         return out;
     }
 
