@@ -584,45 +584,16 @@ def reactive(rs):
 
 
 def _twins(rs, gateway, before: list[list[dict]], after: list[list[dict]]) -> tuple[list[str], list[str]]:
-    """What ``after``'s batches say (in firing order) in a session never rebuilt and in its twin,
-    rebuilt between ``before`` and ``after`` from the snapshot taken after ``before``'s last batch
-    plus the replay of the journal since (``after``'s first batch, its modify, is replayed; the
-    fires follow on the rebuilt session). A handle ``"$h"`` in a command stands for the order's."""
-    manager = gateway.engine.session_manager
-    said = []
-    for rebuilt in (False, True):
-        sid = rs.post(f"{REACTIVE}/sessions", json={}).json()["id"]
-        manager.find("reactive", sid).durability.every = 1 if rebuilt else 1_000_000
-        made = manager.get("reactive", sid).execute([{"op": "insert", "facts": [
-            {"type": "Order", "id": "o1", "status": "open", "note": ""}]}])
-        handle = made.results[0]["handles"][0]
-
-        def run(batch: list[dict]) -> list[str]:
-            commands = [{**c, "handle": handle} if c.get("handle") == "$h" else c for c in batch]
-            answer = manager.get("reactive", sid).execute(commands)
-            return [a["params"]["text"] for a in answer.actions()]
-
-        for batch in before:
-            run(batch)
-        if rebuilt:
-            assert manager.find("reactive", sid).durability.commands_since_snapshot == 0
-            manager.find("reactive", sid).durability.every = 1_000_000  # what follows is journalled, not snapshotted
-            run(after[0])
-            assert manager.find("reactive", sid).durability.commands_since_snapshot == 1
-            _crash(gateway, sid, "reactive")
-            manager.get("reactive", sid)  # rebuilt: the snapshot restored, the modify replayed
-            assert manager.find("reactive", sid).durability.commands_since_snapshot == 1
-            said.append([text for batch in after[1:] for text in run(batch)])
-        else:
-            said.append([text for batch in after for text in run(batch)])
-        assert rs.delete(f"{REACTIVE}/sessions/{sid}").status_code == 200
-    return said[0], said[1]
+    """:func:`_twin_firings` on the "reactive" rule set over one open order (``"$h0"`` is its handle):
+    what ``after``'s batches say in a session never rebuilt and in its twin rebuilt between
+    ``before`` and ``after`` (``after``'s first batch, its modify, replayed)."""
+    return _twin_firings(rs, gateway, "reactive", [ORDER], before, after)
 
 
 FIRE_ALL = [{"op": "fire", "max": -1}]
 LATER = [{"op": "set_focus", "group": "later"}, {"op": "fire", "max": -1}]
-UNWATCHED = [{"op": "modify", "handle": "$h", "set": [["note", "rush"]]}]
-WATCHED = [{"op": "modify", "handle": "$h", "set": [["status", "open"]]}]
+UNWATCHED = [{"op": "modify", "handle": "$h0", "set": [["note", "rush"]]}]
+WATCHED = [{"op": "modify", "handle": "$h0", "set": [["status", "open"]]}]
 
 
 def test_a_fired_match_stays_fired_after_a_rebuild_when_its_fact_changed_in_a_property_its_rule_ignores(reactive, api_gateway):
@@ -658,7 +629,7 @@ def test_two_matches_of_one_key_one_fired_one_waiting_stay_so_across_the_unwatch
 
 
 def test_a_deleted_and_reinserted_order_is_a_new_match_after_a_rebuild(reactive, api_gateway):
-    again = [{"op": "delete", "handle": "$h"},
+    again = [{"op": "delete", "handle": "$h0"},
              {"op": "insert", "facts": [{"type": "Order", "id": "o1", "status": "open", "note": ""}]}]
     kept, rebuilt = _twins(reactive, api_gateway, [[{"op": "fire", "max": 1}]], [again, FIRE_ALL, LATER])
     assert kept == ["Open o1", "Label o1 a", "Label o1 a", "Ship o1", "Tag o1"]
@@ -748,9 +719,10 @@ def test_a_no_loop_rules_own_modify_does_not_fire_its_fired_match_again_after_a_
 
 def _twin_firings(rs, gateway, name: str, facts: list[dict], before: list[list[dict]],
                   after: list[list[dict]]) -> tuple[list[str], list[str]]:
-    """``_twins`` for any ruleset ``name`` and first facts: what ``after``'s batches say in a session
-    never rebuilt and in its twin, snapshotted after ``before`` and rebuilt from that snapshot plus
-    ``after[0]`` replayed. ``"$h<i>"`` in a command stands for the handle of ``facts[i]``."""
+    """What ``after``'s batches say (in firing order) in a session of ``name`` never rebuilt and in
+    its twin, snapshotted after ``before``'s last batch and rebuilt from that snapshot plus
+    ``after[0]`` replayed (the fires that follow run on the rebuilt session). Both start with
+    ``facts``; ``"$h<i>"`` in a command stands for the handle of ``facts[i]``."""
     manager = gateway.engine.session_manager
     said = []
     for rebuilt in (False, True):
@@ -767,8 +739,9 @@ def _twin_firings(rs, gateway, name: str, facts: list[dict], before: list[list[d
             run(batch)
         if rebuilt:
             assert manager.find(name, sid).durability.commands_since_snapshot == 0
-            manager.find(name, sid).durability.every = 1_000_000
+            manager.find(name, sid).durability.every = 1_000_000  # what follows is journalled, not snapshotted
             run(after[0])
+            assert manager.find(name, sid).durability.commands_since_snapshot == 1
             _crash(gateway, sid, name)
             manager.get(name, sid)  # rebuilt: the snapshot restored, after[0] replayed
             assert manager.find(name, sid).durability.commands_since_snapshot == 1
@@ -800,7 +773,6 @@ then
 end
 """
 ORDER = {"type": "Order", "id": "o1", "status": "open", "note": ""}
-WATCHED_0 = [{"op": "modify", "handle": "$h0", "set": [["status", "open"]]}]
 LATER_G = [{"op": "set_focus", "group": "g"}, {"op": "fire", "max": -1}]
 
 
@@ -813,7 +785,7 @@ def test_a_lock_on_active_rules_fired_match_reached_while_its_group_is_active_st
     assert made.status_code == 201, made.text
     kept, rebuilt = _twin_firings(rs, api_gateway, "lockactive", [ORDER],
                                   [[{"op": "set_focus", "group": "g"}, {"op": "fire", "max": 1}]],
-                                  [WATCHED_0, FIRE_ALL, LATER_G])
+                                  [WATCHED, FIRE_ALL, LATER_G])
     assert kept == ["Wait o1"]
     assert rebuilt == kept
 
@@ -855,7 +827,7 @@ def test_a_group_pushed_over_the_active_one_after_the_snapshot_lets_a_lock_on_ac
     rebuilt twin (whose filter must stop dropping "g"'s lock-on-active re-activations at the push)."""
     made = rs.put("/api/rulesets/lockactive3", json={"files": {"types.drl": REACTIVE_TYPES, "rules.drl": LOCK_RULES}})
     assert made.status_code == 201, made.text
-    pushed = [{"op": "set_focus", "group": "h"}, *WATCHED_0]
+    pushed = [{"op": "set_focus", "group": "h"}, *WATCHED]
     kept, rebuilt = _twin_firings(rs, api_gateway, "lockactive3", [ORDER],
                                   [[{"op": "set_focus", "group": "g"}, {"op": "fire", "max": 1}]],
                                   [pushed, FIRE_ALL, LATER_G])
