@@ -13,23 +13,35 @@ rule set's recent fire time) is refused at once too, and one that did wait longe
 refused when its turn comes instead of running late (``waited``, 503). Both carry a
 ``Retry-After``. Nothing refused has been fired, so nothing is lost: the caller retries.
 
-The hand-off is the cheapest measured (docs/benchmarks.md): a C ``SimpleQueue`` the workers block
-on, and for an asyncio caller the answers handed back to the loop in batches (one
-``call_soon_threadsafe`` for the answers that finish while the loop is busy, :class:`_Inbox`).
+Two lanes, one accounting. A stateless fire (the REST fire route, the hot path) runs on the rule
+set's JVM threads (:meth:`Bulkhead.fire`, ``java/.../FireLane.java``): they never take the GIL, so
+the event loop is not competed with; the answers come back through a pipe the loop watches, every
+answer that finished meanwhile in one drain (:class:`_Inbox`). Measured on 2 cores, a Python worker
+thread there cost a quarter of the REST fire's throughput (docs/benchmarks.md). Any other work
+(session commands, KIE batches: Python orchestrating several Java calls) runs on the rule set's
+Python threads (:meth:`Bulkhead.run`): a C ``SimpleQueue`` the workers block on, the answers handed
+back to the loop in batches (one ``call_soon_threadsafe`` for the answers that finish while the
+loop is busy). Both lanes count against the same queue bound and wait estimate.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
+import itertools
 import math
+import os
 import queue
 import threading
 import time
 import weakref
 from typing import Any, Callable
 
+import orjson
+
+from gateway.base import jvm
 from gateway.engine.errors import Overloaded
+from gateway.engine.results import PreparedFire
 
 Done = Callable[[Any, BaseException | None], None]
 
@@ -51,21 +63,17 @@ class Bulkhead:
         self.waiting = 0  # submitted, not yet taken by a worker
         self.running = 0
         self.threads = 0
+        self.in_java = 0  # stateless fires submitted to the JVM lane, not yet answered
         self.mean_s = 0.0
         self.refused = {"queue_full": 0, "waited": 0}
+        self._java_lane: Any = None
 
     # -- submitting ---------------------------------------------------------------------------------
     def submit(self, fn: Callable[[], Any], done: Done) -> None:
         """Queue ``fn`` for a worker, which calls ``done(result, error)`` when it ran (or was refused
         for waiting too long); raises :class:`Overloaded` at once when it would not be served in time."""
         with self._lock:
-            if self.waiting >= self.max_queue:
-                self.refused["queue_full"] += 1
-                raise self._refusal("queue_full", self._expected_wait())
-            expected = self._expected_wait()
-            if expected > self.max_wait_s:
-                self.refused["waited"] += 1
-                raise self._refusal("waited", expected)
+            self._admit()
             self.waiting += 1
             spawn = self.threads < self.workers and self.threads < self.waiting + self.running
             if spawn:
@@ -85,6 +93,45 @@ class Bulkhead:
 
         self.submit(fn, done)
         return await future
+
+    async def fire(self, prepared: PreparedFire, timeout_ms: int) -> tuple[dict[str, Any], float]:
+        """``prepared``'s fire on this rule set's JVM threads while the event loop goes on: the
+        Runner's parsed answer and the fire's duration in ms. Raises :class:`Overloaded` as
+        :meth:`submit` does, at once or when a thread takes it too late."""
+        loop = asyncio.get_running_loop()
+        with self._lock:
+            self._admit()
+            self.in_java += 1
+            lane = self._java_lane
+        try:
+            if lane is None:
+                lane = self._lane()
+            future = _inbox_of(loop).fire(self, lane, prepared, timeout_ms)
+        except BaseException:
+            with self._lock:
+                self.in_java -= 1
+            raise
+        return await future
+
+    def _lane(self) -> Any:
+        with self._lock:
+            if self._java_lane is None:
+                self._java_lane = jvm.helper_class("FireLane")(self.name, self.workers, int(self.idle_s * 1000))
+            return self._java_lane
+
+    def _answered_in_java(self, elapsed_ns: int, waited_ns: int) -> Overloaded | None:
+        """Counts a JVM-lane fire as answered (on the loop); the refusal when it waited too long
+        (``elapsed_ns`` -1; -2: it never reached the JVM)."""
+        with self._lock:
+            self.in_java -= 1
+            if elapsed_ns == -2:
+                return None
+            if elapsed_ns < 0:
+                self.refused["waited"] += 1
+                return self._refusal("waited", waited_ns / 1e9)
+            elapsed = elapsed_ns / 1e9
+            self.mean_s = elapsed if self.mean_s == 0.0 else self.mean_s + SMOOTHING * (elapsed - self.mean_s)
+            return None
 
     # -- the workers --------------------------------------------------------------------------------
     def _work(self) -> None:
@@ -124,9 +171,23 @@ class Bulkhead:
         _call_done(done, result, error)
 
     # -- limits -------------------------------------------------------------------------------------
+    def _admit(self) -> None:
+        """Raises :class:`Overloaded` when a fire submitted now would not be served in time (under the lock)."""
+        if self._queued() >= self.max_queue:
+            self.refused["queue_full"] += 1
+            raise self._refusal("queue_full", self._expected_wait())
+        expected = self._expected_wait()
+        if expected > self.max_wait_s:
+            self.refused["waited"] += 1
+            raise self._refusal("waited", expected)
+
+    def _queued(self) -> int:
+        """Fires waiting for a thread, in both lanes (under the lock)."""
+        return self.waiting + max(0, self.in_java - self.workers)
+
     def _expected_wait(self) -> float:
         """How long a fire submitted now would wait, by the recent mean fire time (under the lock)."""
-        return self.mean_s * (self.waiting + self.running) / self.workers
+        return self.mean_s * (self.waiting + self.running + self.in_java) / self.workers
 
     def _refusal(self, reason: str, wait_s: float) -> Overloaded:
         retry = max(1, math.ceil(min(wait_s, 3600.0)))
@@ -139,9 +200,11 @@ class Bulkhead:
                           f"{self.max_wait_s:g} s (api.max_wait_s); retry in {retry} s")
 
     def stats(self) -> dict[str, Any]:
+        java_threads = 0 if self._java_lane is None else int(self._java_lane.threads())
         with self._lock:
-            return {"waiting": self.waiting, "running": self.running, "threads": self.threads,
-                    "mean_fire_ms": round(self.mean_s * 1000, 3), "refused": dict(self.refused)}
+            return {"waiting": self._queued(), "running": self.running + min(self.in_java, self.workers),
+                    "threads": self.threads + java_threads, "mean_fire_ms": round(self.mean_s * 1000, 3),
+                    "refused": dict(self.refused)}
 
 
 class _Inbox:
@@ -149,20 +212,31 @@ class _Inbox:
 
     Why: each ``call_soon_threadsafe`` writes to the loop's wake-up pipe (a system call, and a
     wake-up the loop reads back). Answers that finish while a drain is already scheduled join it,
-    so a busy loop is woken once for them all instead of once per fire."""
+    so a busy loop is woken once for them all instead of once per fire. The JVM lane's answers wait
+    in a Java queue (``FireLane.Inbox``) whose first answer after a drain writes one byte to a pipe
+    the loop reads; the loop then takes them all in one call. The loop is held weakly: an inbox
+    outlives no loop."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
-        self._loop = loop
+        self._loop = weakref.ref(loop)
         self._answers: collections.deque[tuple[asyncio.Future[Any], Any, BaseException | None]] = collections.deque()
         self._scheduled = False
+        self._java: Any = None  # FireLane.Inbox, made at the first JVM-lane fire
+        self._read_fd = -1
+        self._tickets = itertools.count()
+        self._pending: dict[int, tuple[asyncio.Future[Any], Bulkhead]] = {}
+        self._unsubmitted: list[tuple[Any, int, PreparedFire, int, int]] = []
 
     def deliver(self, future: asyncio.Future[Any], result: Any, error: BaseException | None) -> None:
         """From a worker: settle ``future`` on the loop (raises RuntimeError once the loop closed)."""
         self._answers.append((future, result, error))
         if not self._scheduled:  # two workers may both schedule a drain: the second finds it done
             self._scheduled = True
+            loop = self._loop()
             try:
-                self._loop.call_soon_threadsafe(self._drain)
+                if loop is None:
+                    raise RuntimeError("the event loop is gone")
+                loop.call_soon_threadsafe(self._drain)
             except RuntimeError:
                 self._scheduled = False
                 raise
@@ -172,6 +246,78 @@ class _Inbox:
         answers = self._answers
         while answers:
             _settle(*answers.popleft())
+
+    # -- the JVM lane (on the loop) ---------------------------------------------------------------
+    def fire(self, bulkhead: Bulkhead, lane: Any, prepared: PreparedFire, timeout_ms: int) -> asyncio.Future[Any]:
+        """Submits ``prepared`` to ``lane``; the future gets ``(answer, ms)`` or the refusal."""
+        if self._java is None:
+            self._open_java()
+        loop = self._loop()
+        assert loop is not None  # called on it
+        future = loop.create_future()
+        ticket = next(self._tickets)
+        self._pending[ticket] = (future, bulkhead)
+        # submitted at the end of this loop iteration, with every other fire that came in it: one JVM
+        # call, and one thread wake-up, for them all (a wake-up is the dear part of a hand-off)
+        self._unsubmitted.append((lane, ticket, prepared, timeout_ms, int(bulkhead.max_wait_s * 1000)))
+        if len(self._unsubmitted) == 1:
+            loop.call_soon(self._submit)
+        return future
+
+    def _submit(self) -> None:
+        batch, self._unsubmitted = self._unsubmitted, []
+        groups: dict[tuple[Any, ...], list[tuple[int, PreparedFire]]] = {}
+        for lane, ticket, prepared, timeout_ms, max_wait_ms in batch:
+            key = (lane, prepared.limit, prepared.return_facts, prepared.record_facts, timeout_ms, max_wait_ms)
+            groups.setdefault(key, []).append((ticket, prepared))
+        for (lane, limit, return_facts, record_facts, timeout_ms, max_wait_ms), fires in groups.items():
+            try:
+                if len(fires) == 1:
+                    ticket, prepared = fires[0]
+                    lane.fire(self._java, ticket, prepared.runner, prepared.facts_json, limit, return_facts, record_facts,
+                              timeout_ms, max_wait_ms)
+                else:
+                    lane.fireMany(self._java, [t for t, _ in fires], [p.runner for _, p in fires],
+                                  [p.facts_json for _, p in fires], limit, return_facts, record_facts, timeout_ms, max_wait_ms)
+            except Exception as exc:  # the JVM refused the submission (e.g. out of memory): those fires fail
+                for ticket, _ in fires:
+                    self._fail(ticket, exc)
+
+    def _fail(self, ticket: int, error: BaseException) -> None:
+        future, bulkhead = self._pending.pop(ticket)
+        bulkhead._answered_in_java(-2, 0)
+        if not future.cancelled():
+            future.set_exception(error)
+
+    def _open_java(self) -> None:
+        loop = self._loop()
+        assert loop is not None
+        read_end, write_end = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        try:
+            self._java = jvm.helper_class("FireLane").Inbox(f"/proc/self/fd/{write_end}")  # Java's own descriptor
+        finally:
+            os.close(write_end)
+        self._read_fd = read_end
+        loop.add_reader(read_end, self._drain_java)
+        weakref.finalize(loop, _close_java, read_end, self._java)
+
+    def _drain_java(self) -> None:
+        try:
+            os.read(self._read_fd, 4096)
+        except (BlockingIOError, OSError):
+            pass
+        text = str(self._java.drain())
+        if text == "[]":
+            return
+        for ticket, elapsed_ns, answer in orjson.loads(text):
+            future, bulkhead = self._pending.pop(ticket)
+            refusal = bulkhead._answered_in_java(elapsed_ns, answer if elapsed_ns < 0 else 0)
+            if future.cancelled():  # the caller went away
+                continue
+            if refusal is not None:
+                future.set_exception(refusal)
+            else:
+                future.set_result((answer, elapsed_ns / 1e6))
 
 
 _inboxes: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Inbox] = weakref.WeakKeyDictionary()
@@ -184,6 +330,18 @@ def _inbox_of(loop: asyncio.AbstractEventLoop) -> _Inbox:
         with _inboxes_lock:
             found = _inboxes.setdefault(loop, _Inbox(loop))
     return found
+
+
+def _close_java(read_fd: int, java_inbox: Any) -> None:
+    """A loop's JVM-lane inbox is closed with the loop (its pipe, and Java's end of it)."""
+    try:
+        os.close(read_fd)
+    except OSError:
+        pass
+    try:
+        java_inbox.close()
+    except Exception:  # the JVM is shutting down
+        pass
 
 
 def _settle(future: asyncio.Future[Any], result: Any, error: BaseException | None) -> None:

@@ -41,7 +41,7 @@ from gateway.engine.errors import (
     VersionNotFound,
 )
 from gateway.engine.recorder import DecisionRecorder
-from gateway.engine.results import FireResult, decode_result, encode_facts
+from gateway.engine.results import FireResult, PreparedFire, decode_result, encode_facts, result_of
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
 from gateway.engine.sessions import SessionManager, rule_fingerprints
@@ -539,6 +539,32 @@ class Engine(CatalogLifecycle):
             return [f["rule"] for f in result.fired], result.actions
         return fire
 
+    def prepare_fire(self, name: str, facts: list[dict[str, Any]]) -> PreparedFire:
+        """A stateless fire of the live version of ``name`` ready to run (its facts encoded, bad facts
+        refused here): for a caller that runs ``prepared.runner.fire`` elsewhere (the REST fire
+        route, on the rule set's JVM threads: gateway.engine.bulkhead) and gives the answer to
+        :meth:`finish_fire`. :meth:`fire` does the same in one call on its caller's thread."""
+        info, compiled = self._live_entry(name)
+        return PreparedFire(name, info.version, compiled.runner, self._encoded(name, facts),
+                            int(self.settings.engine.fire_limit), True, True)
+
+    @property
+    def fire_timeout_ms(self) -> int:
+        """``engine.fire_timeout_s`` in ms (0: none), as the Java fire takes it."""
+        return self._fire_timeout_ms
+
+    @staticmethod
+    def finish_fire(prepared: PreparedFire, answer: dict[str, Any], duration_ms: float) -> FireResult:
+        """The result of ``prepared``'s fire from the Runner's parsed ``answer`` (refusals raise)."""
+        return result_of(answer, prepared.name, prepared.version, duration_ms)
+
+    def _encoded(self, name: str, facts: list[dict[str, Any]]) -> str:
+        """``facts`` as the Runner takes them (bad facts raise FactError), kept as a warm-up sample."""
+        facts_json = encode_facts(facts, self.settings.engine.max_facts)
+        if name != DRAFT:
+            self._recent.remember(name, facts_json)
+        return facts_json
+
     def _fire(
         self,
         compiled: CompiledRuleSet,
@@ -549,9 +575,7 @@ class Engine(CatalogLifecycle):
         return_facts: bool,
         record_facts: bool,
     ) -> FireResult:
-        facts_json = encode_facts(facts, self.settings.engine.max_facts)
-        if name != DRAFT:
-            self._recent.remember(name, facts_json)
+        facts_json = self._encoded(name, facts)
         limit = int(fire_limit or self.settings.engine.fire_limit)
         started = time.perf_counter()
         answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts, self._fire_timeout_ms))

@@ -217,9 +217,11 @@ async def fire_answer(state: Any, name: str, body: Any, correlation: str | None)
     engine.live_compiled(name)  # 404 before a bulkhead is made for a name nobody deployed
     start = time.perf_counter()
     try:
-        # only the fire on the rule set's thread (the JVM releases the GIL there); the decision is
-        # recorded here, on the loop, so the thread holds the GIL as briefly as it can
-        result = await state.bulkheads.of(name).run(lambda: engine.fire(name, facts, record=False))
+        # the facts are encoded and the answer read here; only the Java fire runs on the rule set's
+        # JVM threads, which never take the GIL (gateway.engine.bulkhead). Recorded here too.
+        prepared = engine.prepare_fire(name, facts)
+        answer, fire_ms = await state.bulkheads.of(name).fire(prepared, engine.fire_timeout_ms)
+        result = engine.finish_fire(prepared, answer, fire_ms)
     except Exception as exc:
         metrics.fire_error(name, exc)
         raise
