@@ -23,7 +23,8 @@ import logging.handlers
 import queue
 import sys
 import threading
-from typing import TextIO
+import time
+from typing import Callable, TextIO
 
 MAX_RECORDS = 10_000
 
@@ -96,3 +97,30 @@ def log_off_thread(level: int = logging.INFO, fmt: str = "%(asctime)s %(levelnam
     thread.start()
     atexit.register(thread.stop)
     return thread
+
+
+class RepeatLimiter:
+    """Says whether a message that repeats (same key) should be logged now: the first of each key,
+    then at most one per ``window_s``, which carries how many were held back meanwhile.
+
+    Why: some failures repeat once per decision for as long as their cause lasts (every greeting
+    while no robot is connected); one line per decision buries everything else in the log and, in
+    the soak, was most of it. Thread-safe; keys are few (a module and a status)."""
+
+    def __init__(self, window_s: float = 60.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.window_s = window_s
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._last: dict[object, float] = {}
+        self._held: dict[object, int] = {}
+
+    def check(self, key: object) -> tuple[bool, int]:
+        """``(log it now, how many of this key were held back since the last one logged)``."""
+        now = self._clock()
+        with self._lock:
+            last = self._last.get(key)
+            if last is not None and now - last < self.window_s:
+                self._held[key] = self._held.get(key, 0) + 1
+                return False, 0
+            self._last[key] = now
+            return True, self._held.pop(key, 0)

@@ -21,6 +21,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from gateway.base.logs import RepeatLimiter
 from gateway.store.store import ACTIONS
 
 log = logging.getLogger(__name__)
@@ -38,6 +39,7 @@ class ActionRouter:
         self._listeners: list[Callable[[Outcome], None]] = []
         self.queue: queue.Queue[dict[str, Any] | None] = queue.Queue(maxsize=queue_size)
         self.stats = {"decisions": 0, "actions": 0, "failed": 0, "dropped": 0}
+        self._repeats = RepeatLimiter()
         self._thread = threading.Thread(target=self._work, name="actions", daemon=True)
         self._thread.start()
 
@@ -78,8 +80,7 @@ class ActionRouter:
                 fields = {"status": "failed", "message": f"{type(exc).__name__}: {exc}"}
         outcome = {"action": action, "attempts": 1, **fields,
                    "duration_ms": round((time.monotonic() - started) * 1000, 3), **context}
-        (log.info if outcome["status"] == "ok" else log.error)("action %s: %s %s", action.get("module"),
-                                                               outcome["status"], outcome.get("message", ""))
+        self._log(outcome)
         if self.store is not None:
             self.store.record(ACTIONS, outcome, stored_type=f"printeps/Action/{outcome['status']}",
                               inserted_by="gateway")
@@ -89,6 +90,18 @@ class ActionRouter:
             except Exception:
                 log.exception("action listener failed")
         return outcome
+
+    def _log(self, outcome: Outcome) -> None:
+        """One line per action; a failure that repeats (same module and status) at most once a
+        minute, saying how many like it were not logged (every outcome is still recorded)."""
+        module, status = outcome["action"].get("module"), outcome["status"]
+        if status == "ok":
+            log.info("action %s: ok %s", module, outcome.get("message", ""))
+            return
+        now, held = self._repeats.check((module, status))
+        if now:
+            log.error("action %s: %s %s%s", module, status, outcome.get("message", ""),
+                      f" ({held} more like it in the last {self._repeats.window_s:g} s not logged)" if held else "")
 
     def _work(self) -> None:
         while True:
