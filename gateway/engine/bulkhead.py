@@ -32,6 +32,8 @@ import itertools
 import math
 import os
 import queue
+import shutil
+import tempfile
 import threading
 import time
 import weakref
@@ -292,11 +294,20 @@ class _Inbox:
     def _open_java(self) -> None:
         loop = self._loop()
         assert loop is not None
-        read_end, write_end = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        # a named pipe, so that Java opens its write end by a path on any POSIX system; the name
+        # goes as soon as both ends are open
+        folder = tempfile.mkdtemp(prefix="printeps-lane-")
+        path = os.path.join(folder, "wake")
         try:
-            self._java = jvm.helper_class("FireLane").Inbox(f"/proc/self/fd/{write_end}")  # Java's own descriptor
+            os.mkfifo(path, 0o600)
+            read_end = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)  # first: Java's open then does not block
+            try:
+                self._java = jvm.helper_class("FireLane").Inbox(path)
+            except BaseException:
+                os.close(read_end)
+                raise
         finally:
-            os.close(write_end)
+            shutil.rmtree(folder, ignore_errors=True)
         self._read_fd = read_end
         loop.add_reader(read_end, self._drain_java)
         weakref.finalize(loop, _close_java, read_end, self._java)

@@ -29,7 +29,7 @@ public final class FireLane {
         private final AtomicBoolean signalled = new AtomicBoolean();
         private final FileOutputStream wake;
 
-        /** {@code wakePath}: the write end of the loop's pipe (e.g. {@code /proc/self/fd/N}). */
+        /** {@code wakePath}: the loop's named pipe, whose read end the loop holds open. */
         public Inbox(String wakePath) throws IOException {
             wake = new FileOutputStream(wakePath);
         }
