@@ -86,3 +86,28 @@ def hold_build(monkeypatch, engine, comment: str, stage: str = "compile"):
 
     monkeypatch.setattr(engine, "deploy", held)
     return release
+
+
+#: A fact type and a rule whose then-part waits until the test creates the fact's gate file (having
+#: created its "started" file first): a test knows by a condition, not a sleep, that a fire is
+#: running, and decides when it ends (tests of bulkheads and fire lanes). Put a package line before it.
+GATED_JOB_DRL = """declare Job
+    id : String
+    started : String
+    gate : String
+end
+
+rule "Wait for the gate"
+when
+    $j : Job()
+then
+    // only for a test's gate (an absolute path): the warm-up of a deploy fires made-up facts
+    if ($j.getGate() != null && $j.getGate().startsWith("/")) {
+        try { new java.io.File($j.getStarted()).createNewFile(); } catch (Exception e) { }
+        long deadline = System.currentTimeMillis() + 120000;
+        while (!new java.io.File($j.getGate()).exists() && System.currentTimeMillis() < deadline) {
+            try { Thread.sleep(5); } catch (InterruptedException e) { }
+        }
+    }
+end
+"""

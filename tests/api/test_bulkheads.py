@@ -18,35 +18,14 @@ import httpx
 import pytest
 
 from api_helpers import FACTS, ServerThread, files, make_settings
-from gw_testing import built_gateway, wait_for
+from gw_testing import GATED_JOB_DRL, built_gateway, wait_for
 from gateway.api.main import create_app
 
 SLOW = "slowset"
 FAST = "quickset"
 KIE = "/kie-server/services/rest/server/containers/instances"
 
-SLOW_DRL = """package org.printeps.slowtest;
-
-declare Job
-    id : String
-    started : String
-    gate : String
-end
-
-rule "Wait for the gate"
-when
-    $j : Job()
-then
-    // only for a test's gate (an absolute path): the warm-up of a deploy fires made-up facts
-    if ($j.getGate() != null && $j.getGate().startsWith("/")) {
-        try { new java.io.File($j.getStarted()).createNewFile(); } catch (Exception e) { }
-        long deadline = System.currentTimeMillis() + 120000;
-        while (!new java.io.File($j.getGate()).exists() && System.currentTimeMillis() < deadline) {
-            try { Thread.sleep(5); } catch (InterruptedException e) { }
-        }
-    }
-end
-"""
+SLOW_DRL = "package org.printeps.slowtest;\n\n" + GATED_JOB_DRL
 
 LOOP_DRL = """package org.printeps.looptest;
 

@@ -21,16 +21,9 @@ import pytest
 from gateway.engine import Engine
 from gateway.engine.bulkhead import Bulkhead
 from gateway.engine.errors import FactError, Overloaded, RuleRuntimeError
-from gw_testing import run_async, wait_for
+from gw_testing import GATED_JOB_DRL, run_async, wait_for
 
-LANE_DRL = """package org.printeps.lanetest;
-
-declare Job
-    id : String
-    started : String
-    gate : String
-end
-
+LANE_DRL = "package org.printeps.lanetest;\n\n" + GATED_JOB_DRL + """
 declare Greeting
     id : String
     text : String
@@ -38,19 +31,6 @@ end
 
 declare Boom
     id : String
-end
-
-rule "Wait for the gate"
-when
-    $j : Job()
-then
-    if ($j.getGate() != null && $j.getGate().startsWith("/")) {
-        try { new java.io.File($j.getStarted()).createNewFile(); } catch (Exception e) { }
-        long deadline = System.currentTimeMillis() + 120000;
-        while (!new java.io.File($j.getGate()).exists() && System.currentTimeMillis() < deadline) {
-            try { Thread.sleep(5); } catch (InterruptedException e) { }
-        }
-    }
 end
 
 rule "Greet"
