@@ -65,7 +65,7 @@ def child(tree: Path, args: list[str], timeout: float) -> str:
 
 
 def engine(tree: Path, work: Path, args: argparse.Namespace) -> dict[str, float]:
-    r = hb.in_process_fire(work, hb.teahouse_facts(), args.seconds)
+    r = hb.in_process_fire(work, hb.teahouse_facts(), args.seconds, args.engine_warm_up)
     return {"engine fire p50": r["p50_ms"], "engine fire req/s": r["rps"]}
 
 
@@ -138,7 +138,7 @@ def report(records: list[dict], args: argparse.Namespace, note: str) -> str:
     loads = ", ".join(f"{r['round']} {r['tree']} {r['time']} load {r['load']:.1f}" for r in records)
     head = (f"`bench/compare_trees.py --before {args.before} --after {args.after} --rounds {args.rounds} "
             f"--budget {args.budget:.0f} --seconds {args.seconds:g} --stream-seconds {args.stream_seconds:g} "
-            f"--ros-trials {args.ros_trials} --measures {','.join(args.measures)}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
+            f"--ros-trials {args.ros_trials} --engine-warm-up {args.engine_warm_up:g} --measures {','.join(args.measures)}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
             f"(before, after, after, before, ...); each measure runs the tree's own code (PYTHONPATH and cwd = the "
             f"tree); medians over each tree's rounds; the ratio is after/before in the same run.")
     return "\n".join([SECTION, "", head, "", *lines, "", f"Load average (1 min) at the start of each round: {loads}.",
@@ -161,6 +161,8 @@ def parse() -> argparse.Namespace:
                         help="seconds for the whole run: a new pair of rounds starts only if it should end within it")
     parser.add_argument("--rounds", type=int, default=0, help="at most this many rounds (even; 0: the budget decides)")
     parser.add_argument("--seconds", type=float, default=5.0, help="per engine and REST run")
+    parser.add_argument("--engine-warm-up", type=float, default=10.0,
+                        help="seconds of in-process fires before the engine measure (the JIT still compiles after 3 s)")
     parser.add_argument("--stream-seconds", type=float, default=20.0, help="stream length for the papers' query")
     parser.add_argument("--general-seconds", type=float, default=5.0, help="stream length on the general path")
     parser.add_argument("--ros-trials", type=int, default=30)

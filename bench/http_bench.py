@@ -158,13 +158,14 @@ def summarize(latencies: list[float], elapsed: float, errors: int) -> dict:
             "p50_ms": pick(0.50), "p99_ms": pick(0.99), "mean_ms": statistics.fmean(ordered) * 1000}
 
 
-def in_process_fire(tmp: Path, facts: list[dict], seconds: float) -> dict:
-    """engine.fire without HTTP, in a child process (its own JVM) so it does not share the server's."""
+def in_process_fire(tmp: Path, facts: list[dict], seconds: float, warm_up_s: float = 3.0) -> dict:
+    """engine.fire without HTTP, in a child process (its own JVM) so it does not share the server's;
+    fired ``warm_up_s`` first, not counted (the JIT's compiles)."""
     code = (
         "import json,sys,time;from gateway.config import Settings;from gateway.engine import Engine\n"
         f"s=Settings.model_validate({{'data_dir': {str(tmp / 'inproc')!r}, 'engine': {{'rules_dir': {str(RULES)!r}}}}})\n"
         "e=Engine(s);e.seed(s.engine.rules_dir) if hasattr(e, 'seed') else e.seed_from();facts=json.loads(sys.argv[1]);secs=float(sys.argv[2])\n"
-        "end=time.perf_counter()+3\n"
+        f"end=time.perf_counter()+{float(warm_up_s)!r}\n"
         "while time.perf_counter()<end: e.fire('reception',facts)\n"
         "lat=[];t=time.perf_counter();end=t+secs\n"
         "while time.perf_counter()<end:\n"
