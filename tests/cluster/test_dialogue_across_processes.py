@@ -13,7 +13,7 @@ from pathlib import Path
 import httpx
 import pytest
 import yaml
-from test_processes import Process, wait_for
+from test_processes import Process, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -93,8 +93,7 @@ def test_one_conversation_whichever_process_takes_the_turn_and_after_its_process
         (kept,) = orders_of(b.url, "table2")
         assert (kept["drink"], kept["cups"]) == ("green tea", 3) and kept["decision_ids"][0] == asked["decision_id"]
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 def test_workers_carry_one_conversation_on_the_shared_port(home):

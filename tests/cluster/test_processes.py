@@ -87,12 +87,29 @@ class Process:
             self.proc.wait(timeout=60)
 
     def stop(self) -> None:
+        self.terminate()
+        self.wait_stopped()
+
+    def terminate(self) -> None:
+        """SIGTERM (a clean stop), not waited for."""
         if self.proc is not None and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
+
+    def wait_stopped(self) -> None:
+        if self.proc is not None:
             try:
                 self.proc.wait(timeout=60)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
+
+
+def stop_all(*processes: Process) -> None:
+    """Stop several processes at once: each clean stop takes 2-3 s (mostly waiting on its threads
+    and the JVM), so one after the other left the test's worker idle that long per extra process."""
+    for p in processes:
+        p.terminate()
+    for p in processes:
+        p.wait_stopped()
 
 
 def fire(url: str, greeting_of: dict | None = None) -> dict:
@@ -146,8 +163,7 @@ def cluster(tmp_path_factory, mongo):
             p.ready()
         yield procs
     finally:
-        for p in procs.values():
-            p.stop()
+        stop_all(*procs.values())
 
 
 def deploy(url: str, greeting: str, base: int | None = None) -> httpx.Response:
