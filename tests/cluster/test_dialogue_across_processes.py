@@ -4,7 +4,6 @@ several hosts) and it goes on after the process that took its first turns is kil
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import threading
@@ -13,7 +12,7 @@ from pathlib import Path
 import httpx
 import pytest
 import yaml
-from test_processes import Process, stop_all, wait_for
+from test_processes import Process, process_env, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,7 +30,7 @@ def home(tmp_path_factory, mongo):
         "streams": {"queries_dir": None},
         "sessions": {"member_heartbeat_s": 1.0},
     }))
-    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+    return home, config, process_env(mongo.uri)
 
 
 def turn(url: str, conversation: str, text: str) -> dict:
