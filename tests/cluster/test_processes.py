@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from gateway.serve import free_port
+from gw_testing import short_lived_jvm
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -134,18 +135,12 @@ def wait_for(cond, timeout: float = 10.0, step: float = 0.02) -> float | None:
 
 def process_env(mongo_uri: str | None) -> dict[str, str]:
     """The environment of the ``printeps serve`` processes a cluster test starts: this one's, with
-    ``MONGO_URI`` set to the test's server (or removed: the process starts its own), and their JVM on
-    the C1 compiler only (``-XX:TieredStopAtLevel=1``, appended to any PRINTEPS_JVM_OPTIONS given).
-
-    Why C1: each process lives seconds and serves a handful of requests, so what the C2 compiler's
-    threads spend optimising never pays back (its 0.5-1.5 CPU-s a start was measured in the third
-    pass; whole cluster files took 9-18% less CPU). Only these processes get it: the pytest
-    workers' own JVMs run a whole file's workload and keep C2."""
+    ``MONGO_URI`` set to the test's server (or removed: the process starts its own), their JVM on C1
+    only (:func:`gw_testing.short_lived_jvm`)."""
     env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"}
     if mongo_uri is not None:
         env["MONGO_URI"] = mongo_uri
-    env["PRINTEPS_JVM_OPTIONS"] = f"{os.environ.get('PRINTEPS_JVM_OPTIONS', '')} -XX:TieredStopAtLevel=1".strip()
-    return env
+    return short_lived_jvm(env)
 
 
 def cluster_home(tmp_path_factory, mongo, database: str, settings: dict) -> tuple[Path, Path, dict[str, str]]:
