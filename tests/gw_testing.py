@@ -17,6 +17,23 @@ T = TypeVar("T")
 _databases = itertools.count(1)
 
 
+#: The JVM option given to the gateway processes the tests start (see :func:`short_lived_jvm`).
+SHORT_LIVED_JVM = "-XX:TieredStopAtLevel=1"
+
+
+def short_lived_jvm(env: dict[str, str]) -> dict[str, str]:
+    """``env`` for a gateway process a test starts (``printeps serve``, ``ros_launch``, a CLI
+    command), with its JVM on the C1 compiler only: ``SHORT_LIVED_JVM`` appended to any
+    ``PRINTEPS_JVM_OPTIONS`` in ``env``.
+
+    Why: such a process lives seconds and serves a handful of requests, so what C2's threads spend
+    optimising never pays back: 9-18% less CPU for whole cluster files and the export/import and
+    ROS-launcher tests (docs/operations.md, "Where the suite's time goes", fourth pass). Only these
+    processes: the pytest workers' own JVMs run a whole file's workload and keep C2, which is why
+    this is not an environment variable of the run."""
+    return {**env, "PRINTEPS_JVM_OPTIONS": f"{env.get('PRINTEPS_JVM_OPTIONS', '')} {SHORT_LIVED_JVM}".strip()}
+
+
 def run_async(coro: Coroutine[Any, Any, T]) -> T:
     """``asyncio.run(coro)`` on a thread of its own: the session's browser (Playwright's sync API)
     keeps an event loop running on the main thread once a browser test has run in this process

@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 from gateway.cli import app
 from gateway.config import ApiSettings
 from gateway.serve import free_port, open_mode_check
+from gw_testing import short_lived_jvm
 
 PROJECT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
@@ -77,7 +78,7 @@ def test_forced_open_mode_starts_on_a_public_address_and_warns(config: Path, tmp
     with stderr.open("w") as err:
         serve = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--no-ros", "--host", "0.0.0.0",
                                   "--port", str(port), "--config", str(config)],
-                                 env={**_no_auth_env(), "PRINTEPS_API_OPEN": "1"}, cwd=PROJECT,
+                                 env=short_lived_jvm({**_no_auth_env(), "PRINTEPS_API_OPEN": "1"}), cwd=PROJECT,
                                  stdout=subprocess.DEVNULL, stderr=err)
     try:
         deadline = time.monotonic() + 180

@@ -4,7 +4,6 @@ several hosts) and it goes on after the process that took its first turns is kil
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import threading
@@ -13,7 +12,7 @@ from pathlib import Path
 import httpx
 import pytest
 import yaml
-from test_processes import Process, wait_for
+from test_processes import Process, process_env, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,7 +30,7 @@ def home(tmp_path_factory, mongo):
         "streams": {"queries_dir": None},
         "sessions": {"member_heartbeat_s": 1.0},
     }))
-    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+    return home, config, process_env(mongo.uri)
 
 
 def turn(url: str, conversation: str, text: str) -> dict:
@@ -93,8 +92,7 @@ def test_one_conversation_whichever_process_takes_the_turn_and_after_its_process
         (kept,) = orders_of(b.url, "table2")
         assert (kept["drink"], kept["cups"]) == ("green tea", 3) and kept["decision_ids"][0] == asked["decision_id"]
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 def test_workers_carry_one_conversation_on_the_shared_port(home):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from test_processes import Process, cluster_home, files, wait_for
+from test_processes import Process, cluster_home, files, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 BASE = "/kie-server/services/rest/server"
@@ -113,8 +113,7 @@ def test_owner_killed_while_another_process_feeds_keeps_every_acknowledged_inser
         assert said(call("POST", f"{b.url}{API}/{sid}/fire")) == []
         assert rebuilt_in(a, b) == 1
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 
@@ -240,8 +239,7 @@ def test_owner_gone_mid_forward_while_a_third_process_ships_its_journal_keeps_ev
     finally:
         for pid in stopped:
             os.kill(pid, signal.SIGCONT)
-        for p in (a, b, c):
-            p.stop()
+        stop_all(a, b, c)
 
 def test_two_processes_racing_to_take_over_one_wins_and_the_other_forwards(home):
     folder, config, env = home
@@ -272,8 +270,7 @@ def test_two_processes_racing_to_take_over_one_wins_and_the_other_forwards(home)
         assert len(owners) == 1
         assert facts(b.url, sid) == facts(c.url, sid) == sorted([f"r{k}" for k in range(50)] + ["RB", "RC"])
     finally:
-        for p in (a, b, c):
-            p.stop()
+        stop_all(a, b, c)
 
 
 def test_a_lone_restart_serves_its_sessions_again(home):
@@ -326,8 +323,7 @@ def test_kie_lookup_after_a_takeover_reaches_the_same_ksession(home):
         actions = next(x["value"] for x in after.json()["result"]["execution-results"]["results"] if x["key"] == "actions")
         assert [x["params"]["text"] for x in actions] == ["Hello kb"]  # the others fired on A, before it died
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 def test_a_session_that_followed_a_deploy_is_rebuilt_on_that_version(home):
@@ -350,8 +346,7 @@ def test_a_session_that_followed_a_deploy_is_rebuilt_on_that_version(home):
         assert said(call("POST", f"{b.url}{API}/{sid}/fire")) == ["Seen v"]
         assert said(call("POST", f"{b.url}{API}/{sid}/fire")) == []
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 def test_a_corrupt_snapshot_is_passed_over_for_the_one_before_and_the_log(home):
@@ -378,5 +373,4 @@ def test_a_corrupt_snapshot_is_passed_over_for_the_one_before_and_the_log(home):
         assert said(call("POST", f"{b.url}{API}/{sid}/fire")) == []
         assert "digest does not match" in b.output()
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)

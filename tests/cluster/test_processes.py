@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from gateway.serve import free_port
+from gw_testing import short_lived_jvm
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,12 +88,29 @@ class Process:
             self.proc.wait(timeout=60)
 
     def stop(self) -> None:
+        self.terminate()
+        self.wait_stopped()
+
+    def terminate(self) -> None:
+        """SIGTERM (a clean stop), not waited for."""
         if self.proc is not None and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
+
+    def wait_stopped(self) -> None:
+        if self.proc is not None:
             try:
                 self.proc.wait(timeout=60)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
+
+
+def stop_all(*processes: Process) -> None:
+    """Stop several processes at once: each clean stop takes 2-3 s (mostly waiting on its threads
+    and the JVM), so one after the other left the test's worker idle that long per extra process."""
+    for p in processes:
+        p.terminate()
+    for p in processes:
+        p.wait_stopped()
 
 
 def fire(url: str, greeting_of: dict | None = None) -> dict:
@@ -115,6 +133,16 @@ def wait_for(cond, timeout: float = 10.0, step: float = 0.02) -> float | None:
     return None
 
 
+def process_env(mongo_uri: str | None) -> dict[str, str]:
+    """The environment of the ``printeps serve`` processes a cluster test starts: this one's, with
+    ``MONGO_URI`` set to the test's server (or removed: the process starts its own), their JVM on C1
+    only (:func:`gw_testing.short_lived_jvm`)."""
+    env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"}
+    if mongo_uri is not None:
+        env["MONGO_URI"] = mongo_uri
+    return short_lived_jvm(env)
+
+
 def cluster_home(tmp_path_factory, mongo, database: str, settings: dict) -> tuple[Path, Path, dict[str, str]]:
     """A host for gateway processes: a home with the ``cluster`` rule set ("Hello"), a
     printeps.yaml on one data dir and the test database ``database`` (plus ``settings``), and the
@@ -131,7 +159,7 @@ def cluster_home(tmp_path_factory, mongo, database: str, settings: dict) -> tupl
         "streams": {"queries_dir": None},
         **settings,
     }))
-    return home, config, {**os.environ, "MONGO_URI": mongo.uri}
+    return home, config, process_env(mongo.uri)
 
 
 @pytest.fixture(scope="module")
@@ -146,8 +174,7 @@ def cluster(tmp_path_factory, mongo):
             p.ready()
         yield procs
     finally:
-        for p in procs.values():
-            p.stop()
+        stop_all(*procs.values())
 
 
 def deploy(url: str, greeting: str, base: int | None = None) -> httpx.Response:
@@ -337,7 +364,7 @@ def test_workers_share_one_port_and_one_rule_base(tmp_path, mongo):
     config = home / "printeps.yaml"
     config.write_text(yaml.safe_dump({"data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "rules")},
                                       "store": {"database": "workers"}, "streams": {"queries_dir": None}}))
-    env = {**os.environ, "MONGO_URI": mongo.uri}
+    env = process_env(mongo.uri)
     supervisor = Process("workers", config, env, home, "--workers", "2").start()
     try:
         supervisor.ready()
@@ -370,7 +397,7 @@ def test_a_second_gateway_on_a_held_data_dir_says_who_holds_it(tmp_path):
     config = home / "printeps.yaml"
     config.write_text(yaml.safe_dump({"data_dir": str(home / "var"), "engine": {"rules_dir": str(home / "none")},
                                       "streams": {"queries_dir": None}}))
-    env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"}
+    env = process_env(None)
     first = Process("first", config, env, home).start()
     try:
         first.ready()

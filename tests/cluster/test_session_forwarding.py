@@ -11,7 +11,7 @@ import time
 
 import httpx
 import pytest
-from test_processes import Process, cluster_home, wait_for
+from test_processes import Process, cluster_home, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 BASE = "/kie-server/services/rest/server"
@@ -79,8 +79,7 @@ def test_forwarding_between_two_processes_and_410_when_the_owner_is_gone(home):
         finally:
             b2.stop()
     finally:
-        a.stop()
-        b.stop()
+        stop_all(a, b)
 
 
 def workers_registered(served: Process) -> list[dict]:

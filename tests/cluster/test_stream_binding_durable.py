@@ -13,7 +13,7 @@ import time
 
 import httpx
 import pytest
-from test_processes import Process, cluster_home, wait_for
+from test_processes import Process, cluster_home, stop_all, wait_for
 
 pytestmark = pytest.mark.slow
 STREAM = "http://example.org/sensors"
@@ -179,6 +179,4 @@ def test_a_window_firing_in_a_process_that_does_not_own_the_bindings_session_is_
         assert sorted(f["fact"]["id"] for f in call("GET", f"{other.url}{owned}/facts").json()["facts"]) == ["o1"]
         assert httpx.delete(f"{owner.url}/api/queries/Owned/rules", timeout=60).status_code == 200
     finally:
-        owner.stop()
-        if other is not None:
-            other.stop()
+        stop_all(owner, *([other] if other is not None else []))

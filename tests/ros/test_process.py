@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from gw_testing import short_lived_jvm
 
 pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
 pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
@@ -28,7 +29,7 @@ def test_clean_shutdown(sig, domain_id, tmp_path) -> None:
     env = {**os.environ, "PRINTEPS_DATA_DIR": str(tmp_path), "ROS_DOMAIN_ID": str(domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     env.pop("MONGO_URI", None)
-    proc = subprocess.Popen([sys.executable, "-m", "gateway.ros_launch"], cwd=ROOT, env=env, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "gateway.ros_launch"], cwd=ROOT, env=short_lived_jvm(env), text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     lines = []
     try:

@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 
 from gateway.config import PROJECT_ROOT, Settings
 
-from gw_testing import open_test_store
+from gw_testing import open_test_store, short_lived_jvm
 
 ENTRANCE = "http://printeps.org/cafe/entrance"
 RECEPTION_FACTS = [{"type": "Entrance", "id": "entrance", "number_of_customers": 1},
@@ -236,7 +236,7 @@ def test_export_and_import_commands_join_a_running_gateway(tmp_path):
 
     config = tmp_path / "printeps.yaml"
     config.write_text(yaml.safe_dump({"data_dir": str(tmp_path / "var"), "streams": {"queries_dir": None}}))
-    env = {k: v for k, v in os.environ.items() if k != "MONGO_URI"}
+    env = short_lived_jvm({k: v for k, v in os.environ.items() if k != "MONGO_URI"})
     port = free_port()
     serve = subprocess.Popen([sys.executable, "-m", "gateway.cli", "serve", "--no-ros", "--port", str(port), "--config",
                               str(config)], env=env, cwd=PROJECT_ROOT, stdout=subprocess.DEVNULL,

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from gw_testing import wait_for
+from gw_testing import short_lived_jvm, wait_for
 
 pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (ros/install.sh)")
 pytest.importorskip("printeps_interfaces", reason="printeps_interfaces not built (ros/install.sh)")
@@ -116,7 +116,7 @@ def test_generated_node_reports_a_missing_robot_as_a_failed_step(ros_env, tmp_pa
 
 def test_generated_greeting_fires_rules_in_the_gateway_node(pepper, ros_env, tmp_path):
     env = dict(ros_env, PRINTEPS_DATA_DIR=str(tmp_path / "var"))
-    gateway = Proc([sys.executable, "-m", "gateway.ros_launch"], env, tmp_path / "gateway.log")
+    gateway = Proc([sys.executable, "-m", "gateway.ros_launch"], short_lived_jvm(env), tmp_path / "gateway.log")
     try:
         result = run_generated(PROJECT_ROOT / "workflows" / "1_greeting.yaml", env, tmp_path, "--timeout", "60",
                                timeout=150)
