@@ -321,7 +321,10 @@ class _Inbox:
         if text == "[]":
             return
         for ticket, elapsed_ns, answer in orjson.loads(text):
-            future, bulkhead = self._pending.pop(ticket)
+            found = self._pending.pop(ticket, None)
+            if found is None:  # failed at its submission already (_fail), though the JVM took it
+                continue
+            future, bulkhead = found
             refusal = bulkhead._answered_in_java(elapsed_ns, answer if elapsed_ns < 0 else 0)
             if future.cancelled():  # the caller went away
                 continue
