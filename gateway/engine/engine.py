@@ -41,10 +41,10 @@ from gateway.engine.errors import (
     VersionNotFound,
 )
 from gateway.engine.recorder import DecisionRecorder
-from gateway.engine.results import FireResult, PreparedFire, decode_result, encode_facts, result_of
+from gateway.engine.results import FireResult, PreparedFire, decode_result, encode_facts
 from gateway.engine.ruleset import check_files, check_name, content_hash, read_folder
 from gateway.engine.session import StatefulSession
-from gateway.engine.sessions import SessionManager, rule_fingerprints
+from gateway.engine.sessions import SessionManager, rule_fingerprints, rule_texts
 from gateway.base.versions import Catalog, CatalogConflict, Version, VersionInfo, VersionMissing
 
 log = logging.getLogger(__name__)
@@ -111,7 +111,7 @@ class Engine(CatalogLifecycle):
         self._explainers = explain.ExplainCache()
         self._warm_up = warmup.ProcessWarmUp(self)
         self.session_manager = SessionManager(self, self.settings.sessions)
-        self._fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)
+        self.fire_timeout_ms = int(self.settings.engine.fire_timeout_s * 1000)  # as the Java fire takes it (0: none)
         # sessions follow deploys (their policy); decisions are nothing to them
         self.add_listener(self.session_manager.on_engine_event, fires=False)
         store = self.settings.store  # every decision, from every origin, is recorded by this one recorder
@@ -540,23 +540,12 @@ class Engine(CatalogLifecycle):
         return fire
 
     def prepare_fire(self, name: str, facts: list[dict[str, Any]]) -> PreparedFire:
-        """A stateless fire of the live version of ``name`` ready to run (its facts encoded, bad facts
-        refused here): for a caller that runs ``prepared.runner.fire`` elsewhere (the REST fire
-        route, on the rule set's JVM threads: gateway.engine.bulkhead) and gives the answer to
-        :meth:`finish_fire`. :meth:`fire` does the same in one call on its caller's thread."""
+        """A stateless fire of the live version of ``name`` ready to run elsewhere (bad facts refused
+        here): the REST route runs it on the rule set's JVM lane (gateway.engine.bulkhead) and reads
+        the answer with ``results.finished``. :meth:`fire` does all of it on its caller's thread."""
         info, compiled = self._live_entry(name)
         return PreparedFire(name, info.version, compiled.runner, self._encoded(name, facts),
                             int(self.settings.engine.fire_limit), True, True)
-
-    @property
-    def fire_timeout_ms(self) -> int:
-        """``engine.fire_timeout_s`` in ms (0: none), as the Java fire takes it."""
-        return self._fire_timeout_ms
-
-    @staticmethod
-    def finish_fire(prepared: PreparedFire, answer: dict[str, Any], duration_ms: float) -> FireResult:
-        """The result of ``prepared``'s fire from the Runner's parsed ``answer`` (refusals raise)."""
-        return result_of(answer, prepared.name, prepared.version, duration_ms)
 
     def _encoded(self, name: str, facts: list[dict[str, Any]]) -> str:
         """``facts`` as the Runner takes them (bad facts raise FactError), kept as a warm-up sample."""
@@ -578,7 +567,7 @@ class Engine(CatalogLifecycle):
         facts_json = self._encoded(name, facts)
         limit = int(fire_limit or self.settings.engine.fire_limit)
         started = time.perf_counter()
-        answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts, self._fire_timeout_ms))
+        answer = str(compiled.runner.fire(facts_json, limit, return_facts, record_facts, self.fire_timeout_ms))
         return decode_result(answer, name, version, (time.perf_counter() - started) * 1000)
 
     # ------------------------------------------------------------------ sessions
@@ -617,7 +606,7 @@ class Engine(CatalogLifecycle):
         """A Java ``Session`` of ``compiled``: conversations keep a fact handle registry; each fire
         of it is halted after ``engine.fire_timeout_s``."""
         java = jvm.helper_class("Session")(compiled.runner, record_facts, clock == "realtime", kind != "stream")
-        java.setFireTimeoutMs(self._fire_timeout_ms)
+        java.setFireTimeoutMs(self.fire_timeout_ms)
         return java
 
     def live_compiled(self, name: str) -> tuple[VersionInfo, CompiledRuleSet]:
@@ -639,20 +628,11 @@ class Engine(CatalogLifecycle):
         key = (name, old, new)
         found = self._unchanged.get(key)
         if found is None:
-            before = rule_fingerprints(self._rule_texts(self.version(name, old).files))
-            after = rule_fingerprints(self._rule_texts(self.version(name, new).files))
+            before = rule_fingerprints(rule_texts(self.version(name, old).files))
+            after = rule_fingerprints(rule_texts(self.version(name, new).files))
             found = sorted(r for r, digest in after.items() if before.get(r) == digest)
             _keep(self._unchanged, key, found, UNCHANGED_KEPT)
         return found
-
-    @staticmethod
-    def _rule_texts(files: dict[str, str]) -> list[str]:
-        texts = [text for fname, text in files.items() if fname.endswith(".drl")]
-        try:
-            texts.extend(compiler.expand(files).values())
-        except EngineError:  # a version that no longer expands: its rules count as changed
-            pass
-        return texts
 
     def sessions(self) -> list[StatefulSession]:
         return self.session_manager.list()

@@ -147,6 +147,11 @@ def decode_result(answer: str | bytes | bytearray, ruleset: str, version: int, d
     return result_of(orjson.loads(answer), ruleset, version, duration_ms)  # orjson: ~3x faster than json.loads
 
 
+def finished(prepared: PreparedFire, answer: dict[str, Any], duration_ms: float) -> FireResult:
+    """The result of ``prepared``'s fire (Engine.prepare_fire) from the Runner's parsed ``answer``."""
+    return result_of(answer, prepared.name, prepared.version, duration_ms)
+
+
 def result_of(data: dict[str, Any], ruleset: str, version: int, duration_ms: float) -> FireResult:
     """The FireResult of the Runner's parsed answer ``data``; refusals and runaways raise."""
     if data.get("ok") is not True:

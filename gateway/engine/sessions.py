@@ -39,7 +39,7 @@ import threading
 import time
 from typing import Any, Protocol
 
-from gateway.engine import durable
+from gateway.engine import compiler, durable
 from gateway.engine.errors import EngineError
 from gateway.engine.kmodule import Declarations, SessionDeclaration
 from gateway.engine.session import CommandFailed, StatefulSession
@@ -641,6 +641,18 @@ _UNIT_HEAD = re.compile(r"""^[ \t]*(rule|query|declare|function|import|global|pa
                         r"""("(?:[^"\\]|\\.)*"|'[^']*'|[^\s"']+)?""", re.MULTILINE)
 _END = re.compile(r"\bend\b")
 _COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.DOTALL)
+
+
+def rule_texts(files: dict[str, str]) -> list[str]:
+    """The DRL texts of a version's ``files``, its DSL/DSLR and decision tables expanded (for
+    :func:`rule_fingerprints`); a version that no longer expands gives only its DRL, so its other
+    rules count as changed."""
+    texts = [text for fname, text in files.items() if fname.endswith(".drl")]
+    try:
+        texts.extend(compiler.expand(files).values())
+    except EngineError:
+        pass
+    return texts
 
 
 def rule_fingerprints(drl_texts: list[str]) -> dict[str, str]:

@@ -21,6 +21,7 @@ import pytest
 from gateway.engine import Engine
 from gateway.engine.bulkhead import Bulkhead
 from gateway.engine.errors import FactError, Overloaded, RuleRuntimeError
+from gateway.engine.results import finished
 from gw_testing import GATED_JOB_DRL, run_async, wait_for
 
 LANE_DRL = "package org.printeps.lanetest;\n\n" + GATED_JOB_DRL + """
@@ -63,7 +64,7 @@ def _job(folder: Path, name: str) -> tuple[list[dict[str, Any]], Path, Path]:
 async def _fire(engine: Engine, bulkhead: Bulkhead, facts: list[dict[str, Any]]) -> Any:
     prepared = engine.prepare_fire("lane", facts)
     answer, ms = await bulkhead.fire(prepared, engine.fire_timeout_ms)
-    return engine.finish_fire(prepared, answer, ms)
+    return finished(prepared, answer, ms)
 
 
 def test_a_fire_runs_on_the_jvm_thread_while_the_loop_goes_on(lane_engine, tmp_path):

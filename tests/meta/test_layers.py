@@ -249,3 +249,31 @@ def test_every_declared_layer_names_modules_that_exist(layer, prefixes) -> None:
     known = modules_of(ROOT)
     for prefix in prefixes:
         assert any(m == prefix or m.startswith(prefix + ".") for m in known), f"layer {layer!r}: no module {prefix}"
+
+
+#: No source file of the gateway, its Java side or the workbench's sources is longer (issue 27: a
+#: file a newcomer can read; split a concept out rather than let a module grow past it).
+MAX_SOURCE_LINES = 700
+
+
+def long_sources(root: Path, limit: int = MAX_SOURCE_LINES) -> list[str]:
+    """The source files under ``root``'s gateway/, java/src and web/src longer than ``limit`` lines."""
+    found = []
+    for folder, pattern in (("gateway", "*.py"), ("java/src", "*.java"), ("web/src", "*.js")):
+        for path in sorted((root / folder).rglob(pattern)):
+            lines = len(path.read_text(encoding="utf-8").splitlines())
+            if lines > limit:
+                found.append(f"{path.relative_to(root)}: {lines} lines")
+    return found
+
+
+def test_no_source_file_is_longer_than_the_limit() -> None:
+    found = long_sources(ROOT)
+    assert not found, f"longer than {MAX_SOURCE_LINES} lines: " + "; ".join(found)
+
+
+def test_the_length_scan_finds_a_long_file(tmp_path) -> None:
+    (tmp_path / "gateway").mkdir()
+    (tmp_path / "gateway" / "long.py").write_text("x = 1\n" * 701)
+    (tmp_path / "gateway" / "short.py").write_text("x = 1\n" * 700)
+    assert long_sources(tmp_path) == ["gateway/long.py: 701 lines"]

@@ -26,6 +26,7 @@ from gateway.api.errors import ApiError
 from gateway.api.jsonio import JSON, JsonRoute, read_json
 from gateway.api.lean_route import LeanRoute
 from gateway.engine.errors import FactError
+from gateway.engine.results import finished
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"  # as gateway.engine.ruleset.check_name
 
@@ -221,7 +222,7 @@ async def fire_answer(state: Any, name: str, body: Any, correlation: str | None)
         # JVM threads, which never take the GIL (gateway.engine.bulkhead). Recorded here too.
         prepared = engine.prepare_fire(name, facts)
         answer, fire_ms = await state.bulkheads.of(name).fire(prepared, engine.fire_timeout_ms)
-        result = engine.finish_fire(prepared, answer, fire_ms)
+        result = finished(prepared, answer, fire_ms)
     except Exception as exc:
         metrics.fire_error(name, exc)
         raise
