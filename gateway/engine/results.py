@@ -48,7 +48,6 @@ class FireResult:
         return out
 
 
-
 @dataclass(frozen=True, slots=True)
 class PreparedFire:
     """A stateless fire ready for the Java ``Runner.fire`` call: what the engine decided before it
