@@ -50,6 +50,11 @@ Done = Callable[[Any, BaseException | None], None]
 #: Weight of the newest fire in a rule set's mean fire time (the wait estimate).
 SMOOTHING = 0.2
 
+#: A JVM-lane answer's elapsed time when the fire was refused for waiting too long (as
+#: FireLane.java writes it), and when it never reached the JVM (its submission failed).
+WAITED = -1
+NOT_SUBMITTED = -2
+
 
 class Bulkhead:
     """One rule set's fire threads and queue (thread-safe)."""
@@ -123,17 +128,20 @@ class Bulkhead:
 
     def _answered_in_java(self, elapsed_ns: int, waited_ns: int) -> Overloaded | None:
         """Counts a JVM-lane fire as answered (on the loop); the refusal when it waited too long
-        (``elapsed_ns`` -1; -2: it never reached the JVM)."""
+        (``elapsed_ns`` :data:`WAITED`; :data:`NOT_SUBMITTED`: it never reached the JVM)."""
         with self._lock:
             self.in_java -= 1
-            if elapsed_ns == -2:
+            if elapsed_ns == NOT_SUBMITTED:
                 return None
-            if elapsed_ns < 0:
+            if elapsed_ns == WAITED:
                 self.refused["waited"] += 1
                 return self._refusal("waited", waited_ns / 1e9)
-            elapsed = elapsed_ns / 1e9
-            self.mean_s = elapsed if self.mean_s == 0.0 else self.mean_s + SMOOTHING * (elapsed - self.mean_s)
+            self._ran(elapsed_ns / 1e9)
             return None
+
+    def _ran(self, elapsed: float) -> None:
+        """A fire took ``elapsed`` seconds: the mean the wait estimate uses (under the lock)."""
+        self.mean_s = elapsed if self.mean_s == 0.0 else self.mean_s + SMOOTHING * (elapsed - self.mean_s)
 
     # -- the workers --------------------------------------------------------------------------------
     def _work(self) -> None:
@@ -169,7 +177,7 @@ class Bulkhead:
         elapsed = time.monotonic() - started
         with self._lock:
             self.running -= 1
-            self.mean_s = elapsed if self.mean_s == 0.0 else self.mean_s + SMOOTHING * (elapsed - self.mean_s)
+            self._ran(elapsed)
         _call_done(done, result, error)
 
     # -- limits -------------------------------------------------------------------------------------
@@ -287,7 +295,7 @@ class _Inbox:
 
     def _fail(self, ticket: int, error: BaseException) -> None:
         future, bulkhead = self._pending.pop(ticket)
-        bulkhead._answered_in_java(-2, 0)
+        bulkhead._answered_in_java(NOT_SUBMITTED, 0)
         if not future.cancelled():
             future.set_exception(error)
 
@@ -325,7 +333,7 @@ class _Inbox:
             if found is None:  # failed at its submission already (_fail), though the JVM took it
                 continue
             future, bulkhead = found
-            refusal = bulkhead._answered_in_java(elapsed_ns, answer if elapsed_ns < 0 else 0)
+            refusal = bulkhead._answered_in_java(elapsed_ns, answer if elapsed_ns == WAITED else 0)
             if future.cancelled():  # the caller went away
                 continue
             if refusal is not None:

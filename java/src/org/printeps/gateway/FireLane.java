@@ -71,6 +71,9 @@ public final class FireLane {
         }
     }
 
+    /** An answer's elapsed time when its fire was refused for waiting too long (bulkhead.WAITED). */
+    static final long WAITED = -1L;
+
     private final ThreadPoolExecutor pool;
 
     /** {@code workers} threads named {@code fire-<name>}, started on demand and gone after {@code idleMs}. */
@@ -93,7 +96,7 @@ public final class FireLane {
         pool.execute(() -> {
             long started = System.nanoTime();
             if (maxWaitMs > 0 && started - queued > maxWaitMs * 1_000_000L) {
-                inbox.post("[" + ticket + ",-1," + (started - queued) + "]");
+                inbox.post("[" + ticket + "," + WAITED + "," + (started - queued) + "]");
                 return;
             }
             String answer;
