@@ -128,3 +128,17 @@ then
     }
 end
 """
+
+
+class Gate:
+    """One gated fire's "started" and gate files (its facts for :data:`GATED_JOB_DRL`)."""
+
+    def __init__(self, folder: Path, name: str) -> None:
+        self.started = folder / f"{name}.started"
+        self.gate = folder / f"{name}.gate"
+
+    def facts(self) -> list[dict[str, Any]]:
+        return [{"type": "Job", "id": self.gate.stem, "started": str(self.started), "gate": str(self.gate)}]
+
+    def open(self) -> None:
+        self.gate.touch()

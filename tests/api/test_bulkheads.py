@@ -11,14 +11,13 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
 from api_helpers import FACTS, ServerThread, files, make_settings
-from gw_testing import GATED_JOB_DRL, built_gateway, wait_for
+from gw_testing import GATED_JOB_DRL, Gate, built_gateway, wait_for
 from gateway.api.main import create_app
 
 SLOW = "slowset"
@@ -46,20 +45,6 @@ then
     modify($c) { setN($c.getN() + 1) };
 end
 """
-
-
-class Gate:
-    """One slow fire's started/gate files."""
-
-    def __init__(self, folder: Path, name: str) -> None:
-        self.started = folder / f"{name}.started"
-        self.gate = folder / f"{name}.gate"
-
-    def facts(self) -> list[dict[str, Any]]:
-        return [{"type": "Job", "id": self.gate.stem, "started": str(self.started), "gate": str(self.gate)}]
-
-    def open(self) -> None:
-        self.gate.touch()
 
 
 @pytest.fixture(scope="module")

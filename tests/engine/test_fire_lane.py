@@ -13,7 +13,6 @@ import asyncio
 import gc
 import os
 import threading
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -22,7 +21,7 @@ from gateway.engine import Engine
 from gateway.engine.bulkhead import Bulkhead
 from gateway.engine.errors import FactError, Overloaded, RuleRuntimeError
 from gateway.engine.results import finished
-from gw_testing import GATED_JOB_DRL, run_async, wait_for
+from gw_testing import GATED_JOB_DRL, Gate, run_async, wait_for
 
 LANE_DRL = "package org.printeps.lanetest;\n\n" + GATED_JOB_DRL + """
 declare Greeting
@@ -56,11 +55,6 @@ def lane_engine(engine: Engine) -> Engine:
     return engine
 
 
-def _job(folder: Path, name: str) -> tuple[list[dict[str, Any]], Path, Path]:
-    started, gate = folder / f"{name}.started", folder / f"{name}.gate"
-    return [{"type": "Job", "id": name, "started": str(started), "gate": str(gate)}], started, gate
-
-
 async def _fire(engine: Engine, bulkhead: Bulkhead, facts: list[dict[str, Any]]) -> Any:
     prepared = engine.prepare_fire("lane", facts)
     answer, ms = await bulkhead.fire(prepared, engine.fire_timeout_ms)
@@ -69,16 +63,16 @@ async def _fire(engine: Engine, bulkhead: Bulkhead, facts: list[dict[str, Any]])
 
 def test_a_fire_runs_on_the_jvm_thread_while_the_loop_goes_on(lane_engine, tmp_path):
     bulkhead = Bulkhead("lane", workers=1, max_queue=8, max_wait_s=60)
-    facts, started, gate = _job(tmp_path, "slow")
+    slow_gate = Gate(tmp_path, "slow")
 
     async def main() -> tuple[Any, int]:
-        slow = asyncio.ensure_future(_fire(lane_engine, bulkhead, facts))
+        slow = asyncio.ensure_future(_fire(lane_engine, bulkhead, slow_gate.facts()))
         ticks = 0
-        while not started.exists():  # the loop keeps running while the fire waits at its gate
+        while not slow_gate.started.exists():  # the loop keeps running while the fire waits at its gate
             ticks += 1
             await asyncio.sleep(0.01)
         assert bulkhead.stats()["running"] == 1 and bulkhead.stats()["threads"] == 1
-        gate.touch()
+        slow_gate.open()
         return await slow, ticks
 
     result, ticks = run_async(main())
@@ -105,18 +99,17 @@ def test_fires_of_one_loop_iteration_each_get_their_own_answer(lane_engine):
 
 def test_a_fire_that_waited_too_long_is_refused_and_never_runs(lane_engine, tmp_path):
     bulkhead = Bulkhead("lane", workers=1, max_queue=8, max_wait_s=0.3)
-    first, first_started, first_gate = _job(tmp_path, "first")
-    second, second_started, _ = _job(tmp_path, "second")
+    first, second = Gate(tmp_path, "first"), Gate(tmp_path, "second")
 
     async def main() -> tuple[Any, BaseException | None]:
-        running = asyncio.ensure_future(_fire(lane_engine, bulkhead, first))
-        while not first_started.exists():
+        running = asyncio.ensure_future(_fire(lane_engine, bulkhead, first.facts()))
+        while not first.started.exists():
             await asyncio.sleep(0.01)
-        late = asyncio.ensure_future(_fire(lane_engine, bulkhead, second))
+        late = asyncio.ensure_future(_fire(lane_engine, bulkhead, second.facts()))
         await asyncio.sleep(0)  # submitted behind the running one
         assert bulkhead.stats()["waiting"] == 1
         await asyncio.sleep(0.6)  # past max_wait_s
-        first_gate.touch()
+        first.open()
         done = await running
         try:
             await late
@@ -127,26 +120,24 @@ def test_a_fire_that_waited_too_long_is_refused_and_never_runs(lane_engine, tmp_
     done, refusal = run_async(main())
     assert [f["rule"] for f in done.fired] == ["Wait for the gate"]
     assert isinstance(refusal, Overloaded) and refusal.status == 503 and refusal.setting == "api.max_wait_s"
-    assert not second_started.exists()  # refused before it fired
+    assert not second.started.exists()  # refused before it fired
     assert bulkhead.stats()["refused"] == {"queue_full": 0, "waited": 1}
 
 
 def test_a_full_queue_is_refused_at_once(lane_engine, tmp_path):
     bulkhead = Bulkhead("lane", workers=1, max_queue=1, max_wait_s=60)
-    first, first_started, first_gate = _job(tmp_path, "a")
-    second, _, _ = _job(tmp_path, "b")
+    first, second = Gate(tmp_path, "a"), Gate(tmp_path, "b")
 
     async def main() -> Overloaded:
-        running = asyncio.ensure_future(_fire(lane_engine, bulkhead, first))
-        while not first_started.exists():
+        running = asyncio.ensure_future(_fire(lane_engine, bulkhead, first.facts()))
+        while not first.started.exists():
             await asyncio.sleep(0.01)
-        queued = asyncio.ensure_future(_fire(lane_engine, bulkhead, second))
+        queued = asyncio.ensure_future(_fire(lane_engine, bulkhead, second.facts()))
         await asyncio.sleep(0)
         with pytest.raises(Overloaded) as refused:
             await _fire(lane_engine, bulkhead, [{"type": "Greeting", "id": "x"}])
-        first_gate.touch()
-        second_gate = Path(second[0]["gate"])
-        second_gate.touch()
+        first.open()
+        second.open()
         await running
         await queued
         return refused.value
