@@ -181,3 +181,28 @@ def test_a_loops_pipe_is_closed_with_the_loop(lane_engine):
     gc.collect()
     assert wait_for(lambda: (gc.collect(), len(os.listdir("/proc/self/fd")))[1] <= before, 10), \
         (before, len(os.listdir("/proc/self/fd")))
+
+
+def test_a_submission_the_jvm_refuses_fails_its_fires_and_frees_their_places(lane_engine):
+    """If the JVM refuses the hand-over itself (an out-of-memory, a lane shut down), the callers get
+    that error at once and the bulkhead counts nothing in flight; nothing hangs."""
+    bulkhead = Bulkhead("lane", workers=1, max_queue=8, max_wait_s=60)
+
+    class RefusingLane:
+        def fire(self, *args: Any) -> None:
+            raise RuntimeError("the lane refused it")
+
+        fireMany = fire
+
+        def threads(self) -> int:
+            return 0
+
+    bulkhead._java_lane = RefusingLane()
+
+    async def main() -> list[Any]:
+        return await asyncio.gather(*[_fire(lane_engine, bulkhead, [{"type": "Greeting", "id": f"g{k}"}])
+                                      for k in range(3)], return_exceptions=True)
+
+    outcomes = run_async(main())
+    assert [str(o) for o in outcomes] == ["the lane refused it"] * 3
+    assert bulkhead.in_java == 0 and bulkhead.stats()["waiting"] == 0 and bulkhead.stats()["running"] == 0
