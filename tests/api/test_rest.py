@@ -7,6 +7,7 @@ import json
 import pytest
 
 from api_helpers import BROKEN, FACTS, TYPES, files
+from gateway.base import jvm
 
 DSL = '[when]There is a customer=$c : Customer()\n[then]Say hello=actions.say("pepper", "hello " + $c.getId());\n'
 DSLR = (
@@ -148,6 +149,7 @@ def test_health_and_metrics(client, deployed):
     assert h["store"]["status"] == "ok" and h["sync"]["status"] == "ok"
     non_heap = h["engine"]["jvm_non_heap"]  # what the soak plots beside the heap (a deploy leak shows here)
     assert 0 < non_heap["used"] <= non_heap["committed"] and non_heap["classes"] > 1000
+    assert h["engine"]["jvm_aot_cache"] == jvm.aot_cache()  # the AOT class cache the JVM started from, or None
     client.post("/api/rulesets/rest/fire", json={"facts": FACTS})
     text = client.get("/metrics").text
     assert 'printeps_fires_total{outcome="ok",ruleset="rest"}' in text

@@ -68,5 +68,8 @@ def test_fire_locally(cli_home: Path, facts_file: Path):
 
 
 def test_build_java():
+    """Compiles the helpers and names the JVM's AOT class cache it trained (or found up to date)."""
     result = run("build-java")
     assert result.exit_code == 0 and "compiled" in result.output
+    cache = Path(result.output.split("AOT class cache ", 1)[1].split()[0])
+    assert cache.suffix == ".aot" and cache.is_file()
