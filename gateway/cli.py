@@ -597,9 +597,14 @@ def build_java(config: Optional[Path] = ConfigOption) -> None:
     settings = _settings(config)
     try:
         jvm.start(settings.jvm)
-        cache = jvm_training.build(settings)
-    except (jvm.JvmError, jvm_training.TrainingError) as exc:
+    except jvm.JvmError as exc:
         _fail(str(exc))
+    try:
+        cache = jvm_training.build(settings)
+    except jvm_training.TrainingError as exc:
+        # the cache only makes starts cheaper: without it everything runs as before
+        typer.echo(f"JVM started; Java helpers compiled; no AOT class cache: {exc}", err=True)
+        return
     typer.echo("JVM started; Java helpers compiled; "
                + (f"AOT class cache {cache}" if cache else "no AOT class cache (needs Java 25+, jvm.aot_cache)"))
 

@@ -40,7 +40,7 @@ TIMEOUT_S = 600.0
 
 
 class TrainingError(RuntimeError):
-    """The training run failed; its output's end says why."""
+    """The training run failed or did not finish; the message ends with its output's end."""
 
 
 def build(settings: Settings, *, timeout_s: float = TIMEOUT_S) -> Path | None:
@@ -59,8 +59,11 @@ def build(settings: Settings, *, timeout_s: float = TIMEOUT_S) -> Path | None:
     partial = target.with_name(f"{target.stem}.tmp{os.getpid()}")
     env = {**os.environ, jvm_cache.TRAINING_OUTPUT_ENV: str(partial)}
     try:
-        done = subprocess.run([sys.executable, "-m", "gateway.engine.jvm_training"], env=env, capture_output=True,
-                              input=settings.model_dump_json(), text=True, timeout=timeout_s)
+        try:
+            done = subprocess.run([sys.executable, "-m", "gateway.engine.jvm_training"], env=env, capture_output=True,
+                                  input=settings.model_dump_json(), text=True, timeout=timeout_s)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise TrainingError(f"the JVM cache's training run did not finish: {exc}") from exc
         if done.returncode != 0 or not partial.is_file():
             raise TrainingError(f"the JVM cache's training run failed (exit {done.returncode}): "
                                 f"{(done.stderr or done.stdout)[-2000:]}")

@@ -134,3 +134,16 @@ def test_the_trained_cache_starts_a_jvm():
     finally:
         bogus.unlink()
     assert refused.returncode != 0
+
+
+def test_a_failed_training_run_says_why_and_leaves_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRINTEPS_CACHE_DIR", str(tmp_path))  # no cache there: build() trains
+
+    def failed(args, **kwargs):
+        Path(kwargs["env"][jvm_cache.TRAINING_OUTPUT_ENV]).write_bytes(b"half")  # a JVM that died writing
+        return subprocess.CompletedProcess(args, 1, "", "Error: the rules did not compile")
+
+    monkeypatch.setattr(jvm_training.subprocess, "run", failed)
+    with pytest.raises(jvm_training.TrainingError, match=r"exit 1\).*the rules did not compile"):
+        jvm_training.build(Settings())
+    assert list((tmp_path / "jvm-aot").iterdir()) == []
