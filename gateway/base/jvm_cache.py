@@ -90,11 +90,10 @@ def _entry(path: str) -> str:
 
 def _release(jvm_lib: str) -> str:
     """The Java home's ``release`` file (the exact build), or '' if there is none."""
-    for parent in Path(jvm_lib).parents:
-        release = parent / "release"
-        if release.is_file():
-            return release.read_text(encoding="utf-8", errors="replace")
-    return ""
+    try:
+        return (Path(jvm_lib).parents[2] / "release").read_text(encoding="utf-8", errors="replace")
+    except (OSError, IndexError):
+        return ""
 
 
 def _jpype_version() -> str:
