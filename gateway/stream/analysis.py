@@ -9,6 +9,7 @@ fields a CONSTRUCT stream offers to a rule binding.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 from pyoxigraph import NamedNode
@@ -32,7 +33,22 @@ def _algebra(sparql: str) -> Any | None:
 
 def relevant_predicates(sparql: str) -> frozenset[NamedNode] | None:
     """The predicates the query can match (None: any — nothing may be dropped)."""
+    return _analysed(sparql)[0]
+
+
+@functools.lru_cache(maxsize=256)
+def _analysed(sparql: str) -> tuple[frozenset[NamedNode] | None, tuple[str, ...]]:
+    """``(relevant predicates, CONSTRUCT fields)`` of one query text, from one parse.
+
+    Why kept: rdflib's SPARQL parser (pyparsing) takes ~0.1 s a query, and the same texts are read
+    again and again: a query is registered twice when it is seeded or changed (the check on a
+    scratch engine, then the real one), by every gateway a process builds, and by every replay and
+    trial of the workbench. Both answers are immutable and depend on the text alone."""
     algebra = _algebra(sparql)
+    return _predicates(algebra), _fields(algebra)
+
+
+def _predicates(algebra: Any | None) -> frozenset[NamedNode] | None:
     if algebra is None or algebra.name == "DescribeQuery":
         return None
     found: set[str] = set()
@@ -118,10 +134,13 @@ def _path(path: Any, found: set[str]) -> None:
 def construct_fields(sparql: str) -> list[str]:
     """What a rule binding can read from a CONSTRUCT query's output: ``subject`` plus the local
     name of every constant predicate in the template (``rdf:type`` is ``type``)."""
-    algebra = _algebra(sparql)
+    return list(_analysed(sparql)[1])
+
+
+def _fields(algebra: Any | None) -> tuple[str, ...]:
     fields = ["subject"]
     if algebra is None or algebra.name != "ConstructQuery":
-        return fields
+        return tuple(fields)
     from rdflib.term import URIRef
 
     for triple in algebra.template or []:
@@ -130,4 +149,4 @@ def construct_fields(sparql: str) -> list[str]:
             field = "type" if str(p) == RDF + "type" else local_name(str(p))
             if field not in fields:
                 fields.append(field)
-    return fields
+    return tuple(fields)
