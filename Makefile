@@ -28,7 +28,7 @@ $(STAMP): pyproject.toml $(LOCK) $(LOCK_NODEPS) ros/install.sh ros/requirements-
 
 # Every install also brings the Java side up to date (a few seconds when it is): the Java helpers
 # compiled from java/src, and the JVM's AOT class cache trained on them (~45 s when java/src or a
-# jar changed; each gateway process, and each of the suite's, then starts ~2.5 CPU-s cheaper).
+# jar changed; a process that compiles rules, a test's or a gateway's, then spends ~2 CPU-s less).
 install: $(STAMP)
 	$(BIN)/printeps build-java
 

@@ -590,7 +590,7 @@ def workflow_generate(
 @app.command("build-java")
 def build_java(config: Optional[Path] = ConfigOption) -> None:
     """Compile the Java helpers (java/src) into the cache, then train the JVM's AOT class cache
-    (Java 25+: each gateway process then starts ~2.5 CPU-s cheaper; see docs/operations.md)."""
+    (Java 25+: a process that compiles rules then spends ~2 CPU-s less on it; see docs/operations.md)."""
     from gateway.base import jvm
     from gateway.engine import jvm_training
 

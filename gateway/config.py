@@ -37,7 +37,8 @@ class JvmSettings(BaseModel):
     aot_cache: bool = Field(
         default=True,
         description="Start the JVM from the ahead-of-time class cache that `printeps build-java` makes (Java 25+; "
-        "about 2.5 CPU-s less per process start). Used only when it matches this JVM and classpath; false: never.")
+        "about 2 CPU-s less for a process that compiles rules). Used only when it matches this JVM and "
+        "classpath; false: never.")
 
     @field_validator("extra_options", mode="before")
     @classmethod

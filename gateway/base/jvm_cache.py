@@ -4,9 +4,9 @@ Why: every gateway process starts a JVM that loads ~9,000 classes (Drools' compi
 Eclipse compiler, Pellet and the OWL API) from jars, verifies and links each one, and runs them
 interpreted until the JIT catches up. JDK 25's AOT cache (JEPs 483, 514, 515) keeps all of that from a
 training run in one file that the next JVMs map instead. Measured on the 2-core target, a process that
-starts the JVM, compiles one rule and fires it: 6.1-6.6 CPU-s without the cache, 3.7-4.0 with it;
-2.7 with the cache and the C1-only JIT the tests' processes use. A restart, every ``--workers``
-process and each of the ~100 gateway processes the test suite starts pay that.
+starts the JVM, compiles one rule and fires it: 6.4 CPU-s without the cache, 4.2-4.6 with it. What
+it saves is loading and compiling: a process that deploys (every test process, an author's first
+edit after a restart) gains; one whose rule units are all cached starts about as before.
 
 Safety: a cache is valid only for the JVM that wrote it and the exact classpath (the JVM checks each
 jar's size and time and quietly starts without the cache on any difference). Its file name is a
@@ -15,8 +15,9 @@ as before), never a wrong one. Classes in a directory cannot be cached, which is
 go on the classpath as a jar once compiled (:mod:`gateway.base.jvm`).
 
 Who makes it: ``printeps build-java`` (``make install`` runs it) starts a training process that
-builds and exercises a gateway (:mod:`gateway.engine.jvm_training`); its JVM writes the cache as
-it exits (``-XX:AOTCacheOutput``, which starts ``java`` once more to assemble it).
+compiles and fires the shipped rule sets and reasons with Pellet (:mod:`gateway.engine.jvm_training`);
+its JVM writes the cache as it exits (``-XX:AOTCacheOutput``, which starts ``java`` once more to
+assemble it).
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ from gateway.engine.warmup import example_fact_sets
 
 log = logging.getLogger(__name__)
 
-#: Seconds the training child may take (it compiles every shipped rule set cold: ~20 s on 2 cores).
+#: Seconds the training child may take (it compiles every shipped rule set cold: 30-45 s on 2 cores).
 TIMEOUT_S = 600.0
 
 
