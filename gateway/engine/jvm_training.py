@@ -121,7 +121,8 @@ async def _fire_on_the_lane(engine: Engine, name: str, samples: list[list[dict]]
 
 
 def _reason(settings: Settings) -> None:
-    """Pellet over the shipped ontology (with an empty data graph: the plain answer is cached)."""
+    """Pellet over the shipped ontology, with an empty data graph: ``""``, not None, which would be
+    answered from the disk copy of the ontology's own inferences and never reach Pellet."""
     from gateway.ontology.knowledge import KnowledgeBase
 
     if not settings.streams.knowledge_dir:
