@@ -9,6 +9,7 @@ locally or against a server.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
 from pathlib import Path
@@ -192,8 +193,12 @@ def demo(
     """The teahouse reception end to end: the gateway (as `printeps serve` builds it, with its ROS
     node) and the sensor and Pepper simulators; prints what happens and a summary. Without
     --headless the gateway keeps running (workbench at http://127.0.0.1:8080/workbench) until Ctrl-C."""
+    from gateway.base.logs import log_off_thread
     from gateway.demo import run_demo
 
+    # as printeps serve: no serving thread waits on a stderr nobody reads (the demo shows warnings
+    # and errors only, as before: its own narration is the story)
+    log_off_thread(logging.WARNING)
     sys.setswitchinterval(0.001)  # short GIL hand-offs between the ROS executor and the workers
     summary: dict[str, Any] = {}
     _run_or_explain(lambda: summary.update(run_demo(_settings(config), headless=headless, scenario=scenario,

@@ -11,7 +11,7 @@ So every gateway process logs through a bounded queue: a thread that logs only p
 the queue (never blocks; when the queue is full the record is counted and dropped), and one
 writer thread writes the records to stderr. When the writer catches up after drops it says
 how many records were lost. ``log_off_thread`` is called once per process by its entry point
-(``printeps serve`` and its workers, the ROS launcher, the shipper process).
+(``printeps serve`` and its workers, the ROS launcher, ``printeps demo``, the shipper process).
 """
 
 from __future__ import annotations

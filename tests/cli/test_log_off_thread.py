@@ -44,3 +44,27 @@ def test_a_thread_that_logs_never_waits_on_an_unread_stderr() -> None:
     assert child.returncode == 0, err[-2000:]
     assert "log records dropped: stderr was not read fast enough" in err
     assert err.rstrip().endswith("lane: last")
+
+
+DEMO_CHILD = textwrap.dedent("""
+    import logging
+    import gateway.demo
+    from gateway.cli import app
+
+    def fake_run_demo(settings, **options):  # what the demo's threads log through, at its start
+        root = logging.getLogger()
+        print("handlers", [type(h).__name__ for h in root.handlers], logging.getLevelName(root.level), flush=True)
+        return {}
+
+    gateway.demo.run_demo = fake_run_demo
+    app(["demo", "--headless"], standalone_mode=False)
+""")
+
+
+def test_printeps_demo_logs_through_the_queue_as_serve_does(tmp_path: Path) -> None:
+    """`make run` is `printeps demo`: its gateway threads (stream engine, action router, ROS node)
+    log through the bounded queue too, showing warnings and errors as before."""
+    done = subprocess.run([sys.executable, "-c", DEMO_CHILD], cwd=PROJECT, capture_output=True, text=True, timeout=120,
+                          env={**__import__("os").environ, "PRINTEPS_DATA_DIR": str(tmp_path)})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "handlers ['DroppingQueueHandler'] WARNING" in done.stdout
