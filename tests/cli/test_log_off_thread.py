@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -65,6 +66,6 @@ def test_printeps_demo_logs_through_the_queue_as_serve_does(tmp_path: Path) -> N
     """`make run` is `printeps demo`: its gateway threads (stream engine, action router, ROS node)
     log through the bounded queue too, showing warnings and errors as before."""
     done = subprocess.run([sys.executable, "-c", DEMO_CHILD], cwd=PROJECT, capture_output=True, text=True, timeout=120,
-                          env={**__import__("os").environ, "PRINTEPS_DATA_DIR": str(tmp_path)})
+                          env={**os.environ, "PRINTEPS_DATA_DIR": str(tmp_path)})
     assert done.returncode == 0, done.stderr[-2000:]
     assert "handlers ['DroppingQueueHandler'] WARNING" in done.stdout
