@@ -14,10 +14,10 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Installs come from the lock files only: exact versions with their hashes (pyproject.toml keeps
 # lower bounds for people who install the package into an environment of their own).
 LOCK        := requirements.lock
-# Nothing of an install floats: pip itself is pinned, and the gateway's own (editable) install is
-# built with the setuptools of the lock (no build isolation, which would fetch the newest one).
-PIP_VERSION := 26.3
 LOCK_NODEPS := requirements-nodeps.lock
+# Nothing else of an install floats either: pip itself is pinned, and the gateway's own (editable)
+# install is built with the setuptools of the lock (no build isolation, which would fetch the newest).
+PIP_VERSION := 26.3
 
 $(STAMP): pyproject.toml $(LOCK) $(LOCK_NODEPS) ros/install.sh ros/requirements-jazzy.txt $(wildcard ros/printeps_interfaces/msg/*.msg ros/printeps_interfaces/srv/*.srv)
 	$(MAKE) system-deps
