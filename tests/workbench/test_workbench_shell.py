@@ -72,3 +72,29 @@ def test_an_author_creates_a_rule_set_in_the_browser(author_page, gateway):
     expect(page.locator("[data-testid=check-status]")).to_have_text("✓ No problems")
     expect(page.locator(f"[data-ruleset='{name}']")).to_be_visible()
     assert gateway.fire(name, [])["actions"] == []
+
+
+def test_a_view_still_loading_does_not_pull_the_user_back(author_page):
+    """Workflows opens its first workflow once the list has come. A user who has clicked on to
+    Knowledge by then stays there: the late list neither moves the address nor paints the sidebar
+    or the page (it did: the one-navigation test above failed when the list came late)."""
+    page = author_page
+    page.goto("/workbench#/rules/reception")
+    expect(page.locator("[data-ruleset=reception]")).to_be_visible()
+    held = []
+    page.route(re.compile(r"/api/workflows$"), lambda route: held.append(route))
+    nav = page.get_by_role("navigation", name="Sections")
+    nav.get_by_role("link", name="Workflows", exact=True).click()
+    page.wait_for_function("() => location.hash === '#/workflows'")
+    nav.get_by_role("link", name="Knowledge", exact=True).click()
+    expect(page.locator("#sidebar-title")).to_have_text("Knowledge")
+    heading = page.locator("main h1").first.inner_text()
+    assert len(held) == 1, "the workflow list was not asked for while Workflows was open"
+    with page.expect_response(re.compile(r"/api/workflows$")) as late:
+        held[0].continue_()
+    late.value.finished()
+    page.evaluate("() => new Promise((done) => setTimeout(() => setTimeout(done)))")  # the late view's turn
+    assert page.evaluate("location.hash") == "#/knowledge"
+    assert page.locator("#sidebar-title").text_content() == "Knowledge"
+    assert page.locator("main h1").first.inner_text() == heading
+    expect(nav.get_by_role("link", name="Knowledge", exact=True)).to_have_attribute("aria-current", "page")

@@ -70,10 +70,10 @@ const navEl = h("nav", { "aria-label": "Sections" },
 const sideTitleEl = h("h2", { id: "sidebar-title" }, "Rule sets");
 const listEl = h("ul", { class: "ruleset-list", "data-testid": "rulesets", "aria-labelledby": "sidebar-title" });
 const flashEl = h("div", { class: "flash" });
-const mainEl = h("main", { id: "main" });
+let mainEl = h("main", { id: "main" });
+const contentEl = h("div", { class: "content" }, flashEl, mainEl);
 const layoutEl = h("div", { class: "layout" },
-  h("aside", { class: "sidebar" }, sideTitleEl, listEl),
-  h("div", { class: "content" }, flashEl, mainEl));
+  h("aside", { class: "sidebar" }, sideTitleEl, listEl), contentEl);
 
 function shell() {
   fill(document.getElementById("app"),
@@ -102,10 +102,40 @@ function parseHash() {
   return { section: section || "rules", name, params: new URLSearchParams(query) };
 }
 
+/** Counts the routes taken: a view is current while its route is the last one. */
+let routeSeq = 0;
+
+/** A fresh <main> for each route, so a view still loading when the user moves on paints into one
+ * that is no longer on the page instead of over the next view. */
+function freshMain() {
+  const main = h("main", { id: "main" });
+  contentEl.replaceChild(main, mainEl);
+  mainEl = main;
+  return main;
+}
+
+/** The context one route's view gets: the shell's, except that what changes the page around the
+ * view (the sidebar, navigation) does nothing once the user has gone elsewhere. Why: a view that
+ * opens its first item after a request (Workflows) used to pull a user who had already clicked
+ * on to another section back to it. */
+function viewContext(seq) {
+  const current = () => seq === routeSeq;
+  return Object.assign(Object.create(ctx), {
+    current,
+    setSidebar: (title, items) => { if (current()) ctx.setSidebar(title, items); },
+    hideSidebar: () => { if (current()) ctx.hideSidebar(); },
+    navigate: (hash, force = false) => { if (current()) ctx.navigate(hash, force); },
+    /** Go to `hash` in place of the current address (opening a section's first item). */
+    replace: (hash) => { if (current()) location.replace(hash); },
+  });
+}
+
 async function route() {
+  const seq = ++routeSeq;
   const { section, name, params } = parseHash();
   if (ctx.view?.dispose) ctx.view.dispose();
   ctx.view = null;
+  const main = freshMain();
   for (const a of navEl.querySelectorAll("a[data-section]")) {
     const active = a.dataset.section === section;
     a.classList.toggle("active", active);
@@ -128,7 +158,9 @@ async function route() {
     if (name) ctx.lastRuleset = name;
     if (!name) return showChooser(section);
   }
-  ctx.view = await target.show(mainEl, ctx, name, params);
+  const view = await target.show(main, viewContext(seq), name, params);
+  if (seq === routeSeq) ctx.view = view;
+  else view?.dispose?.();
 }
 
 function showChooser(section) {

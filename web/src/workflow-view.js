@@ -41,7 +41,7 @@ export async function showWorkflows(main, ctx, name, params) {
       h("span", { class: "name" }, w.title || w.name),
       h("span", { class: "meta" }, `${w.name} · version ${w.version}`)))));
   if (!name) {
-    if (list.length) location.replace(ctx.href("workflows", list[0].name));
+    if (list.length) ctx.replace(ctx.href("workflows", list[0].name));
     else fill(main, h("p", { class: "muted" }, "There are no workflows yet. Put YAML files under workflows/ and restart the gateway."));
     return {};
   }
