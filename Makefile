@@ -9,7 +9,7 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install system-deps browser node run serve test test-fast lock bench clean
+.PHONY: install system-deps browser node run serve test test-fast durations lock bench clean
 
 # Installs come from the lock files only: exact versions with their hashes (pyproject.toml keeps
 # lower bounds for people who install the package into an environment of their own).
@@ -69,11 +69,12 @@ run: install
 serve: install
 	$(BIN)/printeps serve
 
-# Two pytest-xdist workers, each with its own JVM, SecantusDB, browser and ROS domains, one test
-# file per worker at a time (--dist loadfile: a file's module fixtures are built once). A single
-# pytest process keeps one of the two cores idle most of the time (docs/operations.md, "Where the
-# suite's time goes"). TEST_WORKERS=0 runs everything in one process.
-TEST_WORKERS ?= 2
+# Three pytest-xdist workers, each with its own JVM, SecantusDB, browser and ROS domains, one test
+# file per worker at a time (--dist loadfile: a file's module fixtures are built once), the longest
+# files first (tests/durations.json). On 2 cores the third fills the time the other two wait on
+# processes, browsers and databases (docs/operations.md, "Where the suite's time goes").
+# TEST_WORKERS=0 runs everything in one process.
+TEST_WORKERS ?= 3
 # Bytecode caches are written for the test runs even where the environment says not to
 # (PYTHONDONTWRITEBYTECODE, common in containers): without them every pytest worker re-does
 # pytest's assertion rewrite of ~275 modules and every `printeps serve` a test starts compiles the
@@ -89,6 +90,11 @@ test: install browser node
 # The inner loop: everything but the tests marked `slow` (long soaks, cluster faults, browser stories).
 test-fast: install browser node
 	$(PYTEST_RUN) -m "not slow"
+
+# Measure each test file's time (a whole run) into tests/durations.json, the order the workers get
+# the files in: after adding or changing long tests.
+durations: install browser node
+	$(PYTEST_RUN) --record-durations
 
 bench: install
 	$(BIN)/python bench/run_all.py

@@ -4,10 +4,12 @@ MongoDB-protocol server; gateways are built through the one composition root."""
 from __future__ import annotations
 
 import os
+from collections import Counter
 from pathlib import Path
 
 import pytest
 
+import scheduling
 from gw_testing import open_test_store
 
 # Under CI=true a skip is a failure unless tests/skip_allowlist.txt lists it (tests/ci_skips.py).
@@ -94,38 +96,38 @@ def _in_ros_unit(path: Path | str) -> bool:
     return any(relative == Path(unit) or Path(unit) in relative.parents for unit in ROS_UNIT)
 
 
-# The longest files that hold no `slow` test, measured (docs/operations.md "Where the suite's time
-# goes"): 30-75 CPU-s each, or one test of 25-55 s. Handed out right after the long units.
-LONG_FAST_FILES = ("workbench/test_workflow_editor.py", "stream/test_fastpath_agreement.py",
-                   "knowledge/test_knowledge_api.py", "engine/test_plain_shapes.py",
-                   "engine/test_engine_sessions.py", "workbench/test_workbench_authoring.py")
-
-
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """On pytest-xdist workers (`make test`), the long units are handed out first: the files
-    holding `slow` tests and the ROS unit, then LONG_FAST_FILES (the long ones of `make test-fast`).
-
-    Why: `--dist loadfile` gives each worker a whole file at a time, in collection order; a browser
-    story or cluster file of minutes handed out last leaves the other worker idle that long. The
-    longest first keeps the two busy to the end. The order inside each file stays as written, and a
-    run in one process keeps the usual order. Every worker collects the same list, as xdist needs."""
+    """On pytest-xdist workers (`make test`), the files come longest first by their measured time
+    (tests/scheduling.py, tests/durations.json), the ROS unit as one. The order inside each file
+    stays as written, and a run in one process keeps the usual order. Every worker collects the
+    same list, as xdist needs."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
     for item in items:
         if item.get_closest_marker("ros") and not _in_ros_unit(item.path):
             item.add_marker(pytest.mark.outside_ros_unit)
-    long_files = {item.path for item in items if item.get_closest_marker("slow") or _in_ros_unit(item.path)}
-    # then the longest files without `slow` tests (what make test-fast ends on otherwise)
-    long_fast_files = {TESTS / name for name in LONG_FAST_FILES}
-    items.sort(key=lambda item: 0 if item.path in long_files else 1 if item.path in long_fast_files else 2)
+    files = [item.nodeid.split("::", 1)[0] for item in items]
+    seconds = scheduling.estimated_seconds(scheduling.load(), Counter(files))
+    order = {file: rank for rank, file in enumerate(
+        scheduling.longest_first(dict.fromkeys(files), seconds, _scope))}
+    items.sort(key=lambda item: order[item.nodeid.split("::", 1)[0]])
 
 
-def pytest_runtest_setup(item: pytest.Item) -> None:
-    """A `ros` test outside ROS_UNIT fails, naming the list to add its file to."""
-    if item.get_closest_marker("outside_ros_unit"):
-        pytest.fail(f"{item.nodeid} is marked `ros` but its file is not in ROS_UNIT (tests/conftest.py): "
-                    "under xdist it would run beside the other ROS tests", pytrace=False)
+def _scope(file: str) -> str:
+    """What one worker runs as a whole: a file, or all of ROS_UNIT."""
+    return "ROS_UNIT" if _in_ros_unit(file) else file
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--record-durations", action="store_true",
+                     help="write each test file's measured time into tests/durations.json (make durations)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """``--record-durations``: the controlling process (it sees every worker's reports) records."""
+    if config.getoption("record_durations") and not os.environ.get("PYTEST_XDIST_WORKER"):
+        config.pluginmanager.register(scheduling.Recorder(), "record-durations")
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
@@ -133,6 +135,10 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
     if config.getoption("dist", None) != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
+
+    # The workers' collection is already longest first (pytest_collection_modifyitems above); xdist's
+    # own reorder (by number of tests) would undo that.
+    config.option.loadscopereorder = False
 
     class LoadFileAndFolderScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
