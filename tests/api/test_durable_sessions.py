@@ -870,3 +870,35 @@ def test_a_call_for_a_session_being_opened_here_waits_and_leaves_its_owner_recor
     record = manager.directory.owner("durable", "stream.Opening")
     assert record is not None and record["process"] == manager.directory.process
     opened[0].close()
+
+
+def test_a_read_that_looked_just_before_the_open_ended_gets_the_open_session(rs, api_gateway, monkeypatch):
+    """A REST read of a stream binding's session looks for it in memory a moment before the
+    binding's first window has opened it. By the time the read asks the log, the session is open
+    and journalled. The read took its owner record (naming this process) for a leftover, released
+    it, and rebuilt a second copy that replaced the binding's session in the registry. The binding
+    went on firing its own copy, and reads saw the other one: the facts of later windows never
+    showed (tests/api/test_stream_binding_sessions.py failed so under load). Now the read gets the
+    open session, and the record stays."""
+    manager = api_gateway.engine.session_manager
+    opened = manager.binding_session("durable", "stream.JustOpened")
+    opened.execute([{"op": "insert", "facts": [{"type": "Customer", "id": "w1", "age": 30}], "ret": False},
+                    {"op": "fire", "max": -1}])
+    looked = []
+    real_find = manager.find
+
+    def find_as_just_before(ruleset, session_id):  # the read's first look, before the open ended
+        if session_id == "stream.JustOpened" and not looked:
+            looked.append(True)
+            return None
+        return real_find(ruleset, session_id)
+
+    monkeypatch.setattr(manager, "find", find_as_just_before)
+    try:
+        assert manager.get("durable", "stream.JustOpened") is opened
+        assert real_find("durable", "stream.JustOpened") is opened  # still the one the binding holds
+        record = manager.directory.owner("durable", "stream.JustOpened")
+        assert record is not None and record["process"] == manager.directory.process
+    finally:
+        monkeypatch.undo()
+        opened.close()
