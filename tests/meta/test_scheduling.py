@@ -51,7 +51,7 @@ def test_the_record_names_only_test_files_that_exist():
 
 
 def test_xdist_workers_collect_the_files_longest_first(tmp_path: Path):
-    """Two workers of a real xdist run hand out the recorded longest file first, against xdist's
+    """A worker of a real xdist run gets the recorded longest file first, against xdist's
     own order (most tests first)."""
     tests = tmp_path / "tests"
     tests.mkdir()
