@@ -119,6 +119,13 @@ def _scope(file: str) -> str:
     return "ROS_UNIT" if _in_ros_unit(file) else file
 
 
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A `ros` test outside ROS_UNIT fails, naming the list to add its file to."""
+    if item.get_closest_marker("outside_ros_unit"):
+        pytest.fail(f"{item.nodeid} is marked `ros` but its file is not in ROS_UNIT (tests/conftest.py): "
+                    "under xdist it would run beside the other ROS tests", pytrace=False)
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--record-durations", action="store_true",
                      help="write each test file's measured time into tests/durations.json (make durations)")

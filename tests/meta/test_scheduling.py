@@ -50,21 +50,35 @@ def test_the_record_names_only_test_files_that_exist():
     assert not gone, f"tests/durations.json names files that are gone (make durations, or delete them): {gone}"
 
 
+def _xdist_run(root: Path, files: dict[str, str]) -> subprocess.CompletedProcess:
+    """pytest on one xdist worker over ``files`` (under ``root/tests``) with the suite's own conftest."""
+    tests = root / "tests"
+    tests.mkdir()
+    for helper in ("conftest.py", "scheduling.py", "gw_testing.py", "ci_skips.py", "skip_allowlist.txt"):
+        (tests / helper).write_text((ROOT / "tests" / helper).read_text())
+    for name, text in files.items():
+        (tests / name).write_text(text)
+    return subprocess.run([sys.executable, "-m", "pytest", "-n", "1", "--dist", "loadfile", "-v", "-p", "no:cacheprovider",
+                           "-p", "no:randomly", "tests"], cwd=root, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(ROOT), "CI": ""})
+
+
 def test_xdist_workers_collect_the_files_longest_first(tmp_path: Path):
     """A worker of a real xdist run gets the recorded longest file first, against xdist's
     own order (most tests first)."""
-    tests = tmp_path / "tests"
-    tests.mkdir()
-    (tests / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
-    for helper in ("scheduling.py", "gw_testing.py", "ci_skips.py", "skip_allowlist.txt"):
-        (tests / helper).write_text((ROOT / "tests" / helper).read_text())
-    (tests / "test_many.py").write_text("".join(f"def test_{i}():\n    pass\n" for i in range(5)))
-    (tests / "test_one.py").write_text("def test_long():\n    pass\n")
-    (tests / "durations.json").write_text(scheduling.dumps({
-        "tests/test_many.py": {"seconds": 1.0, "tests": 5}, "tests/test_one.py": {"seconds": 60.0, "tests": 1}}))
-    run = subprocess.run([sys.executable, "-m", "pytest", "-n", "1", "--dist", "loadfile", "-v", "-p", "no:cacheprovider",
-                          "-p", "no:randomly", "tests"], cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                         env={**os.environ, "PYTHONPATH": str(ROOT), "CI": ""})
+    run = _xdist_run(tmp_path, {
+        "test_many.py": "".join(f"def test_{i}():\n    pass\n" for i in range(5)),
+        "test_one.py": "def test_long():\n    pass\n",
+        "durations.json": scheduling.dumps({"tests/test_many.py": {"seconds": 1.0, "tests": 5},
+                                            "tests/test_one.py": {"seconds": 60.0, "tests": 1}})})
     passed = [line for line in run.stdout.splitlines() if "PASSED" in line]
     assert run.returncode == 0, run.stdout + run.stderr
     assert "test_one.py::test_long" in passed[0], passed
+
+
+def test_a_ros_test_outside_the_ros_unit_fails_under_xdist(tmp_path: Path):
+    """The ROS tests run as one unit on one worker (tests/conftest.py, ROS_UNIT); one marked `ros`
+    elsewhere fails, naming the list to add its file to."""
+    run = _xdist_run(tmp_path, {"test_elsewhere.py": "import pytest\n\n@pytest.mark.ros\ndef test_topic():\n    pass\n"})
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert "is marked `ros` but its file is not in ROS_UNIT" in run.stdout
