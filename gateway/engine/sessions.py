@@ -281,7 +281,7 @@ class SessionManager:
         rebuilt here from its log (claimed first: one process wins, the others forward to it), or
         :class:`SessionGone` (its owner died and it was not durable), or None (no such session)."""
         with self._lock:
-            live = self._live(ruleset, session_id)
+            live = self.find(ruleset, session_id)
             if live is not None:  # opened (or rebuilt) here since the caller looked: its record is ours
                 return live
             if (ruleset, session_id) in self._rebuilding:  # claimed by us, being rebuilt: its record is ours
@@ -338,7 +338,7 @@ class SessionManager:
             _, rebuilt = self._rebuild(ruleset, session_id, gone)  # read again, now that it is ours
             session = self._wrap(ruleset, session_id, history.opening, rebuilt)
             with self._lock:
-                live = self._live(ruleset, session_id)
+                live = self.find(ruleset, session_id)
                 raced = live is not None or key in self._opening
                 if not raced:
                     self._sessions[key] = session
@@ -472,10 +472,6 @@ class SessionManager:
     # ------------------------------------------------------------------ finding
 
     def find(self, ruleset: str, session_id: str) -> StatefulSession | None:
-        return self._live(ruleset, session_id)
-
-    def _live(self, ruleset: str, session_id: str) -> StatefulSession | None:
-        """The open session of this id in this process, or None."""
         session = self._sessions.get((ruleset, session_id))
         return session if session is not None and not session.closed else None
 
