@@ -121,7 +121,6 @@ function freshMain() {
 function viewContext(seq) {
   const current = () => seq === routeSeq;
   return Object.assign(Object.create(ctx), {
-    current,
     setSidebar: (title, items) => { if (current()) ctx.setSidebar(title, items); },
     hideSidebar: () => { if (current()) ctx.hideSidebar(); },
     navigate: (hash, force = false) => { if (current()) ctx.navigate(hash, force); },
