@@ -107,11 +107,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("ros") and not _in_ros_unit(item.path):
             item.add_marker(pytest.mark.outside_ros_unit)
-    files = [item.nodeid.split("::", 1)[0] for item in items]
+    files = [scheduling.file_of(item.nodeid) for item in items]
     seconds = scheduling.estimated_seconds(scheduling.load(), Counter(files))
     order = {file: rank for rank, file in enumerate(
         scheduling.longest_first(dict.fromkeys(files), seconds, _scope))}
-    items.sort(key=lambda item: order[item.nodeid.split("::", 1)[0]])
+    items.sort(key=lambda item: order[scheduling.file_of(item.nodeid)])
 
 
 def _scope(file: str) -> str:

@@ -32,6 +32,11 @@ def load(path: Path = DURATIONS) -> dict[str, dict[str, float]]:
         return {}
 
 
+def file_of(nodeid: str) -> str:
+    """The test file of a node id, as the record names it (``tests/api/test_rest.py``)."""
+    return nodeid.split("::", 1)[0]
+
+
 def estimated_seconds(record: dict[str, dict[str, float]], tests_by_file: Counter[str]) -> dict[str, float]:
     """Each collected file's expected time: its recorded time, in proportion where fewer of its
     tests run (``-m "not slow"``, ``-k``), or its tests at the record's average a test."""
@@ -67,7 +72,7 @@ class Recorder:
         self.tests: Counter[str] = Counter()
 
     def pytest_runtest_logreport(self, report) -> None:
-        file = report.nodeid.split("::", 1)[0]
+        file = file_of(report.nodeid)
         self.seconds[file] += report.duration
         if report.when == "setup":  # every test has one, a skipped test too
             self.tests[file] += 1
