@@ -902,3 +902,32 @@ def test_a_read_that_looked_just_before_the_open_ended_gets_the_open_session(rs,
     finally:
         monkeypatch.undo()
         opened.close()
+
+
+def test_a_rebuild_that_finds_the_session_opened_meanwhile_gives_way_to_it(rs, api_gateway, monkeypatch):
+    """The other order of the race above: the read is already rebuilding a stored session from its
+    log when the binding opens it here. The rebuilt copy is dropped and the read gets the open
+    session, which stays the one in the registry (the copy used to replace it)."""
+    manager = api_gateway.engine.session_manager
+    stored = manager.binding_session("durable", "stream.OpenedMeanwhile")
+    stored.execute([{"op": "insert", "facts": [{"type": "Customer", "id": "w1", "age": 30}], "ret": False}])
+    _crash(api_gateway, "stream.OpenedMeanwhile")
+    opened = []
+    real_rebuild = manager._rebuild
+
+    def rebuild_while_the_binding_opens(ruleset, session_id, gone=None):
+        rebuilt = real_rebuild(ruleset, session_id, gone)
+        if session_id == "stream.OpenedMeanwhile" and not opened:
+            opened.append(manager.open(ruleset, session_id=session_id, kind="stream"))
+        return rebuilt
+
+    monkeypatch.setattr(manager, "_rebuild", rebuild_while_the_binding_opens)
+    try:
+        assert manager.get("durable", "stream.OpenedMeanwhile") is opened[0]
+        assert manager.find("durable", "stream.OpenedMeanwhile") is opened[0]
+        record = manager.directory.owner("durable", "stream.OpenedMeanwhile")
+        assert record is not None and record["process"] == manager.directory.process
+    finally:
+        monkeypatch.undo()
+        for session in opened:
+            session.close()
