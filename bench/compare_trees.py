@@ -8,7 +8,7 @@ rounds and the after/before ratio of the same run. Each measure runs the tree's 
 process with ``PYTHONPATH=<tree>`` and ``cwd=<tree>`` (the existing benches' functions drive it).
 
     .venv/bin/python bench/compare_trees.py --before /work/main --after /work/wt/integ \
-        [--budget 600] [--rounds N] [--seconds 5] [--stream-seconds 20] [--ros-trials 30] [--write-docs]
+        [--budget 600] [--rounds N] [--seconds 5] [--rest-seconds 20] [--stream-seconds 20] [--ros-trials 30] [--write-docs]
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def rest(tree: Path, work: Path, args: argparse.Namespace) -> dict[str, float]:
                            json.dumps(hb.kie_batch(facts)).encode())
     with contextlib.redirect_stdout(sys.stderr):  # its progress lines: stdout keeps one JSON line per round
         rows = hb.measure(work / "server", [("fire8", fire, 8, b'"decision_id"'), ("fire2", fire, 2, b'"decision_id"'),
-                                            ("kie8", kie, 8, b'"SUCCESS"')], args.seconds)
+                                            ("kie8", kie, 8, b'"SUCCESS"')], args.rest_seconds)
     errors = sum(r["errors"] for r in rows.values())
     if errors:
         raise RuntimeError(f"REST run in {tree}: {errors} failed requests")
@@ -137,7 +137,8 @@ def report(records: list[dict], args: argparse.Namespace, note: str) -> str:
               if k.startswith("error ")]
     loads = ", ".join(f"{r['round']} {r['tree']} {r['time']} load {r['load']:.1f}" for r in records)
     head = (f"`bench/compare_trees.py --before {args.before} --after {args.after} --rounds {args.rounds} "
-            f"--budget {args.budget:.0f} --seconds {args.seconds:g} --stream-seconds {args.stream_seconds:g} "
+            f"--budget {args.budget:.0f} --seconds {args.seconds:g} --rest-seconds {args.rest_seconds:g} "
+            f"--stream-seconds {args.stream_seconds:g} "
             f"--ros-trials {args.ros_trials} --engine-warm-up {args.engine_warm_up:g} --measures {','.join(args.measures)}`, {time.strftime('%Y-%m-%d %H:%M')} UTC, {note}. Rounds interleaved "
             f"(before, after, after, before, ...); each measure runs the tree's own code (PYTHONPATH and cwd = the "
             f"tree); medians over each tree's rounds; the ratio is after/before in the same run.")
@@ -160,7 +161,10 @@ def parse() -> argparse.Namespace:
     parser.add_argument("--budget", type=float, default=600,
                         help="seconds for the whole run: a new pair of rounds starts only if it should end within it")
     parser.add_argument("--rounds", type=int, default=0, help="at most this many rounds (even; 0: the budget decides)")
-    parser.add_argument("--seconds", type=float, default=5.0, help="per engine and REST run")
+    parser.add_argument("--seconds", type=float, default=5.0, help="per engine run")
+    parser.add_argument("--rest-seconds", type=float, default=20.0,
+                        help="per REST run: 5 s windows after the 8 s warm-up still caught the JIT compiling and the "
+                             "shared machine's drift (the same tree measured 1,300-1,860 req/s; docs/benchmarks.md)")
     parser.add_argument("--engine-warm-up", type=float, default=10.0,
                         help="seconds of in-process fires before the engine measure (the JIT still compiles after 3 s)")
     parser.add_argument("--stream-seconds", type=float, default=20.0, help="stream length for the papers' query")
