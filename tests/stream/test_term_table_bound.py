@@ -52,8 +52,8 @@ def reading(k: int) -> tuple[int, list[tuple]]:
 
 
 def test_the_term_table_holds_what_the_windows_need_and_answers_stay_the_same(settings, monkeypatch) -> None:
-    """The floor (4,096 terms in service) is lowered so that a two-minute stream empties the table
-    several times: the bound then comes from what a window holds, as it does on a busy stream."""
+    """The floor (4,096 terms in service) is lowered so that a two-minute stream passes it: the
+    bound then comes from what a window holds, as it does on a busy stream."""
     monkeypatch.setattr(executor, "TERMS_FLOOR", FLOOR)
     fast = StreamEngine(settings)
     general = StreamEngine(StreamSettings(**{**settings.model_dump(), "fast_path": False}))
