@@ -185,7 +185,8 @@ class StoreSettings(BaseModel):
     embedded_oplog_retention_s: int = Field(
         default=600, ge=60, description="Seconds the embedded DB keeps a replication-log entry (whichever bound, "
         "this or the entry count, comes first prunes).")
-    timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation.")
+    timeout_ms: int = Field(default=1000, description="Server selection / socket timeout per DB operation "
+                            "(a server selection waits at least 1 s).")
     spool_max_docs: int = Field(default=200_000, description="Bound of the on-disk write buffer (documents).")
     retry_interval_s: float = Field(
         default=1.0, description="Wait after a failed try to ship; doubled after each further failure, up to 8×."

@@ -47,10 +47,19 @@ log = logging.getLogger(__name__)
 META_INDEX = [("_meta.stored_type", 1), ("_meta.inserted_at", 1)]
 
 
+#: The shortest server selection a client gets, in ms: two of pymongo's minimum intervals between
+#: checks of a server. A client that last saw the database down checks it again at most that often,
+#: so a shorter selection could end before the check that finds the database back: the first read
+#: after an outage failed with "Connection refused" though the database had been up for a while
+#: (``store.timeout_ms: 500``, seen in tests/store/test_store.py's 30 s outage).
+MIN_SELECTION_MS = int(2 * pymongo.common.MIN_HEARTBEAT_INTERVAL * 1000)
+
+
 def mongo_client(uri: str, timeout_ms: int) -> pymongo.MongoClient:
-    """A client with the store's timeouts (the store's own reads and the shipper process use the same)."""
-    return pymongo.MongoClient(uri, serverSelectionTimeoutMS=timeout_ms, connectTimeoutMS=timeout_ms,
-                               socketTimeoutMS=timeout_ms * 5, tz_aware=True)
+    """A client with the store's timeouts (the store's own reads and the shipper process use the
+    same); server selection waits at least :data:`MIN_SELECTION_MS`."""
+    return pymongo.MongoClient(uri, serverSelectionTimeoutMS=max(timeout_ms, MIN_SELECTION_MS),
+                               connectTimeoutMS=timeout_ms, socketTimeoutMS=timeout_ms * 5, tz_aware=True)
 
 
 class ShipperFailed(RuntimeError):

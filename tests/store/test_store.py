@@ -134,6 +134,25 @@ def test_db_outage_30s_under_load_loses_nothing(both_stores: list[InformationSta
     _outage_under_load(both_stores, mongo, outage_s=30.0)
 
 
+def test_a_store_client_waits_long_enough_to_see_the_database_back() -> None:
+    """pymongo checks a server it last saw down at most every ``MIN_HEARTBEAT_INTERVAL`` (0.5 s):
+    with a server selection shorter than two of those, the first read after an outage could end
+    before the check that finds the database back. The 30 s outage test failed so once, with
+    ``timeout_ms`` 500: "Connection refused" from a database up and holding every document."""
+    import pymongo.common
+
+    from gateway.store.shipper import mongo_client
+
+    for timeout_ms in (100, 500, 1000, 5000):
+        client = mongo_client("mongodb://127.0.0.1:9/?directConnection=true", timeout_ms)
+        try:
+            selection = client.options.server_selection_timeout
+            assert selection >= 2 * pymongo.common.MIN_HEARTBEAT_INTERVAL and selection >= timeout_ms / 1000
+            assert client.options.pool_options.connect_timeout == timeout_ms / 1000  # the rest as configured
+        finally:
+            client.close()
+
+
 def _journalled(folder) -> int:
     return sum(len([x for x in p.read_text().splitlines() if x.strip()]) for p in folder.glob("*.jsonl"))
 
