@@ -163,8 +163,14 @@ class EmbeddedMongo:
                 self._release_ownership()
                 raise EmbeddedDbError(
                     f"{DAEMON} exited with code {self.proc.returncode}; see {self.data_dir / 'secantusd.log'}")
-            if self._ping():
+            answering = self._answering_pid()
+            if answering == self.proc.pid or answering == 0:
                 return self.uri
+            if answering is not None:  # our daemon cannot have the port: it exits, or is stopped here
+                self.stop()
+                raise EmbeddedDbError(
+                    f"127.0.0.1:{self.port} is already served by another database process (pid {answering}): "
+                    f"set store.embedded_port to a free port (0 picks one), or MONGO_URI to join that database")
             time.sleep(0.1)
         self.stop()
         raise EmbeddedDbError(f"{DAEMON} did not answer on 127.0.0.1:{self.port} within {timeout_s:.0f} s")
@@ -198,13 +204,18 @@ class EmbeddedMongo:
         os.close(self._lock_fd)
         self._lock_fd = None
 
-    def _ping(self) -> bool:
+    def _answering_pid(self) -> int | None:
+        """The pid of the database answering on this port (0: one that does not say), None if none does.
+
+        Why the pid: a restart on the same port (after an outage) or a configured port another
+        server already listens on was answered by that other server, so the start looked done
+        while this daemon exited for want of the port, and the gateway wrote to a foreign database."""
         try:
             with pymongo.MongoClient(self.uri, serverSelectionTimeoutMS=300, connectTimeoutMS=300) as client:
-                client.admin.command("ping")
-            return True
+                pid = client.admin.command("serverStatus").get("pid")
+            return int(pid) if isinstance(pid, int) and not isinstance(pid, bool) else 0
         except pymongo.errors.PyMongoError:
-            return False
+            return None
 
     def _wait_waking(self, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
         """Wait for the daemon to exit, connecting to its port now and then meanwhile.

@@ -241,6 +241,22 @@ def test_open_store_starts_the_embedded_db_and_stops_it(settings, monkeypatch) -
     assert proc.poll() is not None
 
 
+def test_an_embedded_db_on_a_port_another_database_serves_refuses_to_start(mongo, tmp_path) -> None:
+    """A restart after an outage, or a configured ``store.embedded_port``, may find the port taken by
+    another database: that one answered the start's ping, the start returned, this daemon exited
+    for want of the port, and the gateway wrote to the other database. Now the start fails naming
+    the process that serves the port, and the other database goes on serving."""
+    from gateway.store.embedded import EmbeddedDbError, EmbeddedMongo
+
+    second = EmbeddedMongo(tmp_path / "second", port=mongo.port)
+    with pytest.raises(EmbeddedDbError, match=rf"127.0.0.1:{mongo.port} is already served by another database "
+                                              rf"process \(pid {mongo.proc.pid}\).*store.embedded_port"):
+        second.start(timeout_s=20)
+    assert second.proc is None  # its own daemon was stopped
+    with pymongo.MongoClient(mongo.uri, serverSelectionTimeoutMS=2000) as client:
+        assert client.admin.command("ping")["ok"] == 1
+
+
 def test_the_embedded_db_keeps_its_replication_log_to_the_configured_bound(settings, monkeypatch) -> None:
     """Each decision writes about two replication-log entries; the daemon's own default keeps 100,000
     (about 80 minutes of a busy gateway) in memory. The launcher passes the gateway's bound; the daemon
