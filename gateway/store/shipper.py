@@ -47,12 +47,13 @@ log = logging.getLogger(__name__)
 META_INDEX = [("_meta.stored_type", 1), ("_meta.inserted_at", 1)]
 
 
-#: The shortest server selection a client gets, in ms: two of pymongo's minimum intervals between
-#: checks of a server. A client that last saw the database down checks it again at most that often,
-#: so a shorter selection could end before the check that finds the database back: the first read
-#: after an outage failed with "Connection refused" though the database had been up for a while
+#: The shortest server selection a client gets, in ms: two of the drivers' minimum intervals between
+#: checks of a server (``minHeartbeatFrequencyMS``, 500 ms, fixed by MongoDB's server discovery
+#: specification). A client that last saw the database down checks it again at most that often, so
+#: a shorter selection could end before the check that finds the database back: the first read after
+#: an outage failed with "Connection refused" though the database had been up for a while
 #: (``store.timeout_ms: 500``, seen in tests/store/test_store.py's 30 s outage).
-MIN_SELECTION_MS = int(2 * pymongo.common.MIN_HEARTBEAT_INTERVAL * 1000)
+MIN_SELECTION_MS = 2 * 500
 
 
 def mongo_client(uri: str, timeout_ms: int) -> pymongo.MongoClient:
