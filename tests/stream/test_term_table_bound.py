@@ -34,6 +34,7 @@ HZ = 10
 CUSTOMERS = 3
 READINGS = 1_200  # 3,600 new position nodes: the table would hold them all without the bound
 FLOOR = 256  # the table's floor for this test, below what one window needs (the window's own limit rules)
+WINDOW_TRIPLES = 3 * HZ * CUSTOMERS * 3  # RANGE 3s of readings, three triples a customer
 
 
 def reading(k: int) -> tuple[int, list[tuple]]:
@@ -69,10 +70,10 @@ def test_the_term_table_holds_what_the_windows_need_and_answers_stay_the_same(se
 
     stats = runtime.stats
     assert stats["fast"] > 100 and stats["fallbacks"] == 0, stats  # the fast path ran on every window
-    # a window holds 3 s x 10 Hz x 9 triples: the table is emptied past 4 x 2 x 270 terms, and then
-    # holds at most that and one window's new terms
-    limit = max(FLOOR, executor.TERMS_SLACK * 2 * 3 * HZ * CUSTOMERS * 3)
-    assert len(runtime.plan.table) <= limit + 2 * 3 * HZ * CUSTOMERS * 3, len(runtime.plan.table)
+    # the table is emptied past TERMS_SLACK x 2 terms a window's triple, and then holds at most that
+    # and one window's new terms (two a triple)
+    limit = max(FLOOR, executor.TERMS_SLACK * 2 * WINDOW_TRIPLES)
+    assert len(runtime.plan.table) <= limit + 2 * WINDOW_TRIPLES, len(runtime.plan.table)
     assert runtime.plan.table.generation > 1  # it was emptied on the way
     fast_rows = [event["rows"] for event in fast.results("Approaching", limit=1000)]
     general_rows = [event["rows"] for event in general.results("Approaching", limit=1000)]
