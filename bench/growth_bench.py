@@ -350,8 +350,10 @@ def business(args: argparse.Namespace) -> None:
     """The gateway's build run (cold deploy, one-rule redeploys, first fire after each, fire
     latency, RSS; each process checks its firings against the generator's model) on the second
     generator's rule bases, one process per size; the rows go to BUSINESS_RESULTS."""
-    env = {"GROWTH_GENERATOR": "business", "GROWTH_SEED": str(args.seed), "GROWTH_DOMAINS": args.domains}
-    results = {"generator": "business", "seed": args.seed, "domains": args.domains, "load_start": os.getloadavg(), "cpus": os.cpu_count(),
+    env = {"GROWTH_GENERATOR": "business", "GROWTH_SEED": str(args.seed), "GROWTH_DOMAINS": args.domains,
+           "GROWTH_REQUEST_JOINS": args.request_joins}
+    results = {"generator": "business", "seed": args.seed, "domains": args.domains, "request_joins": args.request_joins,
+               "load_start": os.getloadavg(), "cpus": os.cpu_count(),
                "measured_at": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "runs": {}}
     work = Path(tempfile.mkdtemp(prefix="printeps-growth-business-"))
     for n in [int(s) for s in args.sizes.split(",")]:
@@ -387,6 +389,9 @@ def main() -> None:
                         help="business: the second generator (bench/peers/business_rules.py), gateway runs only, "
                              "saved to bench/results/growth_bench_business.json (reported by hand in docs/benchmarks.md)")
     parser.add_argument("--seed", type=int, default=1, help="the business generator's seed")
+    parser.add_argument("--request-joins", choices=("auto", "always", "never"), default="always",
+                        help="engine.compile_request_joins of the business runs (its bases have auto-focus rules, "
+                             "so auto keeps the rule base's network; always is what issue 30's figures measure)")
     parser.add_argument("--domains", choices=("scaled", "fixed"), default="scaled",
                         help="the business generator's key domains: grown with the base beyond 1,000 rules (default) "
                              "or fixed (the bases measured before 2026-11-27 14:30 UTC)")

@@ -54,6 +54,11 @@ else:
     def sample_facts(k: int, n: int) -> list[dict]:
         return _sample_facts(k)  # the same facts at every size
 
+# GROWTH_REQUEST_JOINS=auto|always|never: engine.compile_request_joins (issue 30: one-shot fires of
+# all-plain sets read joined facts from the request; auto uses it only without auto-focus rules,
+# and the business generator has some, so its runs name the mode they measured)
+REQUEST_JOINS = os.environ.get("GROWTH_REQUEST_JOINS", "auto")
+
 EDITS = 5
 # fewer on a loaded machine (GROWTH_WARM_FIRES / GROWTH_REQUESTS): a 10,000-rule business request
 # fires ~750 rules, 5,000 of them take half an hour at load 30; the results record the count
@@ -73,7 +78,7 @@ def new_engine(cache_dir: str, incremental: bool = True):
     data = tempfile.mkdtemp(prefix="printeps-growth-")
     return Engine(Settings(data_dir=data, engine={
         "rules_dir": str(Path(data) / "none"), "compile_cache_dir": cache_dir, "compile_incremental": incremental,
-        "compile_timeout_s": 3600}))
+        "compile_timeout_s": 3600, "compile_request_joins": REQUEST_JOINS}))
 
 
 def start_jvm() -> float:
@@ -124,6 +129,14 @@ def _warm_stats(files) -> dict:
     return dict(stats.__dict__) if stats is not None else {}
 
 
+def _reads_joins(files) -> bool:
+    """Whether the live version's one-shot fires use a request-join network (GROWTH_REQUEST_JOINS)."""
+    from gateway.engine import compiler
+    from gateway.engine.ruleset import content_hash
+
+    return bool(compiler._cache[content_hash(files)].runner.readsJoinsFromRequest())
+
+
 def _counts(result) -> dict[str, int]:
     out: dict[str, int] = {}
     for fired in result.fired:
@@ -161,8 +174,10 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     first = deploy(engine, files)
     with Clock() as wall:
         result = engine.fire("growth", sample_facts(0, n))
-    first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000, "warm": _warm_stats(files)}
+    first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000, "warm": _warm_stats(files),
+                  "reads_joins_from_request": _reads_joins(files)}
     out = {"peer": "gateway", "generator": GENERATOR, "mode": "incremental" if incremental else "whole", "rules": n,
+           "request_joins": REQUEST_JOINS,
            "jvm_start_s": jvm_s,
            "cold_deploy": first, "first_fire_after_cold_deploy": first_fire}
     if archive and incremental:

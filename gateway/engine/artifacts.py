@@ -88,7 +88,8 @@ def load_compiled(data: bytes, files: dict[str, str], options: CompileOptions | 
         plan = incremental._plan_from_json(manifest["plan"])
         stats = incremental.BuildStats(mode="loaded", rules=len(plan.rules))
         try:
-            compiled = incremental.assemble(plan, files, dict(manifest["plan"].get("expanded", {})), cache, stats)
+            compiled = incremental.assemble(plan, files, dict(manifest["plan"].get("expanded", {})), cache, stats,
+                                            request_joins=options.request_joins)
         except incremental._MissingUnit as exc:
             raise IncompatibleArtifact(f"unit {exc} of the archive does not load here: compile the files") from None
         if options.incremental and options.disk_cache:

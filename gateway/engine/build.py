@@ -57,6 +57,7 @@ class CompileOptions:
     memory_cache_mb: int = 256  # compiled units kept in memory (zipped class bytes)
     disk_cache_mb: int = 2048
     plain_rules: bool = True  # build rules of the plain shapes at run time (gateway.engine.plain_rules)
+    request_joins: str = "auto"  # one-shot fires of all-plain sets read joined facts from the request: auto | always | never
 
     @classmethod
     def from_settings(cls, engine_settings: Any) -> "CompileOptions":
@@ -73,6 +74,7 @@ class CompileOptions:
             memory_cache_mb=int(pick("memory_cache_mb", 256)),
             disk_cache_mb=int(pick("disk_cache_mb", 2048)),
             plain_rules=pick("plain_rules", True),
+            request_joins=pick("request_joins", "auto"),
         )
 
 

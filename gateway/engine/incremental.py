@@ -79,6 +79,7 @@ class BuildStats:
     compile_s: float = 0.0
     load_s: float = 0.0
     assemble_s: float = 0.0
+    request_joins_s: float = 0.0  # building the request-join network of one-shot fires (0: none built)
     total_s: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
@@ -205,7 +206,7 @@ def build(
         plan = _compile_whole(sources, items, env, cache, deadline, stats, on_progress, options)
     else:
         plan = _compile_incremental(sources, items, env, cache, deadline, stats, on_progress, options)
-    compiled = assemble(plan, files, expanded, cache, stats, on_progress)
+    compiled = assemble(plan, files, expanded, cache, stats, on_progress, request_joins=options.request_joins)
     stats.total_s = time.perf_counter() - started
     if options.incremental and options.disk_cache:
         cache.put_plan(content_hash(files), _plan_to_json(plan, expanded))
@@ -427,9 +428,11 @@ def _build_plain(rules: Plain, env: str, declarations: _Loaded) -> tuple[UnitArt
     return unit, leftovers
 
 
-def _java_build(description: bytes, declarations: _Loaded) -> Any:
-    """``PlainRules.build`` of a plain unit's description against the declarations' classes and globals."""
-    return jvm.helper_class("PlainRules").build(declarations.loader, declarations.models, description.decode())
+def _java_build(description: bytes, declarations: _Loaded, request_joins: bool = False) -> Any:
+    """``PlainRules.build`` of a plain unit's description against the declarations' classes and
+    globals (``request_joins``: as the request-join network of one-shot fires, see RequestFacts.java)."""
+    return jvm.helper_class("PlainRules").build(declarations.loader, declarations.models, description.decode(),
+                                                request_joins)
 
 
 HEARTBEAT_S = 0.5  # how often a long unit's wait reports progress (and hears a cancel)
@@ -557,8 +560,13 @@ def _load_plain(unit: UnitArtifact, parent: _Loaded | None, key: tuple[str, str]
 
 
 def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache: UnitCache | None,
-             stats: BuildStats, on_progress: Progress | None = None) -> CompiledRuleSet:
-    """One KieBase from the plan's units, wrapped as a CompiledRuleSet."""
+             stats: BuildStats, on_progress: Progress | None = None, *, request_joins: str = "auto"
+             ) -> CompiledRuleSet:
+    """One KieBase from the plan's units, wrapped as a CompiledRuleSet; when every rule is plain,
+    also the request-join network its one-shot fires use (see :func:`_request_join_base`), as
+    ``request_joins`` says: ``auto`` where it fires exactly as the KieBase (no auto-focus rule) and
+    pays (``Runner.requestJoinsPay``: facts of a type enter at least REQUEST_JOINS_FAN_OUT memories
+    untested), ``always``, or ``never``."""
     import json
 
     import jpype
@@ -595,19 +603,25 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
     _progress(on_progress, 0, 1, "assemble")
     started = time.perf_counter()
     try:
+        positions = jpype.JArray(jpype.JInt)([position[u] for u, _, _ in plan.rules])
+        packages = jpype.JArray(jpype.JString)([p for _, p, _ in plan.rules])
+        names = jpype.JArray(jpype.JString)([n for _, _, n in plan.rules])
         kbase = (units.build(declarations.models, kiebase_configuration(ks)) if plan.whole and not plan.rules else units.assemble(
-            declarations.models, unit_models,
-            jpype.JArray(jpype.JInt)([position[u] for u, _, _ in plan.rules]),
-            jpype.JArray(jpype.JString)([p for _, p, _ in plan.rules]),
-            jpype.JArray(jpype.JString)([n for _, _, n in plan.rules]),
-            kiebase_configuration(ks)))
-        runner = j["Runner"](kbase)
+            declarations.models, unit_models, positions, packages, names, kiebase_configuration(ks)))
+        stats.assemble_s = time.perf_counter() - started
+        joins = None
+        if (request_joins == "always" or (request_joins == "auto" and j["Runner"].requestJoinsPay(kbase))) \
+                and not plan.whole and unit_ids and all(fetch(u).kind == "plain" for u in unit_ids):
+            joined = time.perf_counter()
+            joins = _request_join_base(unit_ids, fetch, declarations, lambda models: units.assemble(
+                declarations.models, models, positions, packages, names, kiebase_configuration(ks)))
+            stats.request_joins_s = time.perf_counter() - joined
+        runner = j["Runner"](kbase) if joins is None else j["Runner"](kbase, joins)
     except jpype.JException as exc:
         resource = _resource_error_of(exc)
         if resource is not None:
             raise resource from None
         raise
-    stats.assemble_s = time.perf_counter() - started
     _progress(on_progress, 1, 1, "assemble")
     return CompiledRuleSet(
         hash=content_hash(files),
@@ -623,6 +637,32 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         stats=stats,
         unit_cache=cache,
     )
+
+
+def _request_join_base(unit_ids: list[str], fetch: Callable[[str], UnitArtifact], declarations: _Loaded,
+                       assemble_models: Callable[[Any], Any]) -> Any | None:
+    """The rules of the plain units built again as a request-join network (``PlainRules.build``
+    with ``requestJoins``): every pattern after a rule's first reads the request's facts, so a
+    one-shot fire stages no fact in the memories of rules its request cannot match (at 10,000
+    business rules ~13,000 right tuples of a 5-fact request; docs/benchmarks.md, issue 30).
+    None when a rule does not build so (the fires then use the rule base itself)."""
+    import jpype
+
+    models = jpype.JClass("java.util.ArrayList")()
+    for unit_id in unit_ids:
+        unit = fetch(unit_id)
+        key = (f"{unit.id}#request-joins", declarations.token)
+        with _loaded_lock:
+            loaded = _loaded.get(key)
+        if loaded is None:
+            built = _java_build(unit.data, declarations, request_joins=True)
+            if len(built.rejected()):
+                log.warning("unit %s builds no request-join network: %s", unit.id, list(built.rejected())[:3])
+                return None
+            loaded = _remember(key, _Loaded(declarations.loader, built.models(), len(unit.rules),
+                                            f"{unit.id}#request-joins#{next(_load_serial)}"))
+        models.add(loaded.models)
+    return assemble_models(models)
 
 
 class _MissingUnit(LookupError):
@@ -646,7 +686,8 @@ def build_from_plan(files: dict[str, str], options: CompileOptions, on_progress:
     stats.rules = len(plan.rules)
     stats.units_reused = len({u for u, _, _ in plan.rules} | {plan.declarations})
     try:
-        compiled = assemble(plan, files, dict(saved.get("expanded", {})), cache, stats, on_progress)
+        compiled = assemble(plan, files, dict(saved.get("expanded", {})), cache, stats, on_progress,
+                            request_joins=options.request_joins)
     except _MissingUnit:
         return None
     stats.total_s = time.perf_counter() - started

@@ -343,6 +343,11 @@ public final class DroolsInternals {
      * with one of them. Assumes: rules are {@code RuleImpl}s (another kind: true, the safe answer)
      * whose {@code getAgendaGroup()} is {@code "MAIN"} (or empty) when none is declared.
      */
+    /** Whether a rule has auto-focus (evaluated eagerly: see {@code Runner.requestJoinsExact}). */
+    public static boolean autoFocus(Rule r) {
+        return !(r instanceof RuleImpl) || ((RuleImpl) r).getAutoFocus();
+    }
+
     public static boolean movesFocus(Rule r) {
         if (!(r instanceof RuleImpl)) return true;
         RuleImpl rule = (RuleImpl) r;
@@ -607,6 +612,26 @@ public final class DroolsInternals {
         }
         return out.toArray(new String[0]);
     }
+
+    /**
+     * The most join, {@code not}, {@code exists} and accumulate nodes any one type's node feeds
+     * without an alpha test in between: how many memories every fact of that type enters on insert
+     * (see {@code Runner.requestJoinsPay}). Assumes: the KieBase is a {@code RuleBase} whose
+     * {@code Rete} lists its {@code ObjectTypeNode}s, whose sinks are alpha nodes, left input
+     * adapters and the right inputs of {@code BetaNode}s.
+     */
+    public static int untestedRightInputs(KieBase kieBase) {
+        int most = 0;
+        for (ObjectTypeNode otn : ((RuleBase) kieBase).getRete().getObjectTypeNodes()) {
+            int n = 0;
+            for (ObjectSink sink : otn.getObjectSinkPropagator().getSinks()) {
+                if (sink instanceof org.drools.core.reteoo.BetaNode) n++;
+            }
+            most = Math.max(most, n);
+        }
+        return most;
+    }
+
     // ---- plain rules: what the executable model's generated code constructs -----------------
 
     /**

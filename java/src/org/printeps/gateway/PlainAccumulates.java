@@ -31,6 +31,10 @@ final class PlainAccumulates {
 
     @SuppressWarnings({"unchecked", "rawtypes"})
     void accumulate(Map<String, Object> a, List<RuleItemBuilder<?>> items) {
+        if (rule.fromRequest) {
+            requestAccumulate(a, items);
+            return;
+        }
         List<Object> binds = new ArrayList<Object>();
         PatternDSL.PatternDef<Object> source = rule.pattern((Map<String, Object>) a.get("source"), binds);
         String sourceVar = source.getFirstVariable().getName();
@@ -93,6 +97,10 @@ final class PlainAccumulates {
         if (!resultTypeName.equals("Number") && !resultTypeName.equals("java.lang.Number")) {
             throw new Reject("an accumulate result of type " + resultTypeName);
         }
+        if (rule.fromRequest) {
+            requestFromAccumulate(a, resultSpec, items);
+            return;
+        }
         java.util.Set<String> before = new java.util.HashSet<String>(rule.vars.keySet());
         List<Object> binds = new ArrayList<Object>();
         PatternDSL.PatternDef<Object> source = rule.pattern((Map<String, Object>) a.get("source"), binds);
@@ -137,7 +145,12 @@ final class PlainAccumulates {
         rule.uncertain.add(resultName);
         List<Object> tests = (List<Object>) resultSpec.get("constraints");
         if (tests.isEmpty()) return;
-        PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
+        items.add(numberTests(PatternDSL.pattern(result), resultType, tests));
+    }
+
+    /** The result pattern's comparisons of {@code intValue}/{@code longValue}/{@code doubleValue} with numbers. */
+    @SuppressWarnings("unchecked")
+    private PatternDSL.PatternDef<Object> numberTests(PatternDSL.PatternDef<Object> on, Class<?> resultType, List<Object> tests) {
         for (Object t : tests) {
             Map<String, Object> c = (Map<String, Object>) t;
             String field = (String) c.get("field");
@@ -157,6 +170,78 @@ final class PlainAccumulates {
             }
             on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
         }
+        return on;
+    }
+
+    // ---- in a request-join build (PlainRequestJoins): the accumulate read from the request's facts
+
+    /** The field a binding of the source pattern ({@code $m : amount}) reads, or null. */
+    @SuppressWarnings("unchecked")
+    private static String boundField(Map<String, Object> source, String var) {
+        for (Object b : (List<Object>) source.get("binds")) {
+            Map<String, Object> bind = (Map<String, Object>) b;
+            if (bind.get("var").equals(var)) return (String) bind.get("field");
+        }
+        return null;
+    }
+
+    private Class<?> inputType(Map<String, Object> source, String field) {
+        return field == null ? Integer.class : boxed(rule.context.property(rule.resolve((String) source.get("type")), field).type);
+    }
+
+    /** {@link #fromAccumulate} with the accumulate read from the request: the same function and result type. */
+    @SuppressWarnings("unchecked")
+    private void requestFromAccumulate(Map<String, Object> a, Map<String, Object> resultSpec, List<RuleItemBuilder<?>> items) {
+        Map<String, Object> source = (Map<String, Object>) a.get("source");
+        String function = (String) a.get("function");
+        Map<String, Object> arg = (Map<String, Object>) a.get("arg");
+        String argVar = (String) arg.get("var");
+        String field = argVar == null ? null : boundField(source, argVar);
+        if (argVar != null && field == null) throw new Reject("an accumulate over " + argVar + ", not bound in its pattern");
+        if (argVar == null && !function.equals("count")) throw new Reject(function + " of a constant");
+        Object constant = argVar == null ? literal(arg, int.class) : null;
+        java.util.function.Supplier<?> fn = DroolsInternals.accumulateFunction(function, inputType(source, field));
+        if (fn == null) throw new Reject("accumulate function " + function + " is left to the compiler");
+        Class<?> resultType = DroolsInternals.accumulateResultType(function);
+        String resultVar = (String) resultSpec.get("var");
+        String resultName = resultVar != null ? resultVar : "$pattern_Number$" + (++rule.unnamed) + "$";
+        if (rule.vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
+        Declaration<Object> result = PlainRequestJoins.accumulate(rule, source, resultName, resultType, function, fn, field, constant);
+        items.add(numberTests(PatternDSL.pattern(result), resultType, (List<Object>) resultSpec.get("constraints")));
+        items.add(PlainRequestJoins.keepOrder(rule));
+        rule.vars.put(resultName, result);
+        rule.varTypes.put(resultName, resultType);
+        rule.uncertain.add(resultName);
+    }
+
+    /** {@link #accumulate} (a sum bound to a variable, with its tests) read from the request. */
+    @SuppressWarnings("unchecked")
+    private void requestAccumulate(Map<String, Object> a, List<RuleItemBuilder<?>> items) {
+        Map<String, Object> source = (Map<String, Object>) a.get("source");
+        String function = (String) a.get("function");
+        String argVar = (String) a.get("arg");
+        List<Object> binds = (List<Object>) source.get("binds");
+        String field = argVar == null ? null : boundField(source, argVar);
+        if (!function.equals("sum") || field == null || binds.size() != 1 || inputType(source, field) != Double.class) {
+            throw new Reject("accumulate function " + function + " is left to the compiler");
+        }
+        String resultName = (String) a.get("var");
+        if (rule.vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
+        Class<?> resultType = Double.class;
+        Declaration<Object> result = PlainRequestJoins.accumulate(rule, source, resultName, resultType, "sum",
+                DroolsInternals.accumulateFunction("sum", Double.class), field, null);
+        PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
+        for (Object t : (List<Object>) a.get("constraints")) {
+            Map<String, Object> c = (Map<String, Object>) t;
+            Object value = literal(c.get("literal"), double.class);
+            Index.ConstraintType op = constraintType((String) c.get("op"));
+            Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
+            on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
+        }
         items.add(on);
+        items.add(PlainRequestJoins.keepOrder(rule));
+        rule.vars.put(resultName, result);
+        rule.varTypes.put(resultName, resultType);
+        rule.uncertain.add(resultName);
     }
 }

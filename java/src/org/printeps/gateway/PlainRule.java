@@ -43,6 +43,12 @@ final class PlainRule {
     final Set<String> uncertain = new HashSet<String>();
     final PlainAccumulates accumulates = new PlainAccumulates(this);
     int unnamed = 0;
+    /**
+     * Whether the pattern being built reads its facts from the request ({@link RequestFacts}):
+     * in a request-join build ({@link Context#requestJoins}), every pattern of the rule's conditions
+     * after the first, including those inside {@code not}, {@code exists} and accumulates.
+     */
+    boolean fromRequest = false;
 
     @SuppressWarnings("unchecked")
     PlainRule(Context context, Map<String, Object> spec) {
@@ -56,8 +62,18 @@ final class PlainRule {
     @SuppressWarnings("unchecked")
     Rule build() {
         List<RuleItemBuilder<?>> items = new ArrayList<RuleItemBuilder<?>>();
+        boolean first = true;
+        Map<String, Object> attributeSpec = (Map<String, Object>) spec.get("attributes");
+        boolean eager = attributeSpec != null && Boolean.TRUE.equals(attributeSpec.get("auto-focus"));
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
+            fromRequest = context.requestJoins && !first;
+            first = false;
+            boolean linksOnFacts = fromRequest && eager && (e.containsKey("pattern") || e.containsKey("exists"));
+            if (linksOnFacts) {
+                PlainRequestJoins.linkGuard(this, (Map<String, Object>) e.get(e.containsKey("pattern") ? "pattern" : "exists"), items);
+                items.add(PlainRequestJoins.keepOrder(this));
+            }
             if (e.containsKey("pattern")) {
                 items.add(pattern((Map<String, Object>) e.get("pattern"), null));
             } else if (e.containsKey("accumulate")) {
@@ -136,7 +152,9 @@ final class PlainRule {
         String var = (String) p.get("var");
         String name = var != null ? var : "$pattern_" + type.getSimpleName() + "$" + (++unnamed) + "$";
         if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
-        Declaration<Object> decl = (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name);
+        Declaration<Object> decl = fromRequest
+                ? (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name, requestSource(type, p))
+                : (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name);
         PatternDSL.PatternDef<Object> def = PatternDSL.pattern(decl);
         for (Object c : (List<Object>) p.get("constraints")) {
             def = constraint(def, type, (Map<String, Object>) c);
@@ -149,6 +167,49 @@ final class PlainRule {
             for (Object b : (List<Object>) p.get("binds")) def = bindField(def, type, (Map<String, Object>) b);
         }
         return def;
+    }
+
+    /**
+     * Where a pattern of a request-join build reads its facts: the request's facts of its type,
+     * narrowed by the first equality join ({@link #requestKey}); the pattern's constraints still
+     * decide (see {@link RequestFacts.Keyed}).
+     */
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    org.drools.model.DeclarationSource requestSource(Class<?> type, Map<String, Object> p) {
+        RequestFacts.KeyedSource key = requestKey(type, p);
+        return key == null ? DSL.from(new RequestFacts.All(type))
+                           : DSL.from((org.drools.model.Variable) vars.get(key.ref), key.keyed);
+    }
+
+    /**
+     * The first equality of the pattern with a variable bound before ({@code applicant == $id},
+     * {@code applicant == $a.id}) on a text, int or boolean field (whose {@code equals} is the
+     * constraint's equality), as an index of the request's facts; null if there is none.
+     */
+    @SuppressWarnings("unchecked")
+    RequestFacts.KeyedSource requestKey(Class<?> type, Map<String, Object> p) {
+        for (Object one : (List<Object>) p.get("constraints")) {
+            Map<String, Object> c = (Map<String, Object>) one;
+            String ref = (String) c.get("ref");
+            if (!"==".equals(c.get("op")) || ref == null || !vars.containsKey(ref)) continue;
+            Property field = context.property(type, (String) c.get("field"));
+            Function1<Object, Object> value;
+            Class<?> valueType;
+            if (c.containsKey("refField")) {
+                Property other = context.property(varTypes.get(ref), (String) c.get("refField"));
+                value = other;
+                valueType = other.type;
+            } else if (boundFields.containsKey(ref)) {
+                value = IDENTITY;
+                valueType = boundFields.get(ref).type;
+            } else {
+                continue;
+            }
+            Kind kind = kindOf(field.type);
+            if (kind == Kind.DECIMAL || kindOf(valueType) != kind) continue;
+            return new RequestFacts.KeyedSource(new RequestFacts.Keyed(type, field, value), ref);
+        }
+        return null;
     }
 
     @SuppressWarnings({"unchecked", "rawtypes"})
@@ -164,6 +225,7 @@ final class PlainRule {
             Predicate1<Object> test = fact -> compare(kind, ct, field.apply(fact), value);
             String exprId = exprId(type, field, kind, ct, javaText(c.get("literal"), field.type));
             AlphaIndex index = PatternDSL.alphaIndexedBy((Class) field.type, ct, field.index, (Function1) field, value);
+            record(exprId, test, null, null);
             return def.expr(exprId, test, index, PatternDSL.reactOn(field.name));
         }
         String ref = (String) c.get("ref");
@@ -177,6 +239,7 @@ final class PlainRule {
         String exprId = exprId(type, field, kind, ct, ref + "." + other.getter.getName() + "()");
         BetaIndex index = PatternDSL.betaIndexedBy((Class) field.type, ct, field.index, (Function1) field,
                                                    (Function1) other, other.type);
+        record(exprId, null, test, ref);
         return def.expr(exprId, bound, test, index, PatternDSL.reactOn(field.name));
     }
 
@@ -225,6 +288,7 @@ final class PlainRule {
         List<String> react = new ArrayList<String>();
         if (!source.name.equals(field.name) && isProperty(type, source.name)) react.add(source.name);
         react.add(field.name);
+        record(exprId, null, test, ref);
         return def.expr(exprId, bound, test, index, PatternDSL.reactOn(react.toArray(new String[0])));
     }
 
@@ -277,13 +341,22 @@ final class PlainRule {
         Predicate1<Object> test = negated
                 ? fact -> !DSL.eval(operator, field.apply(fact), values)
                 : fact -> DSL.eval(operator, field.apply(fact), values);
+        record(exprId, test, null, null);
         return def.expr(exprId, test, PatternDSL.reactOn(field.name));
+    }
+
+    /** The constraints of the pattern being built, when {@link #recording} (see {@link PlainRequestJoins}). */
+    List<PlainRequestJoins.Test> recording = null;
+
+    private void record(String id, Predicate1<Object> alpha, Predicate2<Object, Object> beta, String ref) {
+        if (recording != null) recording.add(new PlainRequestJoins.Test(id, alpha, beta, ref));
     }
 
     /** {@code not Type( … )} / {@code exists Type( … )}: nothing bound inside is visible after it. */
     @SuppressWarnings("unchecked")
     RuleItemBuilder<?> negation(Map<String, Object> e) {
         boolean not = e.containsKey("not");
+        if (fromRequest) return PlainRequestJoins.negation(this, (Map<String, Object>) e.get(not ? "not" : "exists"), not);
         java.util.Set<String> before = new java.util.HashSet<String>(vars.keySet());
         PatternDSL.PatternDef<Object> def = pattern((Map<String, Object>) e.get(not ? "not" : "exists"), null);
         vars.keySet().retainAll(before);

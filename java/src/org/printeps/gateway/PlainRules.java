@@ -65,8 +65,18 @@ public final class PlainRules {
      * Builds the rules of {@code spec} (JSON: {@code {"format": 3, "rules": [...]}}) against the
      * classes of {@code loader} (the declarations unit's) and the globals of {@code declarations}.
      */
-    @SuppressWarnings("unchecked")
     public static Built build(ClassLoader loader, List<Model> declarations, String spec) {
+        return build(loader, declarations, spec, false);
+    }
+
+    /**
+     * {@link #build(ClassLoader, List, String)}, for a request-join network when {@code requestJoins}:
+     * every pattern after a rule's first reads the request's facts ({@link RequestFacts}) instead of
+     * a memory of every fact of its type. Only {@link Runner#fire} may fire such rules (it opens the
+     * request's facts); any other session would find nothing to join.
+     */
+    @SuppressWarnings("unchecked")
+    public static Built build(ClassLoader loader, List<Model> declarations, String spec, boolean requestJoins) {
         Map<String, Object> root = (Map<String, Object>) Json.parse(spec);
         Object format = root.get("format");
         if (!(format instanceof Number) || ((Number) format).intValue() < 2 || ((Number) format).intValue() > FORMAT) {
@@ -79,7 +89,7 @@ public final class PlainRules {
         Map<String, PlainModel> byPackage = new LinkedHashMap<String, PlainModel>();
         List<String> rejected = new ArrayList<String>();
         List<Object> rules = (List<Object>) root.get("rules");
-        Context context = new Context(loader, globals);
+        Context context = new Context(loader, globals, requestJoins);
         for (int k = 0; k < rules.size(); k++) {
             Map<String, Object> r = (Map<String, Object>) rules.get(k);
             try {
@@ -115,10 +125,13 @@ public final class PlainRules {
         final Map<String, Global<?>> globals;
         final Map<Class<?>, DomainClassMetadata> metadata = new HashMap<Class<?>, DomainClassMetadata>();
         final Map<String, Property> properties = new HashMap<String, Property>();
+        /** Whether the patterns after a rule's first read the request's facts (see {@link PlainRule}). */
+        final boolean requestJoins;
 
-        Context(ClassLoader loader, Map<String, Global<?>> globals) {
+        Context(ClassLoader loader, Map<String, Global<?>> globals, boolean requestJoins) {
             this.loader = loader;
             this.globals = globals;
+            this.requestJoins = requestJoins;
         }
 
         DomainClassMetadata metadata(Class<?> type) {

@@ -46,9 +46,13 @@ final class Recorder extends DefaultAgendaEventListener {
         if (recordFacts) {
             fired.append(",\"facts\":[");
             List<Object> objs = event.getMatch().getObjects();
+            boolean first = true;
             for (int k = 0; k < objs.size(); k++) {
-                if (k > 0) fired.append(',');
-                Json.write(fired, objs.get(k), types);
+                Object o = objs.get(k);
+                if (o instanceof RequestFacts.Marker) continue;  // a not/exists read from the request: no fact
+                if (!first) fired.append(',');
+                first = false;
+                Json.write(fired, o, types);
             }
             fired.append(']');
         }

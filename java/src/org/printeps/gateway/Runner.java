@@ -25,6 +25,11 @@ import org.kie.api.runtime.rule.FactHandle;
  */
 public final class Runner {
     private final KieBase kieBase;
+    /**
+     * The network {@link #fire} uses: {@link #kieBase}, or the same rules built to read the joined
+     * facts from the request ({@link RequestFacts}; see {@link #Runner(KieBase, KieBase)}).
+     */
+    private final KieBase fireBase;
     private final TypeRegistry types;
     private final boolean hasActionsGlobal;
     private final KieSessionConfiguration sessionConf;
@@ -53,6 +58,16 @@ public final class Runner {
     static final int REUSE_MAX_FACTS = 1000;
 
     public Runner(KieBase kieBase) {
+        this(kieBase, null);
+    }
+
+    /**
+     * A runner whose one-shot {@link #fire} uses {@code requestJoins}, the same rules built by
+     * {@link PlainRules#build} to read the facts of every pattern after a rule's first from the
+     * request, when {@link #requestJoinsAllowed} (null: {@code kieBase} for everything). Stateful
+     * sessions, KIE batches and explain use {@code kieBase}: their facts change between fires.
+     */
+    public Runner(KieBase kieBase, KieBase requestJoins) {
         this.kieBase = kieBase;
         this.types = new TypeRegistry(kieBase);
         this.hasActionsGlobal = declaresGlobal(kieBase, "actions");
@@ -60,8 +75,54 @@ public final class Runner {
         this.sessionConf.setOption(ClockTypeOption.get("pseudo"));
         this.idle = reusable(kieBase, types) ? new java.util.concurrent.ConcurrentLinkedQueue<KieSession>() : null;
         this.calendarRules = usesCalendarAttributes(kieBase);
+        this.fireBase = requestJoins != null && requestJoinsAllowed(types) ? requestJoins : kieBase;
         this.settleDeletions = movesFocus(kieBase);
     }
+
+    /**
+     * Whether a request-join network answers as the rule base itself: its rules are plain (their
+     * then-parts only call globals, so no fact changes while a request fires; the caller builds it
+     * only then), and no type is an event (an event's expiry and the clock belong to the session's
+     * memory, not to one request).
+     */
+    static boolean requestJoinsAllowed(TypeRegistry types) {
+        return !types.hasEventTypes();
+    }
+
+    /**
+     * Whether a request-join network of {@code kb} fires exactly as {@code kb} does, matches and
+     * order alike: no rule has auto-focus. Why: Drools evaluates auto-focus rules in the order
+     * they get linked, and which agenda group fires first follows from it; a fact that links several
+     * such rules at once links them in the order its type's node lists their patterns, which the
+     * request-join network (without those patterns in the type's node) cannot reproduce in every case.
+     */
+    public static boolean requestJoinsExact(KieBase kb) {
+        for (KiePackage p : kb.getKiePackages()) {
+            for (org.kie.api.definition.rule.Rule r : p.getRules()) {
+                if (DroolsInternals.autoFocus(r)) return false;
+            }
+        }
+        return true;
+    }
+
+    /**
+     * How many memories a fact must enter on insert, in a type's node without an alpha test, before
+     * {@link #requestJoinsPay} says a request-join network is worth its cost (a second network in
+     * memory, a second build). Measured (docs/benchmarks.md, issue 30): at 10,000 business rules
+     * (3,498 accumulates straight under the loan type) a fire takes a third of the time; at 1,000
+     * (316) the two are level; on the first growth generator's sets (every joined pattern has a test
+     * of its own) the rule base is faster.
+     */
+    public static final int REQUEST_JOINS_FAN_OUT = 1000;
+
+    /** Whether {@code auto} builds a request-join network for {@code kb}: it fires exactly as
+     *  {@code kb} ({@link #requestJoinsExact}) and its facts fan out widely enough. */
+    public static boolean requestJoinsPay(KieBase kb) {
+        return requestJoinsExact(kb) && DroolsInternals.untestedRightInputs(kb) >= REQUEST_JOINS_FAN_OUT;
+    }
+
+    /** Whether {@link #fire} reads joined facts from the request (a request-join network is in use). */
+    public boolean readsJoinsFromRequest() { return fireBase != kieBase; }
 
     static boolean movesFocus(KieBase kb) {
         for (KiePackage p : kb.getKiePackages()) {
@@ -117,7 +178,7 @@ public final class Runner {
 
     KieSession takeSession() {
         KieSession s = idle == null ? null : idle.poll();
-        return s != null ? startClock(s) : newSession();
+        return startClock(s != null ? s : fireBase.newKieSession(sessionConf, null));
     }
 
     /**
@@ -207,8 +268,15 @@ public final class Runner {
             if (hasActionsGlobal) session.setGlobal("actions", actions);
             Recorder recorder = new Recorder(actions, types, recordFacts);
             session.addEventListener(recorder);
-            for (Object f : facts) session.insert(f);
-            String answer = fireAndReport(session, recorder, types, limit, returnFacts, null, timeoutMs);
+            boolean request = fireBase != kieBase;
+            if (request) RequestFacts.open(facts);
+            String answer;
+            try {
+                for (Object f : facts) session.insert(f);
+                answer = fireAndReport(session, recorder, types, limit, returnFacts, null, timeoutMs);
+            } finally {
+                if (request) RequestFacts.close();
+            }
             session.removeEventListener(recorder);
             reuse = idle != null && answer.startsWith("{\"ok\":true");  // not after a loop or a failing then-part
             return answer;

@@ -1,0 +1,303 @@
+"""One-shot fires of an all-plain rule set read the facts of every pattern after a rule's first
+from the request (a request-join network, RequestFacts.java), instead of Drools staging every
+fact in the memory of every join, not, exists and accumulate over its type (issue 30: ~13,000
+right tuples of a 5-fact request at 10,000 business rules). These tests hold it to the rule
+base's own network: the same answer — rules, order, the facts of each firing, actions and facts —
+on random business bases and on a set with several joined types, keyed and unkeyed joins and
+large requests; and it is used only where that holds."""
+
+from __future__ import annotations
+
+import json
+import random
+import sys
+from pathlib import Path
+
+import pytest
+
+from gateway.engine import compiler, incremental
+from gateway.engine.build import CompileOptions
+from gateway.engine.results import encode_facts
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench" / "peers"))
+from business_rules import BusinessRules
+
+
+@pytest.fixture()
+def options(tmp_path) -> CompileOptions:
+    """``always``: these sets are small, so ``auto`` would keep the rule base's network (see
+    test_auto_builds_it_where_facts_fan_out_widely)."""
+    incremental.reset()
+    yield CompileOptions(cache_dir=str(tmp_path / "units"), request_joins="always")
+    incremental.reset()
+
+
+def answers_alike(compiled, requests: list[list[dict]]) -> None:
+    """Each request fired by the set's runner (request joins, sessions reused) answers exactly as
+    a runner of the rule base's own network (a fresh one each time) does."""
+    from gateway.base import jvm
+
+    runner_class = jvm.helper_class("Runner")
+    for k, facts in enumerate(requests):
+        data = encode_facts(facts, 10_000)
+        joined = json.loads(str(compiled.runner.fire(data, 100_000, True, True)))
+        network = json.loads(str(runner_class(compiled.kbase).fire(data, 100_000, True, True)))
+        assert joined["ok"], (k, joined)
+        assert joined == network, k
+
+
+def without_auto_focus(rules: BusinessRules) -> dict[str, str]:
+    """The base's files with its agenda groups kept and their auto-focus dropped (those rules then
+    never fire: no rule gives their group the focus): a set the request-join network fires exactly."""
+    return {name: text.replace("auto-focus true\n", "") for name, text in rules.drl_files().items()}
+
+
+@pytest.mark.parametrize("seed,attributes", [(1, 0.3), (2, 0.0), (3, 0.6)])
+def test_a_random_business_base_answers_as_its_own_network(options, seed, attributes):
+    """300 rules of every shape (joins, count/sum/min/max accumulates, not, exists, in, matches,
+    then-part calls), with salience, agenda groups, no-loop, lock-on-active and rule dates, or
+    without attributes; 60 requests of up to 5 applicants and 8 loans: the same answers, in order."""
+    rules = BusinessRules(seed, 300, regions=6, segments=3, purposes=3, domains=3, attribute_share=attributes)
+    compiled = compiler.compile_files(without_auto_focus(rules), f"joins{seed}", options)
+    assert compiled.stats.rules_built == 300 and compiled.runner.readsJoinsFromRequest()
+    assert compiled.stats.request_joins_s > 0
+    requests = [rules.facts(k, applicants=1 + k % 5, loans=k % 9) for k in range(60)]
+    answers_alike(compiled, requests)
+    if attributes == 0.0:  # and as the model of the rules' meaning says
+        for facts in requests[:10]:
+            fired = json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, False)))["fired"]
+            counts: dict[str, int] = {}
+            for one in fired:
+                counts[one["rule"]] = counts.get(one["rule"], 0) + 1
+            assert counts == {r: len(t) for r, t in rules.expected(facts).items()}
+
+
+def fanning_out(rules: int, auto_focus: bool = False) -> dict[str, str]:
+    """A set whose loans each enter ``rules`` memories untested (a ``not`` per rule, straight under
+    the loan type), one rule with auto-focus if asked."""
+    text = "package org.joins;\n\n" + "\n".join(
+        f'rule "r{k}"\n{"auto-focus true" if auto_focus and k == 0 else ""}\nwhen\n'
+        f'    $p : Person( age == {k}, $id : id )\n    not Loan( applicant == $id )\nthen\n'
+        f'    actions.say("bot", "r{k}");\nend\n' for k in range(rules))
+    return {"types.drl": TYPES, "rules.drl": text}
+
+
+def test_auto_builds_it_where_facts_fan_out_widely(tmp_path):
+    """``auto`` (the default) builds a request-join network where it pays and fires exactly as the
+    rule base: facts of a type enter at least Runner.REQUEST_JOINS_FAN_OUT memories untested, and no
+    rule has auto-focus; below that, or with an auto-focus rule, the rule base serves."""
+    from gateway.base import jvm
+
+    fan_out = int(jvm.helper_class("Runner").REQUEST_JOINS_FAN_OUT)
+    wide = compiler.compile_files(fanning_out(fan_out), "wide", CompileOptions(cache_dir=str(tmp_path / "w")))
+    assert int(jvm.helper_class("DroolsInternals").untestedRightInputs(wide.kbase)) == fan_out
+    assert wide.runner.readsJoinsFromRequest()
+    answers_alike(wide, [[{"type": "Person", "id": "p", "region": "n", "age": 3}],
+                         [{"type": "Person", "id": "p", "region": "n", "age": 3},
+                          {"type": "Loan", "id": "l", "applicant": "p", "amount": 1.0}]])
+    narrow = compiler.compile_files(fanning_out(fan_out - 1), "narrow", CompileOptions(cache_dir=str(tmp_path / "n")))
+    assert not narrow.runner.readsJoinsFromRequest()
+    focus = compiler.compile_files(fanning_out(fan_out, auto_focus=True), "focus", CompileOptions(cache_dir=str(tmp_path / "f")))
+    assert not focus.runner.readsJoinsFromRequest()
+
+
+def test_auto_focus_rules_use_request_joins_only_when_asked(options):
+    """``always`` builds the request-join network with auto-focus rules too: the same firings,
+    each rule's matches in the same order; only the order the agenda groups take the focus in may
+    differ (when one fact links several auto-focus rules at once)."""
+    rules = BusinessRules(6, 300, regions=6, segments=3, purposes=3, domains=3, attribute_share=0.6)
+    assert any(r.attribute == "agenda-group" for r in rules.rules())
+    always = compiler.compile_files(rules.drl_files(), "focus", options)
+    assert always.runner.readsJoinsFromRequest()
+    from gateway.base import jvm
+
+    runner_class = jvm.helper_class("Runner")
+    for k in range(60):
+        data = encode_facts(rules.facts(k, applicants=1 + k % 5, loans=k % 9), 10_000)
+        joined = json.loads(str(always.runner.fire(data, 10_000, True, True)))
+        network = json.loads(str(runner_class(always.kbase).fire(data, 10_000, True, True)))
+        assert joined["fireCount"] == network["fireCount"] and joined["facts"] == network["facts"]
+        for rule in {f["rule"] for f in network["fired"]}:
+            assert [f for f in joined["fired"] if f["rule"] == rule] == [f for f in network["fired"] if f["rule"] == rule]
+
+
+TYPES = """package org.joins;
+import org.printeps.gateway.Actions;
+global Actions actions;
+
+declare Person
+    id : String
+    region : String
+    age : int
+end
+
+declare Loan
+    id : String
+    applicant : String
+    amount : double
+end
+
+declare Payment
+    id : String
+    applicant : String
+    amount : double
+end
+
+declare Tag
+    owner : int
+    label : String
+end
+"""
+
+RULES = """package org.joins;
+
+rule "loan of a northern person"
+when
+    $p : Person( region == "n", $id : id )
+    $l : Loan( applicant == $id )
+then
+    actions.say("bot", "loan " + $l.getId());
+end
+
+rule "payment of a northern person"
+when
+    $p : Person( region == "n", $id : id )
+    $x : Payment( applicant == $id )
+then
+    actions.say("bot", "payment " + $x.getId());
+end
+
+rule "loan by a field of the person"
+salience 5
+when
+    $p : Person( region == "s" )
+    $l : Loan( applicant == $p.id )
+then
+    actions.say("bot", "field " + $l.getId());
+end
+
+rule "tag of the age"
+when
+    $p : Person( $age : age )
+    $t : Tag( owner == $age )
+then
+    actions.say("bot", "tag " + $t.getLabel());
+end
+
+rule "payment as big as a loan"
+when
+    $l : Loan( $amount : amount )
+    $x : Payment( amount == $amount )
+then
+    actions.say("bot", "same " + $x.getId());
+end
+
+rule "two loans"
+when
+    $p : Person( $id : id )
+    Number( intValue >= 2 ) from accumulate( Loan( applicant == $id ), count( 1 ) )
+then
+    actions.say("bot", "two " + $p.getId());
+end
+
+rule "paid over a hundred"
+when
+    $p : Person( $id : id )
+    Number( doubleValue > 100.0 ) from accumulate( Payment( applicant == $id, $m : amount ), sum( $m ) )
+then
+    actions.say("bot", "paid " + $p.getId());
+end
+
+rule "no loan"
+when
+    $p : Person( $id : id )
+    not Loan( applicant == $id )
+then
+    actions.say("bot", "none " + $p.getId());
+end
+
+rule "some big loan"
+when
+    $p : Person( )
+    exists Loan( amount > 1000.0 )
+then
+    actions.say("bot", "big " + $p.getId());
+end
+
+rule "loan then its payment"
+when
+    $p : Person( $id : id )
+    $l : Loan( applicant == $id )
+    $x : Payment( applicant == $id, amount < 500.0 )
+then
+    actions.say("bot", "chain " + $l.getId() + " " + $x.getId());
+end
+"""
+
+
+def typed_requests(seed: int, count: int, scale: int = 1) -> list[list[dict]]:
+    rng = random.Random(seed)
+    out = []
+    for _ in range(count):
+        persons = [{"type": "Person", "id": f"p{k}", "region": rng.choice("ns"), "age": rng.randrange(20, 24)}
+                   for k in range(rng.randrange(0, 5 * scale))]
+        ids = [p["id"] for p in persons] + ["nobody"]
+        amounts = [50.0, 200.0, 800.0, 1500.0]
+        facts = persons + [{"type": "Loan", "id": f"l{k}", "applicant": rng.choice(ids), "amount": rng.choice(amounts)}
+                           for k in range(rng.randrange(0, 7 * scale))]
+        facts += [{"type": "Payment", "id": f"x{k}", "applicant": rng.choice(ids), "amount": rng.choice(amounts)}
+                  for k in range(rng.randrange(0, 5 * scale))]
+        facts += [{"type": "Tag", "owner": rng.randrange(20, 24), "label": f"t{k}"} for k in range(rng.randrange(0, 3 * scale))]
+        rng.shuffle(facts)  # the request's order is the order joined facts arrive in
+        out.append(facts)
+    return out
+
+
+def test_several_joined_types_keyed_and_unkeyed_joins_answer_as_the_network(options):
+    """Rules that share their first pattern and join different types (a shared node read by type
+    would mix them up), a join on a field of a bound fact, on an int, on a double (not keyed), a
+    chain of two joins, accumulates, not and an uncorrelated exists; then requests of up to a
+    few hundred facts."""
+    files = {"types.drl": TYPES, "rules.drl": RULES}
+    compiled = compiler.compile_files(files, "typed", options)
+    assert compiled.stats.rules_built == 10 and compiled.runner.readsJoinsFromRequest()
+    answers_alike(compiled, typed_requests(1, 80))
+    answers_alike(compiled, typed_requests(2, 6, scale=10))
+
+
+def test_a_request_reads_only_its_own_facts(options):
+    """Two runners' worth of requests in turn on one session pool: nothing of a request is joined
+    in the next one (the request's facts are closed after its fire), and an empty request fires
+    nothing."""
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES}, "own", options)
+    person = {"type": "Person", "id": "p0", "region": "n", "age": 20}
+    first = json.loads(str(compiled.runner.fire(encode_facts([person, {"type": "Loan", "id": "l0", "applicant": "p0",
+                                                                          "amount": 50.0}], 100), 100, False, False)))
+    assert "loan l0" in [a["params"]["text"] for a in first["actions"]]
+    second = json.loads(str(compiled.runner.fire(encode_facts([person], 100), 100, False, False)))
+    texts = [a["params"]["text"] for a in second["actions"]]
+    assert "none p0" in texts and not any(t.startswith("loan") for t in texts)
+    assert json.loads(str(compiled.runner.fire("[]", 100, False, False)))["fireCount"] == 0
+
+
+def test_only_all_plain_sets_without_events_use_request_joins(options, tmp_path):
+    """A then-part that inserts or modifies facts (compiled by Drools) changes facts while a
+    request fires, and an event's expiry belongs to the session: both keep the network itself, as
+    does ``compile_request_joins: never``. Sessions, KIE batches and explain always use it."""
+    changing = RULES + """
+rule "grow"
+when
+    $p : Person( age < 21 )
+then
+    modify( $p ) { setAge( 21 ) };
+end
+"""
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": changing}, "changing", options)
+    assert compiled.stats.rules_compiled >= 1 and not compiled.runner.readsJoinsFromRequest()
+    events = TYPES.replace("declare Tag\n", "declare Tag\n    @role( event )\n")
+    compiled = compiler.compile_files({"types.drl": events, "rules.drl": RULES}, "events", options)
+    assert not compiled.runner.readsJoinsFromRequest()
+    off = CompileOptions(cache_dir=str(tmp_path / "off"), request_joins="never")
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES + "\n"}, "off", off)
+    assert compiled.stats.request_joins_s == 0 and not compiled.runner.readsJoinsFromRequest()
