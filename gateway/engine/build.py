@@ -8,7 +8,7 @@ their cache, assembling a KieBase) both need these, and neither should reach int
 - :class:`Source`, a DRL text to compile and the file it came from;
 - :func:`build_unit`, the one place a DRL text meets Drools' executable-model builder, with the
   mapping of its failures to the authors' files, lines and columns (:func:`sorted_errors`);
-- :func:`kiebase_configuration` and :func:`memory_error`, shared by every build.
+- :func:`kiebase_configuration`, :func:`memory_error` and :func:`resource_error_of`, shared by every build.
 """
 
 from __future__ import annotations
@@ -411,3 +411,20 @@ def _unique(errors: list[CompileError]) -> list[CompileError]:
 
 def sorted_errors(errors: list[CompileError]) -> list[CompileError]:
     return sorted(_unique(errors), key=lambda e: (e.file, e.line, e.column))
+
+
+def resource_error_of(exc: BaseException) -> CompileResourceError | None:
+    """A CompileResourceError if ``exc`` (or its cause chain) is the JVM running out of memory."""
+    text = f"{type(exc).__name__}: {exc}"
+    cause = getattr(exc, "getCause", None)
+    seen = 0
+    while cause is not None and seen < 10:
+        inner = cause()
+        if inner is None:
+            break
+        text += f" {inner.getClass().getName()}: {inner.getMessage()}"
+        cause = getattr(inner, "getCause", None)
+        seen += 1
+    if says_out_of_memory(text):
+        return memory_error()
+    return None

@@ -51,11 +51,11 @@ from gateway.engine.build import (
     build_unit,
     java_classes,
     kiebase_configuration,
-    memory_error,
+    resource_error_of,
     sorted_errors,
 )
 from gateway.engine.drl_items import RuleSetItems, SourceItems
-from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError, says_out_of_memory
+from gateway.engine.errors import BuildCancelled, CompileError, CompileFailed, CompileResourceError
 from gateway.engine.ruleset import content_hash
 from gateway.engine.unit_cache import UnitArtifact, UnitCache
 
@@ -562,11 +562,9 @@ def _load_plain(unit: UnitArtifact, parent: _Loaded | None, key: tuple[str, str]
 def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache: UnitCache | None,
              stats: BuildStats, on_progress: Progress | None = None, *, request_joins: str = "auto"
              ) -> CompiledRuleSet:
-    """One KieBase from the plan's units, wrapped as a CompiledRuleSet; when every rule is plain,
-    also the request-join network its one-shot fires use (see :func:`_request_join_base`), as
-    ``request_joins`` says: ``auto`` where it fires exactly as the KieBase (no auto-focus rule) and
-    pays (``Runner.requestJoinsPay``: facts of a type enter at least REQUEST_JOINS_FAN_OUT memories
-    untested), ``always``, or ``never``."""
+    """One KieBase from the plan's units, wrapped as a CompiledRuleSet; for an all-plain set, also
+    the network its one-shot fires use if ``request_joins`` (auto: ``Runner.requestJoinsPay``,
+    always, never) asks for it (:func:`_request_join_base`)."""
     import json
 
     import jpype
@@ -590,7 +588,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
                 loaded.append(_load(fetch(unit_id), declarations))
             _progress(on_progress, k + 1, len(unit_ids), "load")
     except jpype.JException as exc:
-        raise _resource_error_of(exc) or RuntimeError(f"loading compiled rule units failed: {exc}") from exc
+        raise resource_error_of(exc) or RuntimeError(f"loading compiled rule units failed: {exc}") from exc
     stats.load_s = time.perf_counter() - load_started
     position = {unit_id: k for k, unit_id in enumerate(unit_ids)}
     j = java_classes()
@@ -618,7 +616,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
             stats.request_joins_s = time.perf_counter() - joined
         runner = j["Runner"](kbase) if joins is None else j["Runner"](kbase, joins)
     except jpype.JException as exc:
-        resource = _resource_error_of(exc)
+        resource = resource_error_of(exc)
         if resource is not None:
             raise resource from None
         raise
@@ -641,11 +639,9 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
 
 def _request_join_base(unit_ids: list[str], fetch: Callable[[str], UnitArtifact], declarations: _Loaded,
                        assemble_models: Callable[[Any], Any]) -> Any | None:
-    """The rules of the plain units built again as a request-join network (``PlainRules.build``
-    with ``requestJoins``): every pattern after a rule's first reads the request's facts, so a
-    one-shot fire stages no fact in the memories of rules its request cannot match (at 10,000
-    business rules ~13,000 right tuples of a 5-fact request; docs/benchmarks.md, issue 30).
-    None when a rule does not build so (the fires then use the rule base itself)."""
+    """The plain units' rules built again as a request-join network (``PlainRules.build`` with
+    ``requestJoins``; docs/engine-api.md, "Request joins"): a one-shot fire stages no fact in the
+    memories of rules its request cannot match. None when a rule does not build so."""
     import jpype
 
     models = jpype.JClass("java.util.ArrayList")()
@@ -701,22 +697,3 @@ def _plan_to_json(plan: _Plan, expanded: dict[str, str]) -> dict[str, Any]:
 
 def _plan_from_json(data: dict[str, Any]) -> _Plan:
     return _Plan(data["declarations"], [(u, p, n) for u, p, n in data["rules"]], bool(data.get("whole")))
-
-
-# --------------------------------------------------------------------------- resource errors
-
-def _resource_error_of(exc: BaseException) -> CompileResourceError | None:
-    """A CompileResourceError if ``exc`` (or its cause chain) is the JVM running out of memory."""
-    text = f"{type(exc).__name__}: {exc}"
-    cause = getattr(exc, "getCause", None)
-    seen = 0
-    while cause is not None and seen < 10:
-        inner = cause()
-        if inner is None:
-            break
-        text += f" {inner.getClass().getName()}: {inner.getMessage()}"
-        cause = getattr(inner, "getCause", None)
-        seen += 1
-    if says_out_of_memory(text):
-        return memory_error()
-    return None

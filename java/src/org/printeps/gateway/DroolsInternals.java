@@ -614,19 +614,15 @@ public final class DroolsInternals {
     }
 
     /**
-     * The most join, {@code not}, {@code exists} and accumulate nodes any one type's node feeds
-     * without an alpha test in between: how many memories every fact of that type enters on insert
-     * (see {@code Runner.requestJoinsPay}). Assumes: the KieBase is a {@code RuleBase} whose
-     * {@code Rete} lists its {@code ObjectTypeNode}s, whose sinks are alpha nodes, left input
-     * adapters and the right inputs of {@code BetaNode}s.
+     * The most join, not, exists and accumulate nodes one type's node feeds with no alpha test in
+     * between: the memories each of its facts enters on insert ({@code Runner.requestJoinsPay}).
+     * Assumes: a {@code RuleBase}'s {@code Rete} lists {@code ObjectTypeNode}s, whose sinks include {@code BetaNode}s.
      */
     public static int untestedRightInputs(KieBase kieBase) {
         int most = 0;
         for (ObjectTypeNode otn : ((RuleBase) kieBase).getRete().getObjectTypeNodes()) {
             int n = 0;
-            for (ObjectSink sink : otn.getObjectSinkPropagator().getSinks()) {
-                if (sink instanceof org.drools.core.reteoo.BetaNode) n++;
-            }
+            for (ObjectSink sink : otn.getObjectSinkPropagator().getSinks()) n += sink instanceof org.drools.core.reteoo.BetaNode ? 1 : 0;
             most = Math.max(most, n);
         }
         return most;
