@@ -24,8 +24,8 @@ import org.drools.model.functions.Function1;
  * the session is emptied. At 10,000 business rules a 5-fact request staged ~13,000 right tuples
  * for ~74 firings: 80% of its time (docs/benchmarks.md, issue 30). A one-shot fire knows every fact
  * before it fires, and a rule base whose then-parts only call globals (plain rules) never changes
- * them while it fires: reading them here gives the same matches in the same order (the request's
- * order, which is the order a right memory keeps), at the cost of a lookup per left match.
+ * them while it fires: reading them here gives the same matches, in the order a right memory
+ * holds them ({@link #of(Class)}), at the cost of a lookup per left match.
  *
  * The facts are those of the firing thread: {@link Runner#fire} opens and closes them around its
  * {@code fireAllRules}, which runs the rules on that thread.
