@@ -89,13 +89,18 @@ def start_jvm() -> float:
     return clock.seconds
 
 
-def deploy(engine, files) -> dict:
+def _compiled(files):
+    """The compiled set of ``files`` in the process's compile cache (None if not there)."""
     from gateway.engine import compiler
     from gateway.engine.ruleset import content_hash
 
+    return compiler._cache.get(content_hash(files))
+
+
+def deploy(engine, files) -> dict:
     with Clock() as clock:
         engine.deploy("growth", files)
-    compiled = compiler._cache.get(content_hash(files))
+    compiled = _compiled(files)
     stats = compiled.stats.to_dict() if compiled is not None and compiled.stats is not None else {}
     return {"seconds": clock.seconds, "stats": stats}
 
@@ -121,20 +126,13 @@ def fire_latency(engine, n: int, variants: dict[int, int] | None = None) -> dict
 
 def _warm_stats(files) -> dict:
     """How the live version was warmed before the swap (fires, seconds, first and last ms)."""
-    from gateway.engine import compiler
-    from gateway.engine.ruleset import content_hash
-
-    compiled = compiler._cache.get(content_hash(files))
-    stats = getattr(compiled, "warm_stats", None)
+    stats = getattr(_compiled(files), "warm_stats", None)
     return dict(stats.__dict__) if stats is not None else {}
 
 
 def _reads_joins(files) -> bool:
     """Whether the live version's one-shot fires use a request-join network (GROWTH_REQUEST_JOINS)."""
-    from gateway.engine import compiler
-    from gateway.engine.ruleset import content_hash
-
-    return bool(compiler._cache[content_hash(files)].runner.readsJoinsFromRequest())
+    return bool(_compiled(files).runner.readsJoinsFromRequest())
 
 
 def _counts(result) -> dict[str, int]:
@@ -181,13 +179,10 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
            "jvm_start_s": jvm_s,
            "cold_deploy": first, "first_fire_after_cold_deploy": first_fire}
     if archive and incremental:
-        from gateway.engine import compiler
         from gateway.engine.artifacts import export_compiled
-        from gateway.engine.ruleset import content_hash
 
-        compiled = compiler._cache[content_hash(files)]
         with Clock() as exported:
-            data = export_compiled(compiled)
+            data = export_compiled(_compiled(files))
         Path(archive).write_bytes(data)
         out["export"] = {"seconds": exported.seconds, "bytes": len(data)}
     # the whole path recompiles everything per edit: at 10,000 rules one edit tells enough

@@ -581,11 +581,13 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         declarations = _load(fetch(plan.declarations), None)
         unit_ids = list(dict.fromkeys(unit_id for unit_id, _, _ in plan.rules))
         loaded: list[_Loaded] = []
+        rule_units: list[UnitArtifact] = []  # fetched once: the request-join network reads them again
         for k, unit_id in enumerate(unit_ids):
             if plan.whole and unit_id == plan.declarations:
                 loaded.append(declarations)
             else:
-                loaded.append(_load(fetch(unit_id), declarations))
+                rule_units.append(fetch(unit_id))
+                loaded.append(_load(rule_units[-1], declarations))
             _progress(on_progress, k + 1, len(unit_ids), "load")
     except jpype.JException as exc:
         raise resource_error_of(exc) or RuntimeError(f"loading compiled rule units failed: {exc}") from exc
@@ -608,10 +610,10 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
             declarations.models, unit_models, positions, packages, names, kiebase_configuration(ks)))
         stats.assemble_s = time.perf_counter() - started
         joins = None
-        if (request_joins == "always" or (request_joins == "auto" and j["Runner"].requestJoinsPay(kbase))) \
-                and not plan.whole and unit_ids and all(fetch(u).kind == "plain" for u in unit_ids):
+        all_plain = not plan.whole and bool(rule_units) and all(unit.kind == "plain" for unit in rule_units)
+        if all_plain and (request_joins == "always" or (request_joins == "auto" and j["Runner"].requestJoinsPay(kbase))):
             joined = time.perf_counter()
-            joins = _request_join_base(unit_ids, fetch, declarations, lambda models: units.assemble(
+            joins = _request_join_base(rule_units, declarations, lambda models: units.assemble(
                 declarations.models, models, positions, packages, names, kiebase_configuration(ks)))
             stats.request_joins_s = time.perf_counter() - joined
         runner = j["Runner"](kbase) if joins is None else j["Runner"](kbase, joins)
@@ -637,7 +639,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
     )
 
 
-def _request_join_base(unit_ids: list[str], fetch: Callable[[str], UnitArtifact], declarations: _Loaded,
+def _request_join_base(rule_units: list[UnitArtifact], declarations: _Loaded,
                        assemble_models: Callable[[Any], Any]) -> Any | None:
     """The plain units' rules built again as a request-join network (``PlainRules.build`` with
     ``requestJoins``; docs/engine-api.md, "Request joins"): a one-shot fire stages no fact in the
@@ -645,8 +647,7 @@ def _request_join_base(unit_ids: list[str], fetch: Callable[[str], UnitArtifact]
     import jpype
 
     models = jpype.JClass("java.util.ArrayList")()
-    for unit_id in unit_ids:
-        unit = fetch(unit_id)
+    for unit in rule_units:
         key = (f"{unit.id}#request-joins", declarations.token)
         with _loaded_lock:
             loaded = _loaded.get(key)

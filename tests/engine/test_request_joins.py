@@ -298,6 +298,25 @@ end
     events = TYPES.replace("declare Tag\n", "declare Tag\n    @role( event )\n")
     compiled = compiler.compile_files({"types.drl": events, "rules.drl": RULES}, "events", options)
     assert not compiled.runner.readsJoinsFromRequest()
+    five = RULES + """
+rule "five variables"
+when
+    $p : Person( $i : id, $r : region )
+    $l : Loan( $li : id, $la : applicant )
+    $t : Tag( $tl : label )
+    not Payment( id == $i, applicant == $r, id != $li, applicant != $la, id != $tl )
+then
+    actions.say("bot", "five");
+end
+"""
+    # a not reading more than four variables builds plain, but not from the request: the set
+    # keeps its own network (logged with the reason) and fires as before
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": five}, "five", options)
+    assert compiled.stats.rules_compiled == 0 and not compiled.runner.readsJoinsFromRequest()
+    facts = [{"type": "Person", "id": "p", "region": "n", "age": 20}, {"type": "Loan", "id": "l", "applicant": "a", "amount": 1.0},
+             {"type": "Tag", "owner": 20, "label": "t"}, {"type": "Payment", "id": "p", "applicant": "s", "amount": 1.0}]
+    answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 100), 100, False, False)))
+    assert "five" in [a["params"]["text"] for a in answer["actions"]]
     off = CompileOptions(cache_dir=str(tmp_path / "off"), request_joins="never")
     compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES + "\n"}, "off", off)
     assert compiled.stats.request_joins_s == 0 and not compiled.runner.readsJoinsFromRequest()

@@ -65,22 +65,30 @@ final class PlainAccumulates {
         String resultName = (String) a.get("var");
         if (rule.vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
         Declaration<Object> result = (Declaration<Object>) (Declaration) DSL.declarationOf(resultType, rule.context.metadata(resultType), resultName);
-        rule.vars.put(resultName, result);
-        rule.varTypes.put(resultName, resultType);
-        rule.uncertain.add(resultName);
+        bindResult(resultName, result, resultType);
         items.add((RuleItemBuilder<?>) DSL.accumulate(source, fn.as(result)));
         List<Object> tests = (List<Object>) a.get("constraints");
-        if (!tests.isEmpty()) {
-            PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
-            for (Object t : tests) {
-                Map<String, Object> c = (Map<String, Object>) t;
-                Object value = literal(c.get("literal"), double.class);
-                Index.ConstraintType op = constraintType((String) c.get("op"));
-                Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
-                on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
-            }
-            items.add(on);
+        if (!tests.isEmpty()) items.add(sumTests(PatternDSL.pattern(result), resultType, tests));
+    }
+
+    /** The tests of a sum bound to a variable ({@code $t > 1}): decimal comparisons with numbers. */
+    @SuppressWarnings("unchecked")
+    private static PatternDSL.PatternDef<Object> sumTests(PatternDSL.PatternDef<Object> on, Class<?> resultType, List<Object> tests) {
+        for (Object t : tests) {
+            Map<String, Object> c = (Map<String, Object>) t;
+            Object value = literal(c.get("literal"), double.class);
+            Index.ConstraintType op = constraintType((String) c.get("op"));
+            Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
+            on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
         }
+        return on;
+    }
+
+    /** An accumulate's result variable, visible after it, with a static type the generated code may declare otherwise. */
+    private void bindResult(String name, Declaration<Object> result, Class<?> resultType) {
+        rule.vars.put(name, result);
+        rule.varTypes.put(name, resultType);
+        rule.uncertain.add(name);
     }
 
     /**
@@ -140,9 +148,7 @@ final class PlainAccumulates {
         if (rule.vars.containsKey(resultName)) throw new Reject("variable " + resultName + " bound twice");
         Declaration<Object> result = (Declaration<Object>) (Declaration) DSL.declarationOf(resultType, rule.context.metadata(resultType), resultName);
         items.add((RuleItemBuilder<?>) DSL.accumulate(source, DSL.accFunction(fn, argument).as(result)));
-        rule.vars.put(resultName, result);
-        rule.varTypes.put(resultName, resultType);
-        rule.uncertain.add(resultName);
+        bindResult(resultName, result, resultType);
         List<Object> tests = (List<Object>) resultSpec.get("constraints");
         if (tests.isEmpty()) return;
         items.add(numberTests(PatternDSL.pattern(result), resultType, tests));
@@ -209,9 +215,7 @@ final class PlainAccumulates {
         Declaration<Object> result = PlainRequestJoins.accumulate(rule, source, resultName, resultType, function, fn, field, constant);
         items.add(numberTests(PatternDSL.pattern(result), resultType, (List<Object>) resultSpec.get("constraints")));
         items.add(PlainRequestJoins.keepOrder(rule));
-        rule.vars.put(resultName, result);
-        rule.varTypes.put(resultName, resultType);
-        rule.uncertain.add(resultName);
+        bindResult(resultName, result, resultType);
     }
 
     /** {@link #accumulate} (a sum bound to a variable, with its tests) read from the request. */
@@ -230,18 +234,8 @@ final class PlainAccumulates {
         Class<?> resultType = Double.class;
         Declaration<Object> result = PlainRequestJoins.accumulate(rule, source, resultName, resultType, "sum",
                 DroolsInternals.accumulateFunction("sum", Double.class), field, null);
-        PatternDSL.PatternDef<Object> on = PatternDSL.pattern(result);
-        for (Object t : (List<Object>) a.get("constraints")) {
-            Map<String, Object> c = (Map<String, Object>) t;
-            Object value = literal(c.get("literal"), double.class);
-            Index.ConstraintType op = constraintType((String) c.get("op"));
-            Predicate1<Object> test = total -> compare(Kind.DECIMAL, op, total, value);
-            on = on.expr("PLAIN:" + resultType.getName() + ":" + c.get("text"), test);
-        }
-        items.add(on);
+        items.add(sumTests(PatternDSL.pattern(result), resultType, (List<Object>) a.get("constraints")));
         items.add(PlainRequestJoins.keepOrder(rule));
-        rule.vars.put(resultName, result);
-        rule.varTypes.put(resultName, resultType);
-        rule.uncertain.add(resultName);
+        bindResult(resultName, result, resultType);
     }
 }

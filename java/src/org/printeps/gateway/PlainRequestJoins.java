@@ -117,16 +117,7 @@ final class PlainRequestJoins {
         guard.put("var", null);
         guard.put("constraints", literal);
         guard.put("binds", Collections.emptyList());
-        java.util.Set<String> before = new java.util.HashSet<String>(rule.vars.keySet());
-        boolean fromRequest = rule.fromRequest;
-        rule.fromRequest = false;
-        try {
-            items.add((RuleItemBuilder<?>) DSL.exists(rule.pattern(guard, null)));
-        } finally {
-            rule.fromRequest = fromRequest;
-        }
-        rule.vars.keySet().retainAll(before);
-        rule.varTypes.keySet().retainAll(before);
+        items.add(rule.inner(() -> (RuleItemBuilder<?>) DSL.exists(rule.pattern(guard, null))));
     }
 
     /** The source of {@link #keepOrder}: one marker for every match (all equal, so shared as the node before). */
@@ -150,21 +141,18 @@ final class PlainRequestJoins {
 
     @SuppressWarnings("unchecked")
     private static Read read(PlainRule rule, Map<String, Object> p, List<Object> binds) {
-        java.util.Set<String> before = new java.util.HashSet<String>(rule.vars.keySet());
-        boolean fromRequest = rule.fromRequest;
-        rule.fromRequest = false;
-        rule.recording = new ArrayList<Test>();
         Read read = new Read();
+        rule.recording = new ArrayList<Test>();
         try {
-            PatternDSL.PatternDef<Object> def = rule.pattern(p, binds);
-            read.type = rule.varTypes.get(def.getFirstVariable().getName());
+            rule.inner(() -> {
+                PatternDSL.PatternDef<Object> def = rule.pattern(p, binds);
+                read.type = rule.varTypes.get(def.getFirstVariable().getName());
+                return def;
+            });
             read.tests = rule.recording.toArray(new Test[0]);
         } finally {
             rule.recording = null;
-            rule.fromRequest = fromRequest;
         }
-        rule.vars.keySet().retainAll(before);  // bound inside: not visible after it
-        rule.varTypes.keySet().retainAll(before);
         Map<String, Integer> refs = new LinkedHashMap<String, Integer>();
         for (Test t : read.tests) if (t.ref != null) refs.putIfAbsent(t.ref, refs.size());
         read.refs = new ArrayList<String>(refs.keySet());

@@ -345,6 +345,24 @@ final class PlainRule {
         return def.expr(exprId, test, PatternDSL.reactOn(field.name));
     }
 
+    /**
+     * What {@code build} makes as the rule base's own build makes it (nothing read from the
+     * request), the variables bound inside it not visible after it: a request-join build's
+     * patterns inside a {@code not}, {@code exists} or accumulate, and its linking guards.
+     */
+    <T> T inner(java.util.function.Supplier<T> build) {
+        Set<String> before = new HashSet<String>(vars.keySet());
+        boolean outer = fromRequest;
+        fromRequest = false;
+        try {
+            return build.get();
+        } finally {
+            fromRequest = outer;
+            vars.keySet().retainAll(before);
+            varTypes.keySet().retainAll(before);
+        }
+    }
+
     /** The constraints of the pattern being built, when {@link #recording} (see {@link PlainRequestJoins}). */
     List<PlainRequestJoins.Test> recording = null;
 

@@ -268,7 +268,7 @@ public final class Runner {
             if (hasActionsGlobal) session.setGlobal("actions", actions);
             Recorder recorder = new Recorder(actions, types, recordFacts);
             session.addEventListener(recorder);
-            boolean request = fireBase != kieBase;
+            boolean request = readsJoinsFromRequest();
             if (request) RequestFacts.open(facts);
             String answer;
             try {
