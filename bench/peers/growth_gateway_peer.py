@@ -173,7 +173,8 @@ def build(n: int, cache_dir: str, archive: str | None, incremental: bool = True)
     with Clock() as wall:
         result = engine.fire("growth", sample_facts(0, n))
     first_fire = {"engine_ms": result.duration_ms, "wall_ms": wall.seconds * 1000, "warm": _warm_stats(files),
-                  "reads_joins_from_request": _reads_joins(files)}
+                  "reads_joins_from_request": _reads_joins(files),
+                  "routed_patterns": int(_compiled(files).runner.routedPatterns())}
     out = {"peer": "gateway", "generator": GENERATOR, "mode": "incremental" if incremental else "whole", "rules": n,
            "request_joins": REQUEST_JOINS,
            "jvm_start_s": jvm_s,

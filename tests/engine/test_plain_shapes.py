@@ -128,6 +128,11 @@ def fire(compiled, facts: list[dict]) -> dict:
             "fired": [f["rule"] for f in answer["fired"]]}
 
 
+def fire_raw(compiled, facts: list[dict]) -> dict:
+    """The runner's whole answer, refusals included."""
+    return json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, True)))
+
+
 def fire_fresh(compiled, facts: list[dict]) -> dict:
     """As :func:`fire`, in a session of its own (a new Runner's first session is a new one)."""
     from gateway.base import jvm
@@ -233,6 +238,29 @@ def test_a_null_field_fails_in_and_matches_and_passes_their_negations(options):
     facts = [{"type": "Customer", "id": "c0", "age": 3}]
     assert sorted(fire(plain, facts)["fired"]) == ["not in", "not matches"]
     assert fire(plain, facts) == fire(compiler.compile_files(files, "nulls", compiled_only()), facts)
+
+
+def test_a_regular_expression_is_compiled_once_and_a_bad_one_fails_as_drools_does(options):
+    """``matches`` compiles its expression when the rule is built (Drools' operator compiles it at
+    every test); one that does not compile fails each fire the way the compiled rule's does."""
+    good = {"types.drl": TYPES, "rules.drl": drl({
+        "suffix": 'when $c: Customer(id matches ".*[0-4]") then actions.say("bot", "low " + $c.getId());',
+        "letters": 'when $c: Customer(tier matches "g[a-z]+d") then actions.say("bot", "word " + $c.getId());',
+    })}
+    plain = compiler.compile_files(good, "regex", options)
+    assert plain.stats.rules_built == 2
+    facts = [{"type": "Customer", "id": f"c{k}", "age": 30, "tier": tier} for k, tier in enumerate(["gold", "good", "g-d", "gd"] * 2)]
+    assert fire(plain, facts) == fire(compiler.compile_files(good, "regex", compiled_only()), facts)
+    assert fire(plain, facts)["fired"].count("letters") == 4
+    bad = {"types.drl": TYPES, "rules.drl": drl({"bad": 'when Customer(tier matches "g[") then actions.say("bot", "x");'})}
+    try:
+        compiled_bad = compiler.compile_files(bad, "bad regex", compiled_only())
+    except compiler.CompileFailed:
+        return  # refused when compiled: nothing to compare
+    plain_bad = compiler.compile_files(bad, "bad regex", options)
+    assert plain_bad.stats.rules_built == 1
+    answer = fire_raw(plain_bad, facts)
+    assert answer == fire_raw(compiled_bad, facts) and answer["ok"] is False and "g[" in answer["message"]
 
 
 @pytest.mark.parametrize("body", [

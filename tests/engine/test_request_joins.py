@@ -266,6 +266,102 @@ def test_several_joined_types_keyed_and_unkeyed_joins_answer_as_the_network(opti
     answers_alike(compiled, typed_requests(2, 6, scale=10))
 
 
+IN_RULES = """package org.joins;
+
+rule "north or east"
+when
+    $p : Person( region in ( "n", "e" ) )
+then
+    actions.say("bot", "ne " + $p.getId());
+end
+
+rule "north or east, locked"
+lock-on-active true
+when
+    $p : Person( region in ( "n", "e" ) )
+then
+    actions.say("bot", "ne locked " + $p.getId());
+end
+
+rule "north or east and older"
+salience 3
+when
+    $p : Person( region in ( "n", "e" ), age > 20 )
+then
+    actions.say("bot", "ne older " + $p.getId());
+end
+
+rule "even age"
+when
+    $p : Person( age in ( 20, 22 ) )
+then
+    actions.say("bot", "even " + $p.getId());
+end
+
+rule "two lists"
+when
+    $p : Person( region in ( "s", "w", "n" ), age in ( 21, 23 ) )
+then
+    actions.say("bot", "two lists " + $p.getId());
+end
+
+rule "not north"
+when
+    $p : Person( region not in ( "n" ) )
+then
+    actions.say("bot", "not n " + $p.getId());
+end
+
+rule "loan of a southern or western person"
+when
+    $p : Person( region in ( "s", "w" ), $id : id )
+    $l : Loan( applicant == $id )
+then
+    actions.say("bot", "sw loan " + $l.getId());
+end
+
+rule "big loans unpaid"
+when
+    $l : Loan( applicant in ( "p0", "p1", "p2" ), $id : applicant )
+    not Payment( applicant == $id )
+then
+    actions.say("bot", "unpaid " + $l.getId());
+end
+
+rule "small loan then a payment"
+lock-on-active true
+when
+    $l : Loan( id in ( "l0", "l1", "l2", "l3" ), $id : applicant )
+    $x : Payment( applicant == $id )
+then
+    actions.say("bot", "paid small " + $l.getId() + " " + $x.getId());
+end
+"""
+
+
+def test_root_in_tests_dispatched_by_value_answer_as_the_network(options):
+    """Rules whose first pattern starts with an ``in`` get it dispatched by value (RequestDispatch):
+    one pattern alone, with lock-on-active (Drools builds it otherwise), with more tests, on an
+    int, two lists, followed by a join, by a ``not`` or by a join in a locked rule; a ``not in``
+    stays a test. Requests of up to a few hundred facts answer as the rule
+    base's own network, in order."""
+    files = {"types.drl": TYPES, "rules.drl": IN_RULES}
+    compiled = compiler.compile_files(files, "dispatched", options)
+    assert compiled.runner.readsJoinsFromRequest()
+    assert compiled.runner.routedPatterns() == 7  # ne twice (one key), ne older, even, two lists and the three joins
+    rng = random.Random(7)
+    requests = typed_requests(3, 80) + typed_requests(4, 6, scale=10)
+    for facts in requests:
+        for f in facts:
+            if f["type"] == "Person":
+                f["region"] = rng.choice("nsew")
+    answers_alike(compiled, requests)
+    fired = {f["rule"] for facts in requests
+             for f in json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
+    assert fired >= {"north or east", "north or east, locked", "north or east and older", "even age", "two lists",
+                     "loan of a southern or western person", "big loans unpaid", "small loan then a payment"}
+
+
 def test_a_request_reads_only_its_own_facts(options):
     """Two runners' worth of requests in turn on one session pool: nothing of a request is joined
     in the next one (the request's facts are closed after its fire), and an empty request fires

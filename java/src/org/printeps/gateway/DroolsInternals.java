@@ -632,16 +632,15 @@ public final class DroolsInternals {
 
     /**
      * A rule of the executable model's DSL with its attributes, set in the map's order (salience
-     * first, as the generated code does), and its items. Assumption: {@code PatternDSL.rule} returns
+     * first, as the generated code does), its metadata (public API to read) and its items. Assumption: {@code PatternDSL.rule} returns
      * the implementation's {@code RuleBuilder}, whose {@code attribute} returns the builder.
      */
     @SuppressWarnings({"unchecked", "rawtypes"})
     public static org.drools.model.Rule rule(String pkg, String name, Map<org.drools.model.Rule.Attribute, Object> attributes,
-                                             org.drools.model.RuleItemBuilder<?>[] items) {
+                                             Map<String, Object> metadata, org.drools.model.RuleItemBuilder<?>[] items) {
         org.drools.model.impl.RuleBuilder rule = org.drools.model.PatternDSL.rule(pkg, name);
-        for (Map.Entry<org.drools.model.Rule.Attribute, Object> a : attributes.entrySet()) {
-            rule = rule.attribute(a.getKey(), a.getValue());
-        }
+        for (Map.Entry<org.drools.model.Rule.Attribute, Object> a : attributes.entrySet()) rule = rule.attribute(a.getKey(), a.getValue());
+        for (Map.Entry<String, Object> m : metadata.entrySet()) rule = rule.metadata(m.getKey(), m.getValue());
         return rule.build(items);
     }
 

@@ -21,11 +21,24 @@ final class Recorder extends DefaultAgendaEventListener {
     private final Map<String, Integer> counts = new LinkedHashMap<String, Integer>();
     private final boolean recordFacts;
 
+    /**
+     * Each fact's JSON, written once per fire, when no fact can change while the rules fire (a
+     * request-join fire: plain rules only call globals); null otherwise. Why: a fact is written at
+     * every firing that matched it (~74 firings of 5 facts per request at 10,000 business rules).
+     */
+    private final java.util.IdentityHashMap<Object, String> written;
+
     Recorder(Actions actions, TypeRegistry types, boolean recordFacts) {
+        this(actions, types, recordFacts, false);
+    }
+
+    /** A recorder that writes each fact once when {@code factsFixed} (see {@link #written}). */
+    Recorder(Actions actions, TypeRegistry types, boolean recordFacts, boolean factsFixed) {
         this.actions = actions;
         this.types = types;
         actions.setTypes(types);
         this.recordFacts = recordFacts;
+        this.written = recordFacts && factsFixed ? new java.util.IdentityHashMap<Object, String>() : null;
     }
 
     @Override
@@ -50,9 +63,21 @@ final class Recorder extends DefaultAgendaEventListener {
             for (int k = 0; k < objs.size(); k++) {
                 Object o = objs.get(k);
                 if (o instanceof RequestFacts.Marker) continue;  // a not/exists read from the request: no fact
+                if (o instanceof RequestDispatch.Routed) continue;  // what a dispatched pattern read its fact from
                 if (!first) fired.append(',');
                 first = false;
-                Json.write(fired, o, types);
+                if (written == null) {
+                    Json.write(fired, o, types);
+                } else {
+                    String json = written.get(o);
+                    if (json == null) {
+                        StringBuilder one = new StringBuilder(128);
+                        Json.write(one, o, types);
+                        json = one.toString();
+                        written.put(o, json);
+                    }
+                    fired.append(json);
+                }
             }
             fired.append(']');
         }

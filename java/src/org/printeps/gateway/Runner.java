@@ -30,6 +30,8 @@ public final class Runner {
      * facts from the request ({@link RequestFacts}; see {@link #Runner(KieBase, KieBase)}).
      */
     private final KieBase fireBase;
+    /** How one-shot fires of {@code fireBase} dispatch root {@code in} tests by value (null: none; {@link RequestDispatch}). */
+    private final RequestDispatch dispatch;
     private final TypeRegistry types;
     private final boolean hasActionsGlobal;
     private final KieSessionConfiguration sessionConf;
@@ -76,6 +78,7 @@ public final class Runner {
         this.idle = reusable(kieBase, types) ? new java.util.concurrent.ConcurrentLinkedQueue<KieSession>() : null;
         this.calendarRules = usesCalendarAttributes(kieBase);
         this.fireBase = requestJoins != null && requestJoinsAllowed(types) ? requestJoins : kieBase;
+        this.dispatch = fireBase != kieBase ? RequestDispatch.of(fireBase) : null;
         this.settleDeletions = movesFocus(kieBase);
     }
 
@@ -123,6 +126,9 @@ public final class Runner {
 
     /** Whether {@link #fire} reads joined facts from the request (a request-join network is in use). */
     public boolean readsJoinsFromRequest() { return fireBase != kieBase; }
+
+    /** How many first patterns {@link #fire} dispatches by value ({@link RequestDispatch}; 0: none). */
+    public int routedPatterns() { return dispatch == null ? 0 : dispatch.patterns(); }
 
     static boolean movesFocus(KieBase kb) {
         for (KiePackage p : kb.getKiePackages()) {
@@ -266,13 +272,14 @@ public final class Runner {
         try {
             Actions actions = new Actions();
             if (hasActionsGlobal) session.setGlobal("actions", actions);
-            Recorder recorder = new Recorder(actions, types, recordFacts);
-            session.addEventListener(recorder);
             boolean request = readsJoinsFromRequest();
+            Recorder recorder = new Recorder(actions, types, recordFacts, request);
+            session.addEventListener(recorder);
             if (request) RequestFacts.open(facts);
             String answer;
             try {
-                for (Object f : facts) session.insert(f);
+                if (request && dispatch != null) dispatch.insert(session, facts);
+                else for (Object f : facts) session.insert(f);
                 answer = fireAndReport(session, recorder, types, limit, returnFacts, null, timeoutMs);
             } finally {
                 if (request) RequestFacts.close();
