@@ -155,7 +155,19 @@ def result_of(data: dict[str, Any], ruleset: str, version: int, duration_ms: flo
     """The FireResult of the Runner's parsed answer ``data``; refusals and runaways raise."""
     if data.get("ok") is not True:
         raise_refusal(data, ruleset)
-    return FireResult(ruleset, version, data["actions"], data["fired"], data.get("facts", []), data["fireCount"], duration_ms)
+    return FireResult(ruleset, version, data["actions"], fired_of(data), data.get("facts", []), data["fireCount"], duration_ms)
+
+
+def fired_of(data: dict[str, Any]) -> list[dict[str, Any]]:
+    """The answer's firings, each with its facts. A request-join fire (whose facts cannot change)
+    sends each matched fact once, in ``factTable``, and each firing its facts' numbers: each
+    firing gets its own copy of each fact here, as if written at every firing (Recorder.java)."""
+    fired = data["fired"]
+    table = data.get("factTable")
+    if table is not None:
+        for firing in fired:
+            firing["facts"] = [dict(table[k]) if isinstance(table[k], dict) else table[k] for k in firing["facts"]]
+    return fired
 
 
 def raise_refusal(data: dict[str, Any], ruleset: str | None = None) -> None:

@@ -17,7 +17,7 @@ import pytest
 
 from gateway.engine import compiler, incremental
 from gateway.engine.build import CompileOptions
-from gateway.engine.results import encode_facts
+from gateway.engine.results import encode_facts, fired_of
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench" / "peers"))
@@ -33,6 +33,16 @@ def options(tmp_path) -> CompileOptions:
     incremental.reset()
 
 
+def decoded(answer: str) -> dict:
+    """A runner's answer with each firing's facts in it (a request-join fire sends each fact once,
+    in ``factTable``: results.fired_of puts them back)."""
+    data = json.loads(answer)
+    if data.get("ok"):
+        fired_of(data)
+        data.pop("factTable", None)
+    return data
+
+
 def answers_alike(compiled, requests: list[list[dict]]) -> None:
     """Each request fired by the set's runner (request joins, sessions reused) answers exactly as
     a runner of the rule base's own network (a fresh one each time) does."""
@@ -41,8 +51,8 @@ def answers_alike(compiled, requests: list[list[dict]]) -> None:
     runner_class = jvm.helper_class("Runner")
     for k, facts in enumerate(requests):
         data = encode_facts(facts, 10_000)
-        joined = json.loads(str(compiled.runner.fire(data, 100_000, True, True)))
-        network = json.loads(str(runner_class(compiled.kbase).fire(data, 100_000, True, True)))
+        joined = decoded(str(compiled.runner.fire(data, 100_000, True, True)))
+        network = decoded(str(runner_class(compiled.kbase).fire(data, 100_000, True, True)))
         assert joined["ok"], (k, joined)
         assert joined == network, k
 
@@ -66,7 +76,7 @@ def test_a_random_business_base_answers_as_its_own_network(options, seed, attrib
     answers_alike(compiled, requests)
     if attributes == 0.0:  # and as the model of the rules' meaning says
         for facts in requests[:10]:
-            fired = json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, False)))["fired"]
+            fired = decoded(str(compiled.runner.fire(encode_facts(facts, 10_000), 10_000, False, False)))["fired"]
             counts: dict[str, int] = {}
             for one in fired:
                 counts[one["rule"]] = counts.get(one["rule"], 0) + 1
@@ -115,8 +125,8 @@ def test_auto_focus_rules_use_request_joins_only_when_asked(options):
     runner_class = jvm.helper_class("Runner")
     for k in range(60):
         data = encode_facts(rules.facts(k, applicants=1 + k % 5, loans=k % 9), 10_000)
-        joined = json.loads(str(always.runner.fire(data, 10_000, True, True)))
-        network = json.loads(str(runner_class(always.kbase).fire(data, 10_000, True, True)))
+        joined = decoded(str(always.runner.fire(data, 10_000, True, True)))
+        network = decoded(str(runner_class(always.kbase).fire(data, 10_000, True, True)))
         assert joined["fireCount"] == network["fireCount"] and joined["facts"] == network["facts"]
         for rule in {f["rule"] for f in network["fired"]}:
             assert [f for f in joined["fired"] if f["rule"] == rule] == [f for f in network["fired"] if f["rule"] == rule]
@@ -357,7 +367,7 @@ def test_root_in_tests_dispatched_by_value_answer_as_the_network(options):
                 f["region"] = rng.choice("nsew")
     answers_alike(compiled, requests)
     fired = {f["rule"] for facts in requests
-             for f in json.loads(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
+             for f in decoded(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
     assert fired >= {"north or east", "north or east, locked", "north or east and older", "even age", "two lists",
                      "loan of a southern or western person", "big loans unpaid", "small loan then a payment"}
 
@@ -368,13 +378,36 @@ def test_a_request_reads_only_its_own_facts(options):
     nothing."""
     compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES}, "own", options)
     person = {"type": "Person", "id": "p0", "region": "n", "age": 20}
-    first = json.loads(str(compiled.runner.fire(encode_facts([person, {"type": "Loan", "id": "l0", "applicant": "p0",
+    first = decoded(str(compiled.runner.fire(encode_facts([person, {"type": "Loan", "id": "l0", "applicant": "p0",
                                                                           "amount": 50.0}], 100), 100, False, False)))
     assert "loan l0" in [a["params"]["text"] for a in first["actions"]]
-    second = json.loads(str(compiled.runner.fire(encode_facts([person], 100), 100, False, False)))
+    second = decoded(str(compiled.runner.fire(encode_facts([person], 100), 100, False, False)))
     texts = [a["params"]["text"] for a in second["actions"]]
     assert "none p0" in texts and not any(t.startswith("loan") for t in texts)
-    assert json.loads(str(compiled.runner.fire("[]", 100, False, False)))["fireCount"] == 0
+    assert decoded(str(compiled.runner.fire("[]", 100, False, False)))["fireCount"] == 0
+
+
+def test_a_request_fire_sends_each_matched_fact_once(options):
+    """A request-join fire's answer carries each matched fact once (``factTable``) and each firing
+    its facts' numbers; decoded, every firing has its own copy of its facts, as the rule base's
+    runner writes them at every firing."""
+    from gateway.base import jvm
+    from gateway.engine.results import decode_result
+
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES}, "table", options)
+    facts = [{"type": "Person", "id": "p0", "region": "n", "age": 20},
+             {"type": "Loan", "id": "l0", "applicant": "p0", "amount": 50.0},
+             {"type": "Loan", "id": "l1", "applicant": "p0", "amount": 1500.0},
+             {"type": "Payment", "id": "x0", "applicant": "p0", "amount": 50.0}]
+    data = encode_facts(facts, 100)
+    raw = json.loads(str(compiled.runner.fire(data, 100, False, True)))
+    numbers = [k for firing in raw["fired"] for k in firing["facts"]]
+    assert all(isinstance(k, int) for k in numbers) and len(numbers) > len(raw["factTable"]) == len(set(numbers))
+    result = decode_result(str(compiled.runner.fire(data, 100, False, True)), "table", 1, 0.0)
+    network = json.loads(str(jvm.helper_class("Runner")(compiled.kbase).fire(data, 100, False, True)))
+    assert "factTable" not in network and result.fired == network["fired"]
+    persons = [f for firing in result.fired for f in firing["facts"] if isinstance(f, dict) and f.get("type") == "Person"]
+    assert len(persons) > 1 and len({id(p) for p in persons}) == len(persons)
 
 
 def test_only_all_plain_sets_without_events_use_request_joins(options, tmp_path):
@@ -411,7 +444,7 @@ end
     assert compiled.stats.rules_compiled == 0 and not compiled.runner.readsJoinsFromRequest()
     facts = [{"type": "Person", "id": "p", "region": "n", "age": 20}, {"type": "Loan", "id": "l", "applicant": "a", "amount": 1.0},
              {"type": "Tag", "owner": 20, "label": "t"}, {"type": "Payment", "id": "p", "applicant": "s", "amount": 1.0}]
-    answer = json.loads(str(compiled.runner.fire(encode_facts(facts, 100), 100, False, False)))
+    answer = decoded(str(compiled.runner.fire(encode_facts(facts, 100), 100, False, False)))
     assert "five" in [a["params"]["text"] for a in answer["actions"]]
     off = CompileOptions(cache_dir=str(tmp_path / "off"), request_joins="never")
     compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": RULES + "\n"}, "off", off)

@@ -632,8 +632,8 @@ public final class DroolsInternals {
 
     /**
      * A rule of the executable model's DSL with its attributes, set in the map's order (salience
-     * first, as the generated code does), its metadata (public API to read) and its items. Assumption: {@code PatternDSL.rule} returns
-     * the implementation's {@code RuleBuilder}, whose {@code attribute} returns the builder.
+     * first, as the generated code does), its metadata and its items. Assumption: {@code PatternDSL.rule}
+     * returns the implementation's {@code RuleBuilder}, whose {@code attribute} returns the builder.
      */
     @SuppressWarnings({"unchecked", "rawtypes"})
     public static org.drools.model.Rule rule(String pkg, String name, Map<org.drools.model.Rule.Attribute, Object> attributes,

@@ -22,11 +22,15 @@ final class Recorder extends DefaultAgendaEventListener {
     private final boolean recordFacts;
 
     /**
-     * Each fact's JSON, written once per fire, when no fact can change while the rules fire (a
-     * request-join fire: plain rules only call globals); null otherwise. Why: a fact is written at
-     * every firing that matched it (~74 firings of 5 facts per request at 10,000 business rules).
+     * When no fact can change while the rules fire (a request-join fire: plain rules only call
+     * globals), each matched fact's number in {@link #table}, where its JSON is written once; a
+     * firing lists the numbers and the answer carries the table ({@code "factTable"}; the gateway's
+     * {@code results.result_of} puts the facts back in each firing). Null otherwise. Why: a fact is
+     * written, sent and parsed at every firing that matched it (~74 firings of 5 facts per request
+     * at 10,000 business rules; parsing them was ~0.1 ms of a ~1.3 ms fire).
      */
-    private final java.util.IdentityHashMap<Object, String> written;
+    private final java.util.IdentityHashMap<Object, Integer> written;
+    private final StringBuilder table = new StringBuilder();
 
     Recorder(Actions actions, TypeRegistry types, boolean recordFacts) {
         this(actions, types, recordFacts, false);
@@ -38,7 +42,7 @@ final class Recorder extends DefaultAgendaEventListener {
         this.types = types;
         actions.setTypes(types);
         this.recordFacts = recordFacts;
-        this.written = recordFacts && factsFixed ? new java.util.IdentityHashMap<Object, String>() : null;
+        this.written = recordFacts && factsFixed ? new java.util.IdentityHashMap<Object, Integer>() : null;
     }
 
     @Override
@@ -69,14 +73,14 @@ final class Recorder extends DefaultAgendaEventListener {
                 if (written == null) {
                     Json.write(fired, o, types);
                 } else {
-                    String json = written.get(o);
-                    if (json == null) {
-                        StringBuilder one = new StringBuilder(128);
-                        Json.write(one, o, types);
-                        json = one.toString();
-                        written.put(o, json);
+                    Integer number = written.get(o);
+                    if (number == null) {
+                        number = written.size();
+                        written.put(o, number);
+                        if (number > 0) table.append(',');
+                        Json.write(table, o, types);
                     }
-                    fired.append(json);
+                    fired.append(number.intValue());
                 }
             }
             fired.append(']');
@@ -89,6 +93,7 @@ final class Recorder extends DefaultAgendaEventListener {
         b.append("{\"ok\":true,\"fireCount\":").append(fireCount).append(",\"actions\":");
         actions.drainInto(b);
         b.append(",\"fired\":[").append(fired).append(']');
+        if (written != null) b.append(",\"factTable\":[").append(table).append(']');
         reset();
     }
 
@@ -105,6 +110,10 @@ final class Recorder extends DefaultAgendaEventListener {
         if (fired.length() > 4096) fired = new StringBuilder(); else fired.setLength(0);
         firedCount = 0;
         counts.clear();
+        if (written != null) {
+            written.clear();
+            table.setLength(0);
+        }
         actions.setCurrentRule(null);
         actions.clear();
     }
