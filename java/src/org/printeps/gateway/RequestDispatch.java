@@ -25,10 +25,11 @@ import org.printeps.gateway.PlainValues.Property;
 /**
  * A request-join network's {@code in} tests dispatched by value: a rule whose first pattern starts
  * with {@code field in ( v1, v2, … )} (not auto-focus) gets, in that network, a first pattern on a
- * {@link Routed} fact of its own key, which Drools hashes with every other rule's key, and then
- * reads the fact itself from it ({@code from}) with all of the pattern's constraints. A one-shot
- * fire ({@link Runner#fire}) inserts, after each fact, one {@link Routed} per key whose list holds
- * the fact's value: a hash lookup here instead of the fact passing every such test.
+ * {@link Routed} fact of its pattern's key (equal patterns share one), which Drools hashes with the
+ * other keys, and then reads the fact itself from it ({@code from}) with all of the pattern's
+ * constraints. A one-shot fire ({@link Runner#fire}) inserts, after each fact, one {@link Routed}
+ * per key whose list holds the fact's value: a hash lookup here instead of the fact passing every
+ * such test.
  *
  * Why: Drools hashes alpha tests only for single equalities. An {@code in} test at the root of a
  * pattern is a node under its type's node, and every fact of the type runs every one of them: at
