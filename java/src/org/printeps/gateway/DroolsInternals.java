@@ -336,6 +336,11 @@ public final class DroolsInternals {
         return rule.getDateEffective() != null || rule.getDateExpires() != null;
     }
 
+    /** Whether a rule has auto-focus (evaluated eagerly: see {@code Runner.requestJoinsExact}; another kind: true). */
+    public static boolean autoFocus(Rule r) {
+        return !(r instanceof RuleImpl) || ((RuleImpl) r).getAutoFocus();
+    }
+
     /**
      * Whether a rule can move the agenda's focus: it sits in an agenda group other than MAIN or has
      * auto-focus. Only such rules make the order of propagations matter for which group fires
@@ -343,11 +348,6 @@ public final class DroolsInternals {
      * with one of them. Assumes: rules are {@code RuleImpl}s (another kind: true, the safe answer)
      * whose {@code getAgendaGroup()} is {@code "MAIN"} (or empty) when none is declared.
      */
-    /** Whether a rule has auto-focus (evaluated eagerly: see {@code Runner.requestJoinsExact}). */
-    public static boolean autoFocus(Rule r) {
-        return !(r instanceof RuleImpl) || ((RuleImpl) r).getAutoFocus();
-    }
-
     public static boolean movesFocus(Rule r) {
         if (!(r instanceof RuleImpl)) return true;
         RuleImpl rule = (RuleImpl) r;

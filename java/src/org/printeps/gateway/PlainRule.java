@@ -49,8 +49,6 @@ final class PlainRule {
      * after the first, including those inside {@code not}, {@code exists} and accumulates.
      */
     boolean fromRequest = false;
-    /** The {@link RequestDispatch.Routed} facts the next pattern reads its fact from (request-join builds only). */
-    Declaration<Object> routedBy = null;
 
     @SuppressWarnings("unchecked")
     PlainRule(Context context, Map<String, Object> spec) {
@@ -71,6 +69,7 @@ final class PlainRule {
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
             fromRequest = context.requestJoins && !first;
+            Declaration<Object> routedBy = null;  // the Routed facts a dispatched first pattern reads its fact from
             if (first && context.requestJoins && !eager && e.containsKey("pattern")) {
                 boolean terminalAlpha = ((List<Object>) spec.get("lhs")).size() == 1
                         && !Boolean.TRUE.equals(attributeSpec == null ? null : attributeSpec.get("lock-on-active"));
@@ -83,7 +82,7 @@ final class PlainRule {
                 items.add(PlainRequestJoins.keepOrder(this));
             }
             if (e.containsKey("pattern")) {
-                items.add(pattern((Map<String, Object>) e.get("pattern"), null));
+                items.add(pattern((Map<String, Object>) e.get("pattern"), null, routedBy));
             } else if (e.containsKey("accumulate")) {
                 accumulates.accumulate((Map<String, Object>) e.get("accumulate"), items);
             } else if (e.containsKey("not") || e.containsKey("exists")) {
@@ -154,19 +153,22 @@ final class PlainRule {
         }
     }
 
-    @SuppressWarnings({"unchecked", "rawtypes"})
     PatternDSL.PatternDef<Object> pattern(Map<String, Object> p, List<Object> binds) {
+        return pattern(p, binds, null);
+    }
+
+    /** {@link #pattern(Map, List)}, its fact read from {@code routedBy}'s when not null ({@link RequestDispatch}). */
+    @SuppressWarnings({"unchecked", "rawtypes"})
+    PatternDSL.PatternDef<Object> pattern(Map<String, Object> p, List<Object> binds, Declaration<Object> routedBy) {
         Class<?> type = resolve((String) p.get("type"));
         String var = (String) p.get("var");
         String name = var != null ? var : "$pattern_" + type.getSimpleName() + "$" + (++unnamed) + "$";
         if (vars.containsKey(name)) throw new Reject("variable " + name + " bound twice");
-        Declaration<Object> decl = fromRequest
-                ? (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name, requestSource(type, p))
-                : routedBy != null
-                ? (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name,
-                                                                        DSL.from((org.drools.model.Variable) routedBy, RequestDispatch.FACT))
+        org.drools.model.DeclarationSource source = fromRequest ? requestSource(type, p)
+                : routedBy != null ? DSL.from((org.drools.model.Variable) routedBy, RequestDispatch.FACT) : null;
+        Declaration<Object> decl = source != null
+                ? (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name, source)
                 : (Declaration<Object>) (Declaration) DSL.declarationOf(type, context.metadata(type), name);
-        routedBy = null;
         PatternDSL.PatternDef<Object> def = PatternDSL.pattern(decl);
         for (Object c : (List<Object>) p.get("constraints")) {
             def = constraint(def, type, (Map<String, Object>) c);
@@ -385,8 +387,8 @@ final class PlainRule {
 
     /**
      * What {@code build} makes as the rule base's own build makes it (nothing read from the
-     * request), the variables bound inside it not visible after it: a request-join build's
-     * patterns inside a {@code not}, {@code exists} or accumulate, and its linking guards.
+     * request), the variables bound inside it not visible after it: a pattern inside a {@code not}
+     * or {@code exists}, and a request-join build's patterns inside accumulates and its linking guards.
      */
     <T> T inner(java.util.function.Supplier<T> build) {
         Set<String> before = new HashSet<String>(vars.keySet());
@@ -413,10 +415,7 @@ final class PlainRule {
     RuleItemBuilder<?> negation(Map<String, Object> e) {
         boolean not = e.containsKey("not");
         if (fromRequest) return PlainRequestJoins.negation(this, (Map<String, Object>) e.get(not ? "not" : "exists"), not);
-        java.util.Set<String> before = new java.util.HashSet<String>(vars.keySet());
-        PatternDSL.PatternDef<Object> def = pattern((Map<String, Object>) e.get(not ? "not" : "exists"), null);
-        vars.keySet().retainAll(before);
-        varTypes.keySet().retainAll(before);
+        PatternDSL.PatternDef<Object> def = inner(() -> pattern((Map<String, Object>) e.get(not ? "not" : "exists"), null));
         return (RuleItemBuilder<?>) (not ? DSL.not(def) : DSL.exists(def));
     }
 
