@@ -23,14 +23,15 @@ How a build goes (:func:`build`):
 5. the assembly plan is kept under the set's content hash: loading the same set again (another
    process, the next start) parses and compiles nothing.
 
-Texts the splitter cannot place unambiguously, and rule units (``unit`` declarations), are built
-as one unit (``mode="whole"``), like ``incremental=False``.
+Texts the splitter cannot place unambiguously, and rule units (``unit`` declarations), are built as
+one unit (``mode="whole"``), like ``incremental=False``.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import itertools
+import json
 import logging
 import math
 import os
@@ -43,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.base import jvm
-from gateway.engine import drl_items, plain_rules
+from gateway.engine import drl_items, plain_rules, shared_patterns
 from gateway.engine.build import (
     CompiledRuleSet,
     CompileOptions,
@@ -431,8 +432,7 @@ def _build_plain(rules: Plain, env: str, declarations: _Loaded) -> tuple[UnitArt
 def _java_build(description: bytes, declarations: _Loaded, request_joins: bool = False) -> Any:
     """``PlainRules.build`` of a plain unit's description against the declarations' classes and
     globals (``request_joins``: as the request-join network of one-shot fires, see RequestFacts.java)."""
-    return jvm.helper_class("PlainRules").build(declarations.loader, declarations.models, description.decode(),
-                                                request_joins)
+    return jvm.helper_class("PlainRules").build(declarations.loader, declarations.models, description.decode(), request_joins)
 
 
 HEARTBEAT_S = 0.5  # how often a long unit's wait reports progress (and hears a cancel)
@@ -642,17 +642,16 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
 def _request_join_base(rule_units: list[UnitArtifact], declarations: _Loaded,
                        assemble_models: Callable[[Any], Any]) -> Any | None:
     """The plain units' rules built again as a request-join network (``PlainRules.build`` with
-    ``requestJoins``; docs/engine-api.md, "Request joins"): a one-shot fire stages no fact in the
-    memories of rules its request cannot match. None when a rule does not build so."""
-    import jpype
-
-    models = jpype.JClass("java.util.ArrayList")()
-    for unit in rule_units:
-        key = (f"{unit.id}#request-joins", declarations.token)
+    ``requestJoins``; docs/engine-api.md, "Request joins"), first patterns that open several rules
+    marked (:mod:`gateway.engine.shared_patterns`). None when a rule does not build so."""
+    models = jvm.jclass("java.util.ArrayList")()
+    descriptions = [json.loads(unit.data) for unit in rule_units]
+    for unit, description, marked in zip(rule_units, descriptions, shared_patterns.mark_shared(descriptions)):
+        key = (f"{unit.id}#request-joins#{hash(tuple(marked))}", declarations.token)  # with what the build reads
         with _loaded_lock:
             loaded = _loaded.get(key)
         if loaded is None:
-            built = _java_build(unit.data, declarations, request_joins=True)
+            built = _java_build(json.dumps(description).encode() if marked else unit.data, declarations, request_joins=True)
             if len(built.rejected()):
                 log.warning("unit %s builds no request-join network: %s", unit.id, list(built.rejected())[:3])
                 return None

@@ -1,6 +1,6 @@
-"""The Drools seam's contract: every assumption ``DroolsInternals.java`` makes about Drools'
-implementation, checked against the Drools on the classpath, pinned to the version it was written
-for. A Drools upgrade fails here, naming the seam method to adapt, instead of silently (a changed
+"""The Drools seam's contract: every assumption ``DroolsInternals.java`` (and
+``DroolsLinkOrder.java``) makes about Drools' implementation, checked against the Drools on the
+classpath, pinned to the version it was written for. A Drools upgrade fails here, naming the seam method to adapt, instead of silently (a changed
 constraint-id formula leaves a plain rule that never fires, with no error anywhere).
 
 Also: no other Java helper, and no Python module, reaches into Drools' implementation.
@@ -25,6 +25,8 @@ from gateway.engine.results import encode_facts
 ROOT = Path(__file__).resolve().parents[2]
 JAVA = ROOT / "java" / "src" / "org" / "printeps" / "gateway"
 PACKAGE = "org.printeps.seam"
+#: The seam's files: every use of Drools' implementation, and nothing else, is in them.
+SEAM = {"DroolsInternals.java", "DroolsLinkOrder.java"}
 
 TYPES = f"""package {PACKAGE};
 import org.printeps.gateway.Actions;
@@ -327,6 +329,62 @@ end
         "untestedRightInputs", "a RuleBase's Rete lists its ObjectTypeNodes, whose sinks include the BetaNodes they feed")
 
 
+#: Auto-focus rules whose nodes sit in every place a type's node propagates to, declared in
+#: another order than Drools links them: under a hashed alpha node ("nested": a child of "hashed"'s
+#: node, listed among its range-indexable sinks), hashed (three tier tests), range-indexed (nine
+#: age tests: Drools' default AlphaRangeIndexThresholdOption), hashable (one vip test) and a left
+#: input without a test ("other"). The joins give tier and age their other tests.
+LINK_ORDER = TYPES + "".join(f"""
+rule "{name}"
+    auto-focus true
+    agenda-group "g-{name}"
+when
+    Customer( {test} )
+then
+end
+""" for name, test in [("other", ""), ("hashable", "vip == true"), ("range", "age > 18"), ("hashed", 'tier == "gold"'),
+                        ("nested", 'tier == "gold", score > 1.0')]) + "".join(f"""
+rule "join {k}"
+when
+    $o: Order()
+    Customer( {test}, id == $o.customer )
+then
+end
+""" for k, test in enumerate(['tier == "silver"', 'tier == "bronze"'] + [f"age > {20 + 10 * k}" for k in range(8)]))
+
+
+def test_the_link_order_of_auto_focus_rules_is_the_order_a_type_node_propagates_in(seam, options):
+    """DroolsLinkOrder numbers the nodes that link rules in the order a type's node propagates a
+    fact (hashed, range-indexed, hashable, range-indexable, others; an alpha node's children
+    likewise), and a fire of a request-join network puts the eager rules one fact links in that
+    order. Here, in the rule base's own session, the order it predicts must be Drools' own: a
+    session whose fire reorders by it ends with the same eager list as one that does not."""
+    kbase = compiler.compile_files({"r.drl": LINK_ORDER}, "linkorder", options).kbase
+    link_order = jvm.helper_class("DroolsLinkOrder")
+    customer_type = kbase.getFactType(PACKAGE, "Customer")
+
+    def customer():
+        c = customer_type.newInstance()
+        for field, value in {"id": "c1", "tier": "gold", "age": jpype.JInt(50), "score": 2.0, "vip": True}.items():
+            customer_type.set(c, field, value)
+        return c
+
+    drools, predicted = kbase.newKieSession(), kbase.newKieSession()
+    try:
+        drools.insert(customer())
+        order = [str(n) for n in link_order.eagerRules(drools)]
+        assert order == ["nested", "hashed", "range", "hashable", "other"], broken(
+            "DroolsLinkOrder", "a type node propagates to hashed, range-indexed, hashable, range-indexable, "
+            f"then other sinks, each alpha node's children likewise; eager rules are listed as linked: {order}")
+        fire = link_order.of(kbase).begin(predicted)
+        fire.inserted(predicted.insert(customer()))
+        assert [str(n) for n in link_order.eagerRules(predicted)] == order, broken(
+            "DroolsLinkOrder.of", "the walk of the alpha network visits nodes in propagation order")
+    finally:
+        drools.dispose()
+        predicted.dispose()
+
+
 # --------------------------------------------------------------------------- sessions: handles and agenda
 
 
@@ -535,14 +593,14 @@ def _code(text: str) -> str:
 def test_no_java_helper_but_the_seam_names_a_drools_implementation_class():
     offenders = {}
     for path in sorted(JAVA.glob("*.java")):
-        if path.name == "DroolsInternals.java":
+        if path.name in SEAM:
             continue
         code = _code(path.read_text(encoding="utf-8"))
         bad = sorted({m for m in REFERENCE.findall(code) if not ALLOWED.match(m)})
         bad += sorted(set(re.findall(r"\bInternal[A-Z]\w*|\bRuleImpl\b|\bQueryImpl\b|\bKieBaseBuilder\b", code)))
         if bad:
             offenders[path.name] = bad
-    assert offenders == {}, f"Drools implementation classes outside DroolsInternals.java: {offenders}"
+    assert offenders == {}, f"Drools implementation classes outside the seam ({sorted(SEAM)}): {offenders}"
 
 
 def test_the_scan_catches_an_implementation_class():

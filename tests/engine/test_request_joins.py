@@ -113,23 +113,18 @@ def test_auto_builds_it_where_facts_fan_out_widely(tmp_path):
 
 
 def test_auto_focus_rules_use_request_joins_only_when_asked(options):
-    """``always`` builds the request-join network with auto-focus rules too: the same firings,
-    each rule's matches in the same order; only the order the agenda groups take the focus in may
-    differ (when one fact links several auto-focus rules at once)."""
+    """``always`` builds the request-join network with auto-focus rules too, and fires as the rule
+    base: the agenda groups take the focus in the same order (DroolsLinkOrder: 4 of these 60
+    requests differed without it, when one fact linked several auto-focus rules at once). ``auto``
+    does not: on larger sets a rule's matches may still come in another order (Runner.requestJoinsExact)."""
     rules = BusinessRules(6, 300, regions=6, segments=3, purposes=3, domains=3, attribute_share=0.6)
     assert any(r.attribute == "agenda-group" for r in rules.rules())
     always = compiler.compile_files(rules.drl_files(), "focus", options)
     assert always.runner.readsJoinsFromRequest()
     from gateway.base import jvm
 
-    runner_class = jvm.helper_class("Runner")
-    for k in range(60):
-        data = encode_facts(rules.facts(k, applicants=1 + k % 5, loans=k % 9), 10_000)
-        joined = decoded(str(always.runner.fire(data, 10_000, True, True)))
-        network = decoded(str(runner_class(always.kbase).fire(data, 10_000, True, True)))
-        assert joined["fireCount"] == network["fireCount"] and joined["facts"] == network["facts"]
-        for rule in {f["rule"] for f in network["fired"]}:
-            assert [f for f in joined["fired"] if f["rule"] == rule] == [f for f in network["fired"] if f["rule"] == rule]
+    assert not bool(jvm.helper_class("Runner").requestJoinsExact(always.kbase))
+    answers_alike(always, [rules.facts(k, applicants=1 + k % 5, loans=k % 9) for k in range(60)])
 
 
 TYPES = """package org.joins;
@@ -353,12 +348,13 @@ def test_root_in_tests_dispatched_by_value_answer_as_the_network(options):
     """Rules whose first pattern starts with an ``in`` get it dispatched by value (RequestDispatch):
     one pattern alone, with lock-on-active (Drools builds it otherwise), with more tests, on an
     int, two lists, followed by a join, by a ``not`` or by a join in a locked rule; a ``not in``
-    stays a test. Requests of up to a few hundred facts answer as the rule
+    stays a test, and so does a pattern that opens two rules (test_rules_that_open_alike_share_as_in_the_rule_base). Requests of up to a few hundred facts answer as the rule
     base's own network, in order."""
     files = {"types.drl": TYPES, "rules.drl": IN_RULES}
     compiled = compiler.compile_files(files, "dispatched", options)
     assert compiled.runner.readsJoinsFromRequest()
-    assert compiled.runner.routedPatterns() == 7  # ne twice (one key), ne older, even, two lists and the three joins
+    # ne older, even, two lists and the three joins; "north or east" opens two rules: not dispatched
+    assert compiled.runner.routedPatterns() == 6
     rng = random.Random(7)
     requests = typed_requests(3, 80) + typed_requests(4, 6, scale=10)
     for facts in requests:
@@ -370,6 +366,79 @@ def test_root_in_tests_dispatched_by_value_answer_as_the_network(options):
              for f in decoded(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
     assert fired >= {"north or east", "north or east, locked", "north or east and older", "even age", "two lists",
                      "loan of a southern or western person", "big loans unpaid", "small loan then a payment"}
+
+
+TWINS = """package org.joins;
+
+rule "twin a"
+when
+    $p : Person( region in ( "n", "e" ), age > 30 )
+then
+    actions.say("bot", "a " + $p.getId());
+end
+
+rule "twin b"
+when
+    $p : Person( region in ( "n", "e" ), age > 30 )
+then
+    actions.say("bot", "b " + $p.getId());
+end
+
+rule "loan twin a"
+when
+    $p : Person( region in ( "s", "w" ), $id : id )
+    $l : Loan( applicant == $id, amount > 100.0 )
+then
+    actions.say("bot", "a " + $l.getId());
+end
+
+rule "loan twin b"
+salience 1
+when
+    $p : Person( region in ( "s", "w" ), $id : id )
+    $l : Loan( applicant == $id, amount > 100.0 )
+then
+    actions.say("bot", "b " + $l.getId());
+end
+
+rule "focused"
+auto-focus true
+agenda-group "f"
+when
+    $p : Person( region == "n", $id : id )
+    $l : Loan( applicant == $id, amount > 50.0 )
+then
+    actions.say("bot", "f " + $l.getId());
+end
+
+rule "opens as focused"
+when
+    $p : Person( region == "n", $id : id )
+    $l : Loan( applicant == $id, amount > 50.0 )
+then
+    actions.say("bot", "o " + $l.getId());
+end
+"""
+
+
+def test_rules_that_open_alike_share_as_in_the_rule_base(options):
+    """Drools shares the nodes of rules that open alike, and the order a shared node hands its
+    matches on depends on the rules it is shared with (two rules of one pattern fire their matches
+    in opposite orders). So a first pattern that opens two rules is not dispatched by value, and a
+    rule that opens as an auto-focus rule gets its guards (shared_patterns.py): every request
+    answers as the rule base's own network, each rule's matches in order."""
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": TWINS}, "twins", options)
+    assert compiled.runner.readsJoinsFromRequest() and compiled.runner.routedPatterns() == 0
+    rng = random.Random(11)
+    requests = typed_requests(5, 60)
+    for facts in requests:
+        for f in facts:
+            if f["type"] == "Person":
+                f["region"], f["age"] = rng.choice("nsew"), rng.randrange(20, 50)
+    answers_alike(compiled, requests)
+    fired = {f["rule"] for facts in requests
+             for f in decoded(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
+    assert fired == {"twin a", "twin b", "loan twin a", "loan twin b", "focused", "opens as focused"}
 
 
 def test_a_request_reads_only_its_own_facts(options):

@@ -66,17 +66,22 @@ final class PlainRule {
         Map<String, Object> attributeSpec = (Map<String, Object>) spec.get("attributes");
         boolean eager = attributeSpec != null && Boolean.TRUE.equals(attributeSpec.get("auto-focus"));
         Map<String, Object> metadata = new LinkedHashMap<String, Object>();
+        Object guarded = spec.get("guardedPrefix");  // opens as an auto-focus rule: guarded as it is (shared_patterns.py)
+        int guardedPrefix = guarded instanceof Number ? ((Number) guarded).intValue() : 0;
+        int position = 0;
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
+            boolean guard = eager || position++ < guardedPrefix;
             fromRequest = context.requestJoins && !first;
             Declaration<Object> routedBy = null;  // the Routed facts a dispatched first pattern reads its fact from
-            if (first && context.requestJoins && !eager && e.containsKey("pattern")) {
+            boolean shared = Boolean.TRUE.equals(spec.get("firstShared"));  // another rule opens with this pattern: share it as the rule base does
+            if (first && context.requestJoins && !eager && !shared && e.containsKey("pattern")) {
                 boolean terminalAlpha = ((List<Object>) spec.get("lhs")).size() == 1
                         && !Boolean.TRUE.equals(attributeSpec == null ? null : attributeSpec.get("lock-on-active"));
                 routedBy = RequestDispatch.route(this, (Map<String, Object>) e.get("pattern"), terminalAlpha, items, metadata);
             }
             first = false;
-            boolean linksOnFacts = fromRequest && eager && (e.containsKey("pattern") || e.containsKey("exists"));
+            boolean linksOnFacts = fromRequest && guard && (e.containsKey("pattern") || e.containsKey("exists"));
             if (linksOnFacts) {
                 PlainRequestJoins.linkGuard(this, (Map<String, Object>) e.get(e.containsKey("pattern") ? "pattern" : "exists"), items);
                 items.add(PlainRequestJoins.keepOrder(this));

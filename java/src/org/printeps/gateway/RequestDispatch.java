@@ -163,15 +163,16 @@ public final class RequestDispatch {
         return keys.size();
     }
 
-    /** Inserts {@code facts} in order into {@code session}, each followed by its {@link Routed} facts. */
-    void insert(KieSession session, List<Object> facts) {
-        EntryPoint routes = session.getEntryPoint(ENTRY_POINT);
-        for (Object f : facts) {
-            session.insert(f);
-            for (Table t : tablesOf(f.getClass())) {
-                LinkedHashSet<String> keys = t.keys.get(t.field.apply(f));
-                if (keys != null) for (String k : keys) routes.insert(new Routed(k, f));
-            }
+    /** The entry point {@link Routed} facts go to in {@code session}. */
+    EntryPoint routes(KieSession session) {
+        return session.getEntryPoint(ENTRY_POINT);
+    }
+
+    /** Inserts the {@link Routed} facts of {@code f} (one per key whose list holds its value), after {@code f} itself. */
+    void route(EntryPoint routes, Object f) {
+        for (Table t : tablesOf(f.getClass())) {
+            LinkedHashSet<String> keys = t.keys.get(t.field.apply(f));
+            if (keys != null) for (String k : keys) routes.insert(new Routed(k, f));
         }
     }
 
