@@ -68,13 +68,13 @@ final class PlainRule {
         Map<String, Object> metadata = new LinkedHashMap<String, Object>();
         Object guarded = spec.get("guardedPrefix");  // opens as an auto-focus rule: guarded as it is (shared_patterns.py)
         int guardedPrefix = guarded instanceof Number ? ((Number) guarded).intValue() : 0;
+        boolean shared = Boolean.TRUE.equals(spec.get("firstShared"));  // another rule opens with this pattern: share it as the rule base does
         int position = 0;
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
             boolean guard = eager || position++ < guardedPrefix;
             fromRequest = context.requestJoins && !first;
             Declaration<Object> routedBy = null;  // the Routed facts a dispatched first pattern reads its fact from
-            boolean shared = Boolean.TRUE.equals(spec.get("firstShared"));  // another rule opens with this pattern: share it as the rule base does
             if (first && context.requestJoins && !eager && !shared && e.containsKey("pattern")) {
                 boolean terminalAlpha = ((List<Object>) spec.get("lhs")).size() == 1
                         && !Boolean.TRUE.equals(attributeSpec == null ? null : attributeSpec.get("lock-on-active"));

@@ -1,0 +1,45 @@
+"""shared_patterns: what the request-join network needs to know of all a set's plain rules at once
+(which first patterns open several rules, which rules open as an auto-focus rule). Pure Python,
+on rule descriptions of the shape plain_rules.describe gives; the networks themselves are checked
+in test_request_joins.py."""
+
+from __future__ import annotations
+
+from gateway.engine import shared_patterns
+
+
+def pattern(type_: str, constraints: list, var: str | None = None, binds: list | None = None) -> dict:
+    return {"pattern": {"type": type_, "constraints": constraints, "var": var, "binds": binds or []}}
+
+
+PERSON_N = [{"field": "region", "op": "==", "literal": "n"}]
+LOAN_JOIN = [{"field": "applicant", "op": "==", "ref": "$id"}]
+
+
+def rule(name: str, *lhs: dict, auto_focus: bool = False) -> dict:
+    return {"name": name, "lhs": list(lhs), **({"attributes": {"auto-focus": True}} if auto_focus else {})}
+
+
+def test_a_first_pattern_that_opens_two_rules_is_marked_in_every_unit():
+    one = {"rules": [rule("a", pattern("Person", PERSON_N, "$p")), rule("b", pattern("Person", [], "$p"))]}
+    two = {"rules": [rule("c", pattern("org.x.Person", PERSON_N, "$q", [{"name": "$id"}]), pattern("Loan", LOAN_JOIN))]}
+    assert shared_patterns.mark_shared([one, two]) == [[0], [0]]
+    assert one["rules"][0]["firstShared"] and two["rules"][0]["firstShared"]
+    assert "firstShared" not in one["rules"][1]
+
+
+def test_a_rule_that_opens_as_an_auto_focus_rule_gets_its_guards():
+    focused = rule("f", pattern("Person", PERSON_N, "$p"), pattern("Loan", LOAN_JOIN, "$l"), auto_focus=True)
+    alike = rule("g", pattern("Person", PERSON_N, "$a"), pattern("Loan", LOAN_JOIN, "$m"), pattern("Loan", []))
+    otherwise = rule("h", pattern("Person", PERSON_N, "$p"), pattern("Loan", []))
+    units = [{"rules": [focused, alike, otherwise]}]
+    shared_patterns.mark_shared(units)
+    assert alike["guardedPrefix"] == 2  # the names bound aside, it opens as "f" for two elements
+    assert "guardedPrefix" not in otherwise and "guardedPrefix" not in focused
+    assert all(r["firstShared"] for r in units[0]["rules"])
+
+
+def test_nothing_is_marked_when_no_two_rules_open_alike():
+    units = [{"rules": [rule("a", pattern("Person", PERSON_N)), rule("b", pattern("Loan", []))]}]
+    assert shared_patterns.mark_shared(units) == [[]]
+    assert all("firstShared" not in r and "guardedPrefix" not in r for r in units[0]["rules"])
