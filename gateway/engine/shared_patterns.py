@@ -1,6 +1,6 @@
 """What the request-join network of a set (docs/engine-api.md, "Request joins") needs to know
 about all of the set's plain rules at once, where each unit is built alone: which first patterns
-open more than one rule, and which rules open as an auto-focus rule does."""
+open more than one rule, and which rules join as an auto-focus rule does."""
 
 from __future__ import annotations
 
@@ -41,21 +41,26 @@ def _auto_focus(rule: dict[str, Any]) -> bool:
 
 
 def _prefixes(rule: dict[str, Any]) -> list[str]:
-    """The rule's condition prefixes of two elements or more, shortest first."""
-    lhs = [_element(e) for e in rule.get("lhs") or []]
+    """The rule's condition prefixes of two elements or more, shortest first, as far as its
+    elements are patterns (joins)."""
+    elements = rule.get("lhs") or []
+    joins = next((k for k, e in enumerate(elements) if not (isinstance(e, dict) and "pattern" in e)), len(elements))
+    lhs = [_element(e) for e in elements[:joins]]
     return [json.dumps(lhs[:k]) for k in range(2, len(lhs) + 1)]
 
 
 def guarded_prefixes(descriptions: list[dict[str, Any]]) -> None:
     """Marks (``guardedPrefix``: k) each rule without auto-focus whose first k ≥ 2 condition
-    elements are an auto-focus rule's first k.
+    elements are patterns (a first pattern and joins) and an auto-focus rule's first k.
 
     Why: the request-join network puts a guard before each pattern or ``exists`` after an
     auto-focus rule's first (``PlainRequestJoins.linkGuard``: it links as the rule base's node
     does). Drools shares a rule's nodes with another rule that opens alike, and the order a
-    shared node hands its matches on depends on the nodes it is shared with; a rule that opens as
-    an auto-focus rule gets the same guards, so that it shares them as in the rule base (join rules
-    opening as auto-focus ones fired their matches in another order otherwise)."""
+    shared node hands its matches on depends on the nodes it is shared with; a rule that joins as
+    an auto-focus rule does gets the same guards, so that it shares them as in the rule base (such
+    join rules fired their matches in another order otherwise). Only joins, measured: a rule that
+    shares an ``exists`` with an auto-focus rule answers as the rule base without the guards, and
+    not with them (docs/benchmarks.md)."""
     focused = {prefix for description in descriptions for rule in description.get("rules", [])
                if _auto_focus(rule) for prefix in _prefixes(rule)}
     if not focused:
@@ -71,7 +76,7 @@ def guarded_prefixes(descriptions: list[dict[str, Any]]) -> None:
 
 def mark_shared(descriptions: list[dict[str, Any]]) -> list[list[int]]:
     """Marks (``firstShared``) the rules of each unit whose first pattern opens another rule too,
-    and those that open as an auto-focus rule (:func:`guarded_prefixes`); returns what it marked,
+    and those that join as an auto-focus rule does (:func:`guarded_prefixes`); returns what it marked,
     unit by unit (for the cache key of the unit's build).
 
     Why: Drools shares such a pattern's nodes between the rules, and the order each of them fires

@@ -425,7 +425,7 @@ def test_rules_that_open_alike_share_as_in_the_rule_base(options):
     """Drools shares the nodes of rules that open alike, and the order a shared node hands its
     matches on depends on the rules it is shared with (two rules of one pattern fire their matches
     in opposite orders). So a first pattern that opens two rules is not dispatched by value, and a
-    rule that opens as an auto-focus rule gets its guards (shared_patterns.py): every request
+    rule that joins as an auto-focus rule does gets its guards (shared_patterns.py): every request
     answers as the rule base's own network, each rule's matches in order."""
     compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": TWINS}, "twins", options)
     assert compiled.runner.readsJoinsFromRequest() and compiled.runner.routedPatterns() == 0

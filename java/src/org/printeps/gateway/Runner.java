@@ -110,8 +110,8 @@ public final class Runner {
      * groups take the focus in ({@link DroolsLinkOrder}) and, mostly, the order of each rule's
      * matches, but not always: a node shared between an auto-focus rule and others hands its
      * matches on in an order that depends on what it is shared with, which the request-join
-     * network reproduces only where the rules open alike (docs/benchmarks.md: 2 of 40 requests of
-     * a 3,000-rule business set, 9 of 40 at 10,000, still fire some rule's matches in another order).
+     * network reproduces only in part (docs/benchmarks.md: 0–8% of requests of 3,000-rule business
+     * sets, 7 of 40 at 10,000, still fire some rule's matches in another order).
      */
     public static boolean requestJoinsExact(KieBase kb) {
         for (KiePackage p : kb.getKiePackages()) {
