@@ -642,12 +642,12 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
 def _request_join_base(rule_units: list[UnitArtifact], declarations: _Loaded,
                        assemble_models: Callable[[Any], Any]) -> Any | None:
     """The plain units' rules built again as a request-join network (``PlainRules.build`` with
-    ``requestJoins``; docs/engine-api.md, "Request joins"), first patterns that open several rules
+    ``requestJoins``; docs/engine-api.md, "Request joins"), with what it must know of the whole set
     marked (:mod:`gateway.engine.shared_patterns`). None when a rule does not build so."""
     models = jvm.jclass("java.util.ArrayList")()
     descriptions = [json.loads(unit.data) for unit in rule_units]
     for unit, description, marked in zip(rule_units, descriptions, shared_patterns.mark_shared(descriptions)):
-        key = (f"{unit.id}#request-joins#{hash(tuple(marked))}", declarations.token)  # with what the build reads
+        key = (f"{unit.id}#request-joins#{','.join(map(str, marked))}", declarations.token)  # with what the build reads
         with _loaded_lock:
             loaded = _loaded.get(key)
         if loaded is None:
