@@ -645,13 +645,14 @@ def _request_join_base(rule_units: list[UnitArtifact], declarations: _Loaded,
     ``requestJoins``; docs/engine-api.md, "Request joins"), with what it must know of the whole set
     marked (:mod:`gateway.engine.shared_patterns`). None when a rule does not build so."""
     models = jvm.jclass("java.util.ArrayList")()
-    descriptions = [json.loads(unit.data) for unit in rule_units]
-    for unit, description, marked in zip(rule_units, descriptions, shared_patterns.mark_shared(descriptions)):
-        key = (f"{unit.id}#request-joins#{','.join(map(str, marked))}", declarations.token)  # with what the build reads
+    shapes = [shared_patterns.unit_shapes(unit.id, unit.data) for unit in rule_units]
+    for unit, marks in zip(rule_units, shared_patterns.marks(shapes)):
+        key = (f"{unit.id}#request-joins#{json.dumps(marks, sort_keys=True)}", declarations.token)  # with what the build reads
         with _loaded_lock:
             loaded = _loaded.get(key)
         if loaded is None:
-            built = _java_build(json.dumps(description).encode() if marked else unit.data, declarations, request_joins=True)
+            built = _java_build(shared_patterns.with_marks(unit.data, marks) if marks else unit.data, declarations,
+                                request_joins=True)
             if len(built.rejected()):
                 log.warning("unit %s builds no request-join network: %s", unit.id, list(built.rejected())[:3])
                 return None

@@ -72,7 +72,8 @@ final class PlainRule {
         int position = 0;
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
-            boolean guard = eager || position++ < guardedPrefix;
+            boolean guard = eager || position < guardedPrefix;
+            position++;
             fromRequest = context.requestJoins && !first;
             Declaration<Object> routedBy = null;  // the Routed facts a dispatched first pattern reads its fact from
             if (first && context.requestJoins && !eager && !shared && e.containsKey("pattern")) {
