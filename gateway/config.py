@@ -81,10 +81,9 @@ class EngineSettings(BaseModel):
         default="auto", description="When every rule of a set is built plain, a second network for its one-shot "
         "fires (REST fire, workflows, streams, replay): each pattern after a rule's first reads the request's facts "
         "when the rule's left side matches, instead of every fact entering the memory of every join, not, exists and "
-        "accumulate over its type. Costs a second network in memory and build. auto: where it fires exactly as the "
-        "rule base (no auto-focus rule) and pays (a type's facts enter at least 1,000 memories untested: at 10,000 "
-        "business rules a fire takes a third of the time); always: every all-plain set, auto-focus too (whose agenda "
-        "groups may then take the focus in another order when one fact links several); never: one network.")
+        "accumulate over its type. Costs a second network in memory and build. It answers exactly as the rule "
+        "base. auto: where it pays (a type's facts enter at least 1,000 memories untested: at 10,000 business rules a "
+        "fire takes a third of the time); always: every all-plain set; never: one network.")
     compile_timeout_s: float = Field(
         default=600.0, description="Compile time limit; beyond it the build fails with a 503 (0: none).")
     compile_disk_cache: bool = Field(default=True, description="Keep compiled rule units on disk, shared by processes.")

@@ -1,6 +1,6 @@
 """What the request-join network of a set (docs/engine-api.md, "Request joins") needs to know
 about all of the set's plain rules at once, where each unit is built alone: which first patterns
-open more than one rule, and which rules join as an auto-focus rule does.
+open more than one rule, and which rules open as an auto-focus rule does.
 
 Each plain unit's rules are read once (:func:`unit_shapes`, kept per unit id: a unit's id is made
 from its content); a deploy then only compares the shapes of all units (:func:`marks`). Why: at
@@ -27,7 +27,7 @@ class RuleShape:
     """How a rule opens, as Drools compares its nodes for sharing."""
 
     first: str | None  # its first pattern; None when it opens otherwise
-    joins: tuple[str, ...]  # its opening elements of two or more, as far as they are patterns, shortest first
+    prefixes: tuple[str, ...]  # its first two condition elements or more, shortest first
     auto_focus: bool
 
 
@@ -46,9 +46,8 @@ def _is_pattern(element: Any) -> bool:
 
 def rule_shape(rule: dict[str, Any]) -> RuleShape:
     elements = rule.get("lhs") or []
-    patterns = next((k for k, e in enumerate(elements) if not _is_pattern(e)), len(elements))
-    opening = [_element(e) for e in elements[:patterns]]
-    return RuleShape(opening[0] if opening else None,
+    opening = [_element(e) for e in elements]
+    return RuleShape(opening[0] if elements and _is_pattern(elements[0]) else None,
                      tuple(json.dumps(opening[:k]) for k in range(2, len(opening) + 1)),
                      bool((rule.get("attributes") or {}).get("auto-focus")))
 
@@ -77,16 +76,16 @@ def marks(units: list[list[RuleShape]]) -> list[dict[int, dict[str, Any]]]:
       (RequestDispatch.java), so that they share as in the rule base (two rules of one ``in``
       pattern fired their matches in opposite orders otherwise).
     - ``guardedPrefix``: k, for a rule without auto-focus whose first k ≥ 2 condition elements are
-      patterns (a first pattern and joins) and an auto-focus rule's first k. The request-join
-      network puts a guard before each pattern or ``exists`` after an auto-focus rule's first
-      (``PlainRequestJoins.linkGuard``: it links as the rule base's node does); a rule that joins
-      as an auto-focus rule does gets the same guards, so that it shares them as it shares the
-      join node in the rule base (such join rules fired their matches in another order otherwise).
-      Only joins, measured: a rule that shares an ``exists`` with an auto-focus rule answers as the
-      rule base without the guards, and not with them (docs/benchmarks.md).
+      an auto-focus rule's first k. The request-join network puts a guard before each pattern or
+      ``exists`` after an auto-focus rule's first (``PlainRequestJoins.linkGuard``: it links as the
+      rule base's node does); a rule that opens as an auto-focus rule does gets the same guards, so
+      that it shares them as it shares the join or ``exists`` node in the rule base. Where two
+      rules share a node, the second of its children gets the node's matches in the opposite order
+      (``SegmentPropagator``), so a rule not shared as in the rule base fires its matches in
+      another order.
     """
     firsts = Counter(shape.first for unit in units for shape in unit if shape.first is not None)
-    focused = {joins for unit in units for shape in unit if shape.auto_focus for joins in shape.joins}
+    focused = {prefix for unit in units for shape in unit if shape.auto_focus for prefix in shape.prefixes}
     out = []
     for unit in units:
         unit_marks: dict[int, dict[str, Any]] = {}
@@ -94,7 +93,7 @@ def marks(units: list[list[RuleShape]]) -> list[dict[int, dict[str, Any]]]:
             mark: dict[str, Any] = {}
             if shape.first is not None and firsts[shape.first] > 1:
                 mark["firstShared"] = True
-            guarded = [n for n, joins in enumerate(shape.joins, start=2) if not shape.auto_focus and joins in focused]
+            guarded = [n for n, prefix in enumerate(shape.prefixes, start=2) if not shape.auto_focus and prefix in focused]
             if guarded:
                 mark["guardedPrefix"] = max(guarded)
             if mark:

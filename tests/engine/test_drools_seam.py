@@ -289,10 +289,11 @@ def test_rule_and_query_definitions_are_read_as_the_engine_expects(seam, module_
     assert bool(seam.matchesOnlyFromFacts(query))
 
 
-def test_auto_focus_and_the_memories_a_fact_enters_untested(seam, options):
-    """What decides whether a set gets a request-join network (Runner.requestJoinsPay): a rule's
-    auto-focus, and how many join, not, exists and accumulate nodes a type's node feeds without an
-    alpha test (here Order's: the join and the not, not the join behind ``amount > 5.0``)."""
+def test_the_memories_a_fact_enters_untested(seam, options):
+    """What decides whether a set gets a request-join network (Runner.requestJoinsPay): how many
+    join, not, exists and accumulate nodes a type's node feeds without an alpha test (here Order's:
+    the join and the not, not the join behind ``amount > 5.0``; the auto-focus rule's pattern has
+    no join)."""
     drl = TYPES + """
 rule "focused"
     auto-focus true
@@ -323,8 +324,6 @@ then
 end
 """
     kbase = compiler.compile_files({"r.drl": drl}, "fanout", options).kbase
-    focus = {name: bool(seam.autoFocus(kbase.getRule(PACKAGE, name))) for name in ("focused", "joined")}
-    assert focus == {"focused": True, "joined": False}, broken("autoFocus", "rules are RuleImpls with getAutoFocus")
     assert int(seam.untestedRightInputs(kbase)) == 2, broken(
         "untestedRightInputs", "a RuleBase's Rete lists its ObjectTypeNodes, whose sinks include the BetaNodes they feed")
 

@@ -94,9 +94,9 @@ def fanning_out(rules: int, auto_focus: bool = False) -> dict[str, str]:
 
 
 def test_auto_builds_it_where_facts_fan_out_widely(tmp_path):
-    """``auto`` (the default) builds a request-join network where it pays and fires exactly as the
-    rule base: facts of a type enter at least Runner.REQUEST_JOINS_FAN_OUT memories untested, and no
-    rule has auto-focus; below that, or with an auto-focus rule, the rule base serves."""
+    """``auto`` (the default) builds a request-join network where it pays: facts of a type enter at
+    least Runner.REQUEST_JOINS_FAN_OUT memories untested, with auto-focus rules or without; below
+    that, the rule base serves."""
     from gateway.base import jvm
 
     fan_out = int(jvm.helper_class("Runner").REQUEST_JOINS_FAN_OUT)
@@ -109,22 +109,33 @@ def test_auto_builds_it_where_facts_fan_out_widely(tmp_path):
     narrow = compiler.compile_files(fanning_out(fan_out - 1), "narrow", CompileOptions(cache_dir=str(tmp_path / "n")))
     assert not narrow.runner.readsJoinsFromRequest()
     focus = compiler.compile_files(fanning_out(fan_out, auto_focus=True), "focus", CompileOptions(cache_dir=str(tmp_path / "f")))
-    assert not focus.runner.readsJoinsFromRequest()
+    assert focus.runner.readsJoinsFromRequest()  # auto-focus rules too: they answer alike (DroolsLinkOrder)
 
 
-def test_auto_focus_rules_use_request_joins_only_when_asked(options):
-    """``always`` builds the request-join network with auto-focus rules too, and fires as the rule
-    base: the agenda groups take the focus in the same order (DroolsLinkOrder: 4 of these 60
-    requests differed without it, when one fact linked several auto-focus rules at once). ``auto``
-    does not: on larger sets a rule's matches may still come in another order (Runner.requestJoinsExact)."""
-    rules = BusinessRules(6, 300, regions=6, segments=3, purposes=3, domains=3, attribute_share=0.6)
-    assert any(r.attribute == "agenda-group" for r in rules.rules())
-    always = compiler.compile_files(rules.drl_files(), "focus", options)
-    assert always.runner.readsJoinsFromRequest()
+def test_auto_focus_sets_built_in_several_units_answer_as_the_rule_base(options, monkeypatch, tmp_path):
+    """A business set with auto-focus rules in four agenda groups, built in units of 100 rules (as
+    10,000 rules are built in units of 2,000). The rule base shares the nodes of rules that open
+    alike across units, as one build of the whole set does, and the request-join network shares
+    them as the rule base: every request answers as the rule base's own network, each rule's
+    matches in order (the agenda groups take the focus in the rule base's order: DroolsLinkOrder).
+    Before the plain builder's field readers compared by value, units never shared a join, and a
+    rule that opened as an auto-focus rule in another unit fired its matches in another order."""
     from gateway.base import jvm
 
-    assert not bool(jvm.helper_class("Runner").requestJoinsExact(always.kbase))
-    answers_alike(always, [rules.facts(k, applicants=1 + k % 5, loans=k % 9) for k in range(60)])
+    rules = BusinessRules(6, 300, regions=6, segments=3, purposes=3, domains=3, attribute_share=0.6)
+    assert any(r.attribute == "agenda-group" for r in rules.rules())
+    requests = [rules.facts(k, applicants=1 + k % 5, loans=k % 9) for k in range(60)]
+    one_unit = compiler.compile_files(rules.drl_files(), "one unit", options)
+    monkeypatch.setattr(incremental, "MAX_PLAIN_BATCH", 100)
+    units = compiler.compile_files(rules.drl_files(), "units",
+                                   CompileOptions(cache_dir=str(tmp_path / "small units"), request_joins="always"))
+    assert units.stats.rules_built == 300 and units.runner.readsJoinsFromRequest()
+    answers_alike(units, requests)
+    runner_class = jvm.helper_class("Runner")
+    for k, facts in enumerate(requests):  # the rule base of three units answers as that of one
+        data = encode_facts(facts, 10_000)
+        assert decoded(str(runner_class(units.kbase).fire(data, 100_000, True, True))) == decoded(
+            str(runner_class(one_unit.kbase).fire(data, 100_000, True, True))), k
 
 
 TYPES = """package org.joins;
@@ -418,6 +429,24 @@ when
 then
     actions.say("bot", "o " + $l.getId());
 end
+
+rule "exists as focused"
+when
+    $p : Person( region == "e", $id : id )
+    exists Loan( applicant == $id, amount > 20.0 )
+then
+    actions.say("bot", "eo " + $p.getId());
+end
+
+rule "focused exists"
+auto-focus true
+agenda-group "g"
+when
+    $p : Person( region == "e", $id : id )
+    exists Loan( applicant == $id, amount > 20.0 )
+then
+    actions.say("bot", "fe " + $p.getId());
+end
 """
 
 
@@ -425,12 +454,13 @@ def test_rules_that_open_alike_share_as_in_the_rule_base(options):
     """Drools shares the nodes of rules that open alike, and the order a shared node hands its
     matches on depends on the rules it is shared with (two rules of one pattern fire their matches
     in opposite orders). So a first pattern that opens two rules is not dispatched by value, and a
-    rule that joins as an auto-focus rule does gets its guards (shared_patterns.py): every request
-    answers as the rule base's own network, each rule's matches in order."""
+    rule that opens as an auto-focus rule does (a join, an ``exists``) gets its guards
+    (shared_patterns.py): every request answers as the rule base's own network, each rule's
+    matches in order."""
     compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": TWINS}, "twins", options)
     assert compiled.runner.readsJoinsFromRequest() and compiled.runner.routedPatterns() == 0
     rng = random.Random(11)
-    requests = typed_requests(5, 60)
+    requests = typed_requests(5, 60, scale=3)  # several persons of a region: a rule matches twice or more
     for facts in requests:
         for f in facts:
             if f["type"] == "Person":
@@ -438,7 +468,8 @@ def test_rules_that_open_alike_share_as_in_the_rule_base(options):
     answers_alike(compiled, requests)
     fired = {f["rule"] for facts in requests
              for f in decoded(str(compiled.runner.fire(encode_facts(facts, 10_000), 100_000, True, True)))["fired"]}
-    assert fired == {"twin a", "twin b", "loan twin a", "loan twin b", "focused", "opens as focused"}
+    assert fired == {"twin a", "twin b", "loan twin a", "loan twin b", "focused", "opens as focused",
+                     "focused exists", "exists as focused"}
 
 
 def test_a_request_reads_only_its_own_facts(options):

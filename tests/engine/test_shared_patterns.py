@@ -1,5 +1,5 @@
 """shared_patterns: what the request-join network needs to know of all a set's plain rules at once
-(which first patterns open several rules, which rules join as an auto-focus rule does). Pure Python,
+(which first patterns open several rules, which rules open as an auto-focus rule does). Pure Python,
 on rule descriptions of the shape plain_rules.describe gives; the networks themselves are checked
 in test_request_joins.py."""
 
@@ -60,13 +60,14 @@ def test_a_rule_that_opens_as_an_auto_focus_rule_gets_its_guards():
     assert all(r["firstShared"] for r in units[0]["rules"])
 
 
-def test_a_rule_that_shares_an_exists_with_an_auto_focus_rule_is_not_guarded():
+def test_a_rule_that_shares_an_exists_with_an_auto_focus_rule_is_guarded_in_another_unit():
     exists = {"exists": {"type": "Loan", "constraints": LOAN_JOIN, "binds": []}}
     focused = rule("f", pattern("Person", PERSON_N, "$p"), exists, auto_focus=True)
-    alike = rule("g", pattern("Person", PERSON_N, "$p"), exists)
-    mark_shared([{"rules": [focused, alike]}])
-    assert "guardedPrefix" not in alike  # measured: it answers as the rule base only without guards
-    assert alike["firstShared"]
+    alike = rule("g", pattern("Person", PERSON_N, "$p"), exists, pattern("Loan", []))
+    other = rule("h", pattern("Person", PERSON_N, "$p"), {"not": exists["exists"]})
+    assert mark_shared([{"rules": [focused, other]}, {"rules": [alike]}]) == [[0, 1], [0]]
+    assert alike["guardedPrefix"] == 2 and alike["firstShared"]
+    assert "guardedPrefix" not in other  # a not is no exists
 
 
 def test_nothing_is_marked_when_no_two_rules_open_alike():

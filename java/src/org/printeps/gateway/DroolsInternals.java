@@ -336,11 +336,6 @@ public final class DroolsInternals {
         return rule.getDateEffective() != null || rule.getDateExpires() != null;
     }
 
-    /** Whether a rule has auto-focus (evaluated eagerly: see {@code Runner.requestJoinsExact}; another kind: true). */
-    public static boolean autoFocus(Rule r) {
-        return !(r instanceof RuleImpl) || ((RuleImpl) r).getAutoFocus();
-    }
-
     /**
      * Whether a rule can move the agenda's focus: it sits in an agenda group other than MAIN or has
      * auto-focus. Only such rules make the order of propagations matter for which group fires

@@ -71,6 +71,28 @@ final class PlainValues {
         public Object apply(Object fact) {
             return read.apply(fact);
         }
+
+        /**
+         * Equal when they read one getter of one class, whichever build made them. Why: Drools
+         * shares a join, {@code not}, {@code exists} or accumulate node only when its constraints'
+         * declarations are equal, and a declaration compares the function that reads its field.
+         * Each plain unit makes its own {@code Property} objects, so with identity two units never
+         * shared such a node where one build of the whole DRL shares it (a rule base of more than one
+         * unit, or after a one-rule edit): more nodes, and rules whose matches fired in another
+         * order, since a rule's place among the rules sharing a node decides that order.
+         */
+        @Override
+        public boolean equals(Object other) {
+            if (this == other) return true;
+            if (!(other instanceof Property)) return false;
+            Property that = (Property) other;
+            return index == that.index && name.equals(that.name) && getter.equals(that.getter);
+        }
+
+        @Override
+        public int hashCode() {
+            return 31 * getter.hashCode() + name.hashCode();
+        }
     }
 
     // ------------------------------------------------------------------ reading a getter

@@ -155,9 +155,9 @@ public final class RequestFacts {
         public boolean equals(Object o) {
             if (!(o instanceof Keyed)) return false;
             Keyed k = (Keyed) o;
-            return k.type == type && k.field == field && k.value == value;
+            return k.type == type && k.field.equals(field) && k.value.equals(value);  // Property compares by getter: shared across units as the rule base's join
         }
 
-        @Override public int hashCode() { return Objects.hash(type, System.identityHashCode(field), System.identityHashCode(value)); }
+        @Override public int hashCode() { return Objects.hash(type, field, value); }
     }
 }

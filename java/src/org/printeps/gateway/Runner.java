@@ -105,24 +105,6 @@ public final class Runner {
     }
 
     /**
-     * Whether a request-join network of {@code kb} fires exactly as {@code kb} does, matches and
-     * order alike: no rule has auto-focus. With auto-focus rules it keeps the order the agenda
-     * groups take the focus in ({@link DroolsLinkOrder}) and, mostly, the order of each rule's
-     * matches, but not always: a node shared between an auto-focus rule and others hands its
-     * matches on in an order that depends on what it is shared with, which the request-join
-     * network reproduces only in part (docs/benchmarks.md: 0–8% of requests of 3,000-rule business
-     * sets, 7 of 40 at 10,000, still fire some rule's matches in another order).
-     */
-    public static boolean requestJoinsExact(KieBase kb) {
-        for (KiePackage p : kb.getKiePackages()) {
-            for (org.kie.api.definition.rule.Rule r : p.getRules()) {
-                if (DroolsInternals.autoFocus(r)) return false;
-            }
-        }
-        return true;
-    }
-
-    /**
      * How many memories a fact must enter on insert, in a type's node without an alpha test, before
      * {@link #requestJoinsPay} says a request-join network is worth its cost (a second network in
      * memory, a second build). Measured (docs/benchmarks.md, issue 30): at 10,000 business rules
@@ -132,10 +114,11 @@ public final class Runner {
      */
     public static final int REQUEST_JOINS_FAN_OUT = 1000;
 
-    /** Whether {@code auto} builds a request-join network for {@code kb}: it fires exactly as
-     *  {@code kb} ({@link #requestJoinsExact}) and its facts fan out widely enough. */
+    /** Whether {@code auto} builds a request-join network for {@code kb}: its facts fan out widely
+     *  enough. It answers exactly as {@code kb} does, auto-focus rules included ({@link DroolsLinkOrder};
+     *  {@code tests/engine/test_request_joins.py} compares whole answers). */
     public static boolean requestJoinsPay(KieBase kb) {
-        return requestJoinsExact(kb) && DroolsInternals.untestedRightInputs(kb) >= REQUEST_JOINS_FAN_OUT;
+        return DroolsInternals.untestedRightInputs(kb) >= REQUEST_JOINS_FAN_OUT;
     }
 
     /** Whether {@link #fire} reads joined facts from the request (a request-join network is in use). */
