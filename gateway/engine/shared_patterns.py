@@ -29,6 +29,7 @@ class RuleShape:
     first: str | None  # its first pattern; None when it opens otherwise
     prefixes: tuple[str, ...]  # its first two condition elements or more, shortest first
     auto_focus: bool
+    first_test: str | None = None  # its first pattern's type and first constraint (Drools' node under the type's)
 
 
 def _element(element: Any) -> str:
@@ -47,9 +48,13 @@ def _is_pattern(element: Any) -> bool:
 def rule_shape(rule: dict[str, Any]) -> RuleShape:
     elements = rule.get("lhs") or []
     opening = [_element(e) for e in elements]
+    first_test = None
+    if elements and _is_pattern(elements[0]) and elements[0]["pattern"].get("constraints"):
+        pattern = elements[0]["pattern"]
+        first_test = json.dumps([str(pattern.get("type", "")).rsplit(".", 1)[-1], pattern["constraints"][0]], sort_keys=True)
     return RuleShape(opening[0] if elements and _is_pattern(elements[0]) else None,
                      tuple(json.dumps(opening[:k]) for k in range(2, len(opening) + 1)),
-                     bool((rule.get("attributes") or {}).get("auto-focus")))
+                     bool((rule.get("attributes") or {}).get("auto-focus")), first_test)
 
 
 def unit_shapes(unit_id: str, data: bytes) -> list[RuleShape]:
@@ -70,11 +75,15 @@ def unit_shapes(unit_id: str, data: bytes) -> list[RuleShape]:
 def marks(units: list[list[RuleShape]]) -> list[dict[int, dict[str, Any]]]:
     """For each unit, the marks of its rules by position:
 
-    - ``firstShared``: the rule's first pattern opens another rule too. Drools shares such a
-      pattern's nodes between the rules, and the order each of them fires its matches in depends
-      on that sharing; the request-join network does not dispatch those patterns by value
-      (RequestDispatch.java), so that they share as in the rule base (two rules of one ``in``
-      pattern fired their matches in opposite orders otherwise).
+    - ``firstShared``: the rule's first pattern opens another rule too, or its first test is an
+      auto-focus rule's first test. Drools shares such a pattern's nodes between the rules, and
+      the order each of them fires its matches in depends on that sharing; the request-join
+      network does not dispatch those patterns by value (RequestDispatch.java), so that they share
+      as in the rule base (two rules of one ``in`` pattern fired their matches in opposite orders
+      otherwise). A shared first test is one alpha node whose children Drools orders by how many
+      of them test one field (hashed from three, range-indexed from nine); an auto-focus rule of
+      one pattern gets its match, and pushes its agenda group, when a fact reaches its node, so
+      taking the other rules out from under that node changed which group fired first.
     - ``guardedPrefix``: k, for a rule without auto-focus whose first k ≥ 2 condition elements are
       an auto-focus rule's first k. The request-join network puts a guard before each pattern or
       ``exists`` after an auto-focus rule's first (``PlainRequestJoins.linkGuard``: it links as the
@@ -86,12 +95,14 @@ def marks(units: list[list[RuleShape]]) -> list[dict[int, dict[str, Any]]]:
     """
     firsts = Counter(shape.first for unit in units for shape in unit if shape.first is not None)
     focused = {prefix for unit in units for shape in unit if shape.auto_focus for prefix in shape.prefixes}
+    focused_tests = {shape.first_test for unit in units for shape in unit if shape.auto_focus and shape.first_test}
     out = []
     for unit in units:
         unit_marks: dict[int, dict[str, Any]] = {}
         for k, shape in enumerate(unit):
             mark: dict[str, Any] = {}
-            if shape.first is not None and firsts[shape.first] > 1:
+            if (shape.first is not None and firsts[shape.first] > 1) or (
+                    not shape.auto_focus and shape.first_test in focused_tests):
                 mark["firstShared"] = True
             guarded = [n for n, prefix in enumerate(shape.prefixes, start=2) if not shape.auto_focus and prefix in focused]
             if guarded:

@@ -472,6 +472,46 @@ def test_rules_that_open_alike_share_as_in_the_rule_base(options):
                      "focused exists", "exists as focused"}
 
 
+def shared_first_test(plain_rules: int) -> str:
+    """Two auto-focus rules of one pattern and ``plain_rules`` others, all opening with one ``in``
+    test: Drools' node for that test has a child per rule, range-indexed on age from nine."""
+    focused = "".join(f"""
+rule "focus {name}"
+auto-focus true
+agenda-group "{name}"
+when
+    $p : Person( region in ( "n", "e" ), age > {age} )
+then
+    actions.say("bot", "{name} " + $p.getId());
+end
+""" for name, age in (("older", 40), ("old", 30)))
+    plain = "".join(f"""
+rule "plain {k}"
+when
+    $p : Person( region in ( "n", "e" ), age > {20 + 3 * k} )
+then
+    actions.say("bot", "plain {k} " + $p.getId());
+end
+""" for k in range(plain_rules))
+    return "package org.joins;\n" + focused + plain
+
+
+def test_rules_sharing_an_auto_focus_rules_first_test_are_not_dispatched(options):
+    """An auto-focus rule of one pattern gets its match, and pushes its agenda group, when a fact
+    reaches its node, in the order its parent node hands facts to its children, and that order
+    depends on how many children test one field (range-indexed from nine). Rules opening with the
+    same first test as an auto-focus rule keep it (shared_patterns.py), so that node has the same
+    children as in the rule base: the groups take the focus in the rule base's order (with those
+    rules dispatched, "old" fired before "older")."""
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": shared_first_test(8)}, "first test", options)
+    assert compiled.runner.readsJoinsFromRequest() and compiled.runner.routedPatterns() == 0
+    requests = [[{"type": "Person", "id": f"p{k}", "region": region, "age": age} for k, (region, age) in enumerate(people)]
+                for people in ([("n", 45)], [("e", 35), ("n", 50)], [("s", 60), ("e", 41)], [("n", 25)])]
+    answers_alike(compiled, requests)
+    first = decoded(str(compiled.runner.fire(encode_facts(requests[0], 100), 1000, False, False)))["fired"]
+    assert [f["rule"] for f in first[:2]] == ["focus older", "focus old"]
+
+
 def test_a_request_reads_only_its_own_facts(options):
     """Two runners' worth of requests in turn on one session pool: nothing of a request is joined
     in the next one (the request's facts are closed after its fire), and an empty request fires

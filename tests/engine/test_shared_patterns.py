@@ -70,6 +70,16 @@ def test_a_rule_that_shares_an_exists_with_an_auto_focus_rule_is_guarded_in_anot
     assert "guardedPrefix" not in other  # a not is no exists
 
 
+def test_a_rule_whose_first_test_opens_an_auto_focus_rule_is_not_dispatched():
+    region_in = {"field": "region", "op": "in", "literals": [{"s": "n"}, {"s": "e"}]}
+    older = {"field": "age", "op": ">", "literal": {"n": "40"}}
+    focused = rule("f", pattern("Person", [region_in, older]), auto_focus=True)
+    alike = rule("g", pattern("org.x.Person", [region_in, {"field": "age", "op": ">", "literal": {"n": "30"}}]))
+    other = rule("h", pattern("Person", [older, region_in]))
+    assert mark_shared([{"rules": [focused]}, {"rules": [alike, other]}]) == [[], [0]]
+    assert alike["firstShared"] and "firstShared" not in other and "firstShared" not in focused
+
+
 def test_nothing_is_marked_when_no_two_rules_open_alike():
     units = [{"rules": [rule("a", pattern("Person", PERSON_N)), rule("b", pattern("Loan", []))]}]
     assert mark_shared(units) == [[]]

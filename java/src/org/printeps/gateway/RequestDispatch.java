@@ -38,7 +38,9 @@ import org.printeps.gateway.PlainValues.Property;
  * one of the literals, which are text or int of the field's kind), and the read pattern still
  * tests the {@code in} itself; each rule's matches arrive in the order of the facts, as at its own
  * left input. Rules with auto-focus keep their pattern: the order in which they are linked picks
- * the agenda group that fires first.
+ * the agenda group that fires first; so do rules whose first pattern opens another rule or whose
+ * first test is an auto-focus rule's (marked {@code firstShared} by shared_patterns.py), so that
+ * the nodes they share keep the children, and the order, they have in the rule base.
  */
 public final class RequestDispatch {
     /** The entry point of {@link Routed} facts (never a session's default one: a fire's answer lists those). */
