@@ -357,7 +357,9 @@ def test_the_link_order_of_auto_focus_rules_is_the_order_a_type_node_propagates_
     fact (hashed, range-indexed, hashable, range-indexable, others; an alpha node's children
     likewise), and a fire of a request-join network puts the eager rules one fact links in that
     order. Here, in the rule base's own session, the order it predicts must be Drools' own: a
-    session whose fire reorders by it ends with the same eager list as one that does not."""
+    session whose fire reorders by it ends with the same eager list as one that does not. These
+    rules have one pattern: the walk finds them as alpha terminal nodes in that order too
+    (sameFocusOrder compares that order in the rule base and in a request-join network)."""
     kbase = compiler.compile_files({"r.drl": LINK_ORDER}, "linkorder", options).kbase
     link_order = jvm.helper_class("DroolsLinkOrder")
     customer_type = kbase.getFactType(PACKAGE, "Customer")
@@ -375,6 +377,9 @@ def test_the_link_order_of_auto_focus_rules_is_the_order_a_type_node_propagates_
         assert order == ["nested", "hashed", "range", "hashable", "other"], broken(
             "DroolsLinkOrder", "a type node propagates to hashed, range-indexed, hashable, range-indexable, "
             f"then other sinks, each alpha node's children likewise; eager rules are listed as linked: {order}")
+        assert [str(n) for n in link_order.focusOrder(kbase)] == order, broken(
+            "DroolsLinkOrder.sameFocusOrder", "an auto-focus rule of one pattern is an AlphaTerminalNode, reached in "
+            "the walk's order (its match, and its group's focus, come when a fact reaches it)")
         fire = link_order.of(kbase).begin(predicted)
         fire.inserted(predicted.insert(customer()))
         assert [str(n) for n in link_order.eagerRules(predicted)] == order, broken(

@@ -512,6 +512,42 @@ def test_rules_sharing_an_auto_focus_rules_first_test_are_not_dispatched(options
     assert [f["rule"] for f in first[:2]] == ["focus older", "focus old"]
 
 
+def test_a_set_whose_auto_focus_rules_of_one_pattern_move_keeps_the_rule_base(options):
+    """Two auto-focus rules of one loan pattern and eight joins whose loan patterns test the same
+    field: in the rule base a loan's node hands facts to the ten children range-indexed (by
+    amount), in the request-join network (the joins read loans from the request) to the two in
+    the order they were added, so a loan would reach "medium" first and its group take the focus
+    last. DroolsLinkOrder.sameFocusOrder sees it and the set keeps the rule base's network."""
+    focused = "".join(f"""
+rule "focus {name}"
+auto-focus true
+agenda-group "{name}"
+when
+    $l : Loan( amount > {amount} )
+then
+    actions.say("bot", "{name} " + $l.getId());
+end
+""" for name, amount in (("big", 100.0), ("medium", 50.0)))
+    joins = "".join(f"""
+rule "join {k}"
+when
+    $p : Person( $id : id )
+    $l : Loan( amount > {10.0 + 20 * k}, applicant == $id )
+then
+    actions.say("bot", "join {k} " + $l.getId());
+end
+""" for k in range(8))
+    compiled = compiler.compile_files({"types.drl": TYPES, "rules.drl": "package org.joins;\n" + focused + joins},
+                                      "focus moves", options)
+    assert compiled.stats.request_joins_s > 0 and not compiled.runner.readsJoinsFromRequest()
+    facts = [{"type": "Person", "id": "p0", "region": "n", "age": 45},
+             {"type": "Loan", "id": "l0", "applicant": "p0", "amount": 500.0}]
+    fired = decoded(str(compiled.runner.fire(encode_facts(facts, 100), 1000, False, False)))["fired"]
+    assert [f["rule"] for f in fired[:2]] == ["focus big", "focus medium"]
+    fewer = compiler.compile_files({"types.drl": TYPES, "rules.drl": "package org.joins;\n" + focused}, "focus stays", options)
+    assert fewer.runner.readsJoinsFromRequest()  # nothing moves: the request-join network serves
+
+
 def test_a_request_reads_only_its_own_facts(options):
     """Two runners' worth of requests in turn on one session pool: nothing of a request is joined
     in the next one (the request's facts are closed after its fire), and an empty request fires

@@ -15,11 +15,13 @@ import org.drools.core.common.ReteEvaluator;
 import org.drools.core.impl.RuleBase;
 import org.drools.core.phreak.RuleAgendaItem;
 import org.drools.core.reteoo.AlphaNode;
+import org.drools.core.reteoo.AlphaTerminalNode;
 import org.drools.core.reteoo.BetaNode;
 import org.drools.core.reteoo.CompositeObjectSinkAdapter;
 import org.drools.core.reteoo.ExistsNode;
 import org.drools.core.reteoo.JoinNode;
 import org.drools.core.reteoo.LeftInputAdapterNode;
+import org.drools.core.reteoo.LeftTupleSink;
 import org.drools.core.reteoo.LeftTupleSource;
 import org.drools.core.reteoo.ObjectSink;
 import org.drools.core.reteoo.ObjectSinkPropagator;
@@ -183,6 +185,48 @@ public final class DroolsLinkOrder {
         } else {
             out.put(s, new Place(type, counter[0]++, path));
         }
+    }
+
+    /**
+     * Whether a fact reaches the auto-focus rules of one pattern in {@code joins} (a request-join
+     * network of {@code kb}'s rules) in the order it reaches them in {@code kb}. Such a rule is an
+     * alpha terminal node: Drools makes its match, and pushes its agenda group, the moment a fact
+     * reaches it, not through the eager list {@link Fire} orders. Where the request-join network's
+     * alpha nodes have other children than the rule base's (the patterns it reads from the request
+     * are not there), Drools may order the children otherwise (it hashes and range-indexes
+     * children by how many test one field), and the groups would take the focus in another order:
+     * then the set keeps the rule base's network ({@code Runner}).
+     */
+    public static boolean sameFocusOrder(KieBase kb, KieBase joins) {
+        return focusAtPropagation((RuleBase) kb).equals(focusAtPropagation((RuleBase) joins));
+    }
+
+    /** The auto-focus rules of one pattern, by name, in the order a fact reaches them (all types; for tests of this seam). */
+    public static List<String> focusOrder(KieBase kb) {
+        List<String> out = new ArrayList<String>();
+        for (List<String> keys : focusAtPropagation((RuleBase) kb).values()) {
+            for (String k : keys) out.add(k.substring(k.lastIndexOf('.') + 1, k.lastIndexOf('#')));
+        }
+        return out;
+    }
+
+    /** Per fact type, the auto-focus rules of one pattern in the order a fact reaches them. */
+    private static Map<Class<?>, List<String>> focusAtPropagation(RuleBase base) {
+        List<Map.Entry<Object, Place>> terminals = new ArrayList<Map.Entry<Object, Place>>();
+        for (Map.Entry<Object, Place> e : places(base).entrySet()) {
+            if (e.getKey() instanceof AlphaTerminalNode) terminals.add(e);
+        }
+        terminals.sort(Comparator.comparingLong(e -> e.getValue().number));
+        Map<Class<?>, List<String>> out = new HashMap<Class<?>, List<String>>();
+        for (Map.Entry<Object, Place> e : terminals) {
+            for (LeftTupleSink sink : ((AlphaTerminalNode) e.getKey()).getSinkPropagator().getSinks()) {
+                if (sink instanceof TerminalNode && ((TerminalNode) sink).getRule().isEager()
+                        && ((TerminalNode) sink).getRule().getAutoFocus()) {
+                    out.computeIfAbsent(e.getValue().type, k -> new ArrayList<String>()).add(key((TerminalNode) sink));
+                }
+            }
+        }
+        return out;
     }
 
     /** One fire's insertions into a session of the request-join network. */

@@ -84,6 +84,7 @@ public final class Runner {
         if (usable) {
             try {
                 order = DroolsLinkOrder.of(kieBase);
+                usable = DroolsLinkOrder.sameFocusOrder(kieBase, requestJoins);  // else the groups could take the focus otherwise
             } catch (IllegalStateException e) {  // the link order is not known: not exact
                 usable = false;
             }
