@@ -472,19 +472,24 @@ def test_rules_that_open_alike_share_as_in_the_rule_base(options):
                      "focused exists", "exists as focused"}
 
 
-def shared_first_test(plain_rules: int) -> str:
-    """Two auto-focus rules of one pattern and ``plain_rules`` others, all opening with one ``in``
-    test: Drools' node for that test has a child per rule, range-indexed on age from nine."""
-    focused = "".join(f"""
+def auto_focus_rules(pattern: str, groups: dict[str, str]) -> str:
+    """One auto-focus rule of one pattern per agenda group: ``pattern`` with the group's test in it."""
+    return "".join(f"""
 rule "focus {name}"
 auto-focus true
 agenda-group "{name}"
 when
-    $p : Person( region in ( "n", "e" ), age > {age} )
+    $f : {pattern.format(test)}
 then
-    actions.say("bot", "{name} " + $p.getId());
+    actions.say("bot", "{name} " + $f.getId());
 end
-""" for name, age in (("older", 40), ("old", 30)))
+""" for name, test in groups.items())
+
+
+def shared_first_test(plain_rules: int) -> str:
+    """Two auto-focus rules of one pattern and ``plain_rules`` others, all opening with one ``in``
+    test: Drools' node for that test has a child per rule, range-indexed on age from nine."""
+    focused = auto_focus_rules('Person( region in ( "n", "e" ), age > {} )', {"older": "40", "old": "30"})
     plain = "".join(f"""
 rule "plain {k}"
 when
@@ -518,16 +523,7 @@ def test_a_set_whose_auto_focus_rules_of_one_pattern_move_keeps_the_rule_base(op
     amount), in the request-join network (the joins read loans from the request) to the two in
     the order they were added, so a loan would reach "medium" first and its group take the focus
     last. DroolsLinkOrder.sameFocusOrder sees it and the set keeps the rule base's network."""
-    focused = "".join(f"""
-rule "focus {name}"
-auto-focus true
-agenda-group "{name}"
-when
-    $l : Loan( amount > {amount} )
-then
-    actions.say("bot", "{name} " + $l.getId());
-end
-""" for name, amount in (("big", 100.0), ("medium", 50.0)))
+    focused = auto_focus_rules("Loan( amount > {} )", {"big": "100.0", "medium": "50.0"})
     joins = "".join(f"""
 rule "join {k}"
 when
