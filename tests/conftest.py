@@ -43,22 +43,6 @@ CHROMIUM_ARGS = [
 ]
 
 
-@pytest.fixture(autouse=True)
-def _shared_units_left_as_found():
-    """Puts back the tier of rule units shared with other hosts as the test found it. Why: a
-    gateway built on a store shares units and plans through it (``incremental.share_units``) until
-    it is closed; one a test left open made every later compile of that worker read and write
-    plans there, and a test that built one set twice got the first build's plan back."""
-    import sys
-
-    module = sys.modules.get("gateway.engine.incremental")
-    before = module._shared if module is not None else None
-    yield
-    module = sys.modules.get("gateway.engine.incremental")
-    if module is not None and module._shared is not before:
-        module.share_units(before)
-
-
 @pytest.fixture(scope="session")
 def browser():
     """One headless Debian chromium for the whole run: Playwright's sync API allows only one
