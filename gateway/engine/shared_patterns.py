@@ -32,12 +32,17 @@ class RuleShape:
     first_test: str | None = None  # its first pattern's type and first constraint (Drools' node under the type's)
 
 
+def _type_name(pattern: dict[str, Any]) -> str:
+    """A pattern's type by its simple name, so that two spellings of one type count as one."""
+    return str(pattern.get("type", "")).rsplit(".", 1)[-1]
+
+
 def _element(element: Any) -> str:
-    """One condition element as Drools compares it for sharing: a pattern by its type (simple
-    name, so two spellings of one type count as one) and its constraints, the names it binds aside."""
+    """One condition element as Drools compares it for sharing: a pattern by its type and its
+    constraints, the names it binds aside."""
     pattern = element.get("pattern") if isinstance(element, dict) else None
     if isinstance(pattern, dict):
-        element = {"pattern": [str(pattern.get("type", "")).rsplit(".", 1)[-1], pattern.get("constraints")]}
+        element = {"pattern": [_type_name(pattern), pattern.get("constraints")]}
     return json.dumps(element, sort_keys=True)
 
 
@@ -48,11 +53,11 @@ def _is_pattern(element: Any) -> bool:
 def rule_shape(rule: dict[str, Any]) -> RuleShape:
     elements = rule.get("lhs") or []
     opening = [_element(e) for e in elements]
+    pattern = elements[0]["pattern"] if elements and _is_pattern(elements[0]) else None
     first_test = None
-    if elements and _is_pattern(elements[0]) and elements[0]["pattern"].get("constraints"):
-        pattern = elements[0]["pattern"]
-        first_test = json.dumps([str(pattern.get("type", "")).rsplit(".", 1)[-1], pattern["constraints"][0]], sort_keys=True)
-    return RuleShape(opening[0] if elements and _is_pattern(elements[0]) else None,
+    if pattern is not None and pattern.get("constraints"):
+        first_test = json.dumps([_type_name(pattern), pattern["constraints"][0]], sort_keys=True)
+    return RuleShape(opening[0] if pattern is not None else None,
                      tuple(json.dumps(opening[:k]) for k in range(2, len(opening) + 1)),
                      bool((rule.get("attributes") or {}).get("auto-focus")), first_test)
 

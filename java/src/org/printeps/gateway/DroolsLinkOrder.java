@@ -94,8 +94,12 @@ public final class DroolsLinkOrder {
     /** Each eager rule's linking nodes, by "rule's full name#subrule". */
     private final Map<String, Place[]> links;
 
-    private DroolsLinkOrder(Map<String, Place[]> links) {
+    /** The rule base's auto-focus rules of one pattern, per fact type, in the order a fact reaches them. */
+    private final Map<Class<?>, List<String>> focus;
+
+    private DroolsLinkOrder(Map<String, Place[]> links, Map<Class<?>, List<String>> focus) {
         this.links = links;
+        this.focus = focus;
     }
 
     /**
@@ -115,7 +119,7 @@ public final class DroolsLinkOrder {
                 links.put(key(t), linking(t, places));
             }
         }
-        return links.isEmpty() ? null : new DroolsLinkOrder(links);
+        return links.isEmpty() ? null : new DroolsLinkOrder(links, focusAtPropagation(places));
     }
 
     private static String key(TerminalNode t) {
@@ -189,7 +193,8 @@ public final class DroolsLinkOrder {
 
     /**
      * Whether a fact reaches the auto-focus rules of one pattern in {@code joins} (a request-join
-     * network of {@code kb}'s rules) in the order it reaches them in {@code kb}. Such a rule is an
+     * network of this rule base's rules) in the order it reaches them in the rule base (walked
+     * once, by {@link #of}). Such a rule is an
      * alpha terminal node: Drools makes its match, and pushes its agenda group, the moment a fact
      * reaches it, not through the eager list {@link Fire} orders. Where the request-join network's
      * alpha nodes have other children than the rule base's (the patterns it reads from the request
@@ -197,31 +202,30 @@ public final class DroolsLinkOrder {
      * children by how many test one field), and the groups would take the focus in another order:
      * then the set keeps the rule base's network ({@code Runner}).
      */
-    public static boolean sameFocusOrder(KieBase kb, KieBase joins) {
-        return focusAtPropagation((RuleBase) kb).equals(focusAtPropagation((RuleBase) joins));
+    public boolean sameFocusOrder(KieBase joins) {
+        return focus.equals(focusAtPropagation(places((RuleBase) joins)));
     }
 
     /** The auto-focus rules of one pattern, by name, in the order a fact reaches them (all types; for tests of this seam). */
     public static List<String> focusOrder(KieBase kb) {
         List<String> out = new ArrayList<String>();
-        for (List<String> keys : focusAtPropagation((RuleBase) kb).values()) {
+        for (List<String> keys : focusAtPropagation(places((RuleBase) kb)).values()) {
             for (String k : keys) out.add(k.substring(k.lastIndexOf('.') + 1, k.lastIndexOf('#')));
         }
         return out;
     }
 
-    /** Per fact type, the auto-focus rules of one pattern in the order a fact reaches them. */
-    private static Map<Class<?>, List<String>> focusAtPropagation(RuleBase base) {
+    /** Per fact type, the auto-focus rules of one pattern in the order a fact reaches them ({@code places}: a network's walk). */
+    private static Map<Class<?>, List<String>> focusAtPropagation(Map<Object, Place> places) {
         List<Map.Entry<Object, Place>> terminals = new ArrayList<Map.Entry<Object, Place>>();
-        for (Map.Entry<Object, Place> e : places(base).entrySet()) {
+        for (Map.Entry<Object, Place> e : places.entrySet()) {
             if (e.getKey() instanceof AlphaTerminalNode) terminals.add(e);
         }
         terminals.sort(Comparator.comparingLong(e -> e.getValue().number));
         Map<Class<?>, List<String>> out = new HashMap<Class<?>, List<String>>();
         for (Map.Entry<Object, Place> e : terminals) {
             for (LeftTupleSink sink : ((AlphaTerminalNode) e.getKey()).getSinkPropagator().getSinks()) {
-                if (sink instanceof TerminalNode && ((TerminalNode) sink).getRule().isEager()
-                        && ((TerminalNode) sink).getRule().getAutoFocus()) {
+                if (sink instanceof TerminalNode && ((TerminalNode) sink).getRule().getAutoFocus()) {
                     out.computeIfAbsent(e.getValue().type, k -> new ArrayList<String>()).add(key((TerminalNode) sink));
                 }
             }

@@ -66,7 +66,7 @@ final class PlainRule {
         Map<String, Object> attributeSpec = (Map<String, Object>) spec.get("attributes");
         boolean eager = attributeSpec != null && Boolean.TRUE.equals(attributeSpec.get("auto-focus"));
         Map<String, Object> metadata = new LinkedHashMap<String, Object>();
-        Object guarded = spec.get("guardedPrefix");  // joins as an auto-focus rule does: guarded as it is (shared_patterns.py)
+        Object guarded = spec.get("guardedPrefix");  // opens as an auto-focus rule does: guarded as it is (shared_patterns.py)
         int guardedPrefix = guarded instanceof Number ? ((Number) guarded).intValue() : 0;
         boolean shared = Boolean.TRUE.equals(spec.get("firstShared"));  // another rule opens with this pattern: share it as the rule base does
         int position = 0;

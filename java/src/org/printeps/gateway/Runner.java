@@ -83,8 +83,8 @@ public final class Runner {
         boolean usable = requestJoins != null && requestJoinsAllowed(types);
         if (usable) {
             try {
-                order = DroolsLinkOrder.of(kieBase);
-                usable = DroolsLinkOrder.sameFocusOrder(kieBase, requestJoins);  // else the groups could take the focus otherwise
+                order = DroolsLinkOrder.of(kieBase);  // null: no eager rule, so none with auto-focus
+                usable = order == null || order.sameFocusOrder(requestJoins);  // else the groups could take the focus otherwise
             } catch (IllegalStateException e) {  // the link order is not known: not exact
                 usable = false;
             }
