@@ -33,7 +33,9 @@ class JvmSettings(BaseModel):
     extra_options: list[str] = Field(
         default_factory=list,
         description="More JVM options, e.g. ['-XX:NativeMemoryTracking=summary', '-XX:+StartAttachListener'] to read "
-        "the JVM's native memory with jcmd; env PRINTEPS_JVM_OPTIONS='-XX:A -XX:B' (split like a shell).")
+        "the JVM's native memory with jcmd; env PRINTEPS_JVM_OPTIONS='-XX:A -XX:B' (split like a shell). "
+        "The heap gets transparent huge pages where the kernel grants them on request; '-XX:-UseTransparentHugePages' "
+        "turns that off.")
     aot_cache: bool = Field(
         default=True,
         description="Start the JVM from the ahead-of-time class cache that `printeps build-java` makes (Java 25+; "

@@ -171,6 +171,28 @@ def collector(extra_options: list[str]) -> list[str]:
     return ["-XX:+UseSerialGC"]
 
 
+#: Where Linux says whether a process may ask for transparent huge pages ("always [madvise] never").
+THP_MODE_FILE = Path("/sys/kernel/mm/transparent_hugepage/enabled")
+
+
+def page_options(extra_options: list[str], mode_file: Path = THP_MODE_FILE) -> list[str]:
+    """Transparent huge pages for the Java heap where the kernel grants them on request (its mode
+    is ``madvise`` or ``always``), unless ``jvm.extra_options`` decides about page sizes itself.
+
+    Why: a large rule base is a large graph of small objects (a 10,000-rule business set keeps
+    ~600 MB of the heap live), and a fire follows pointers across it. With 4 KB pages most of those
+    steps also miss the TLB; with 2 MB pages the same fires took ~25% less CPU at the median and
+    ran steadier (docs/benchmarks.md, "Huge pages"). Where the mode is ``never`` (or the file is
+    missing: not Linux) the JVM would only print a warning, so nothing is asked for."""
+    if any(re.fullmatch(r"-XX:[+-](UseTransparentHugePages|UseLargePages)", option) for option in extra_options):
+        return []
+    try:
+        mode = mode_file.read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return []
+    return ["-XX:+UseTransparentHugePages"] if "[madvise]" in mode or "[always]" in mode else []
+
+
 def unlink_garbage_collectors() -> None:
     """Stop JPype from running Java's garbage collector from Python's.
 
@@ -209,6 +231,7 @@ def start(settings: JvmSettings | None = None) -> None:
             "-Xss4m",
             f"-Xmx{settings.max_heap}",
             *collector(settings.extra_options),
+            *page_options(settings.extra_options),
             "-Dorg.slf4j.simpleLogger.defaultLogLevel=warn",
             "-Ddrools.dialect.java.compiler=ECLIPSE",
             "-Dfile.encoding=UTF-8",

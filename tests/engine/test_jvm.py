@@ -98,3 +98,25 @@ def test_a_collector_chosen_in_extra_options_replaces_the_default():
     assert jvm.collector([]) == ["-XX:+UseSerialGC"]
     assert jvm.collector(["-XX:TieredStopAtLevel=1"]) == ["-XX:+UseSerialGC"]
     assert jvm.collector(["-XX:+UseParallelGC"]) == []  # the JVM refuses two collectors
+
+
+def test_the_heap_asks_for_huge_pages_only_where_the_kernel_grants_them(tmp_path):
+    mode = tmp_path / "enabled"
+    for text, options in [("always [madvise] never\n", ["-XX:+UseTransparentHugePages"]),
+                          ("[always] madvise never\n", ["-XX:+UseTransparentHugePages"]),
+                          ("always madvise [never]\n", [])]:  # the JVM would only print a warning
+        mode.write_text(text)
+        assert jvm.page_options([], mode) == options, text
+    mode.write_text("always [madvise] never\n")
+    assert jvm.page_options(["-XX:-UseTransparentHugePages"], mode) == []  # the operator's choice stands
+    assert jvm.page_options(["-XX:+UseLargePages"], mode) == []
+    assert jvm.page_options([], tmp_path / "missing") == []  # not Linux
+
+
+def test_the_running_jvm_uses_huge_pages_where_the_kernel_grants_them():
+    from gateway.base.jvm import THP_MODE_FILE
+
+    jvm.start()
+    flag = jvm.jclass("java.lang.management.ManagementFactory").getPlatformMXBean(
+        jvm.jclass("com.sun.management.HotSpotDiagnosticMXBean")).getVMOption("UseTransparentHugePages")
+    assert str(flag.getValue()) == str(bool(jvm.page_options([]))).lower(), THP_MODE_FILE.read_text()
