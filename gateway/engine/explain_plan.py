@@ -51,19 +51,21 @@ def _close_paren(masked: str, open_at: int) -> int:
     return -1
 
 
-def _split_top(text: str, separators: str) -> list[str]:
-    """``text`` split at the ``separators`` characters (and ``&&``) that are outside brackets and strings."""
+def _split_top(text: str, separators: str, *, at_and: bool = True) -> list[str]:
+    """``text`` split at the ``separators`` characters (and ``&&`` unless ``at_and`` is false) that
+    are outside brackets and strings."""
     masked = _masked(text)
     parts, depth, start, pos = [], 0, 0, 0
     while pos < len(text):
         ch = masked[pos]
+        conjunction = at_and and masked.startswith("&&", pos)
         if ch in "([{":
             depth += 1
         elif ch in ")]}":
             depth -= 1
-        elif depth == 0 and (ch in separators or masked.startswith("&&", pos)):
+        elif depth == 0 and (ch in separators or conjunction):
             parts.append(text[start:pos])
-            pos += 2 if masked.startswith("&&", pos) else 1
+            pos += 2 if conjunction else 1
             start = pos
             continue
         pos += 1
@@ -90,6 +92,10 @@ class Condition:
     constraints: list[str] = field(default_factory=list)
     suffix: str = ""  # "from …", "over window:…"
     branches: list[Condition] = field(default_factory=list)  # an "or"'s alternatives, a "forall"'s patterns
+    # the accumulate element ``accumulate( source; functions [; constraints] )``: its source and
+    # functions (its constraints are ``constraints``); empty for every other condition
+    source: str = ""
+    functions: str = ""
 
     def where(self) -> dict[str, Any]:
         out: dict[str, Any] = {"index": self.index, "kind": self.kind, "drl": self.drl, "written": self.written,
@@ -99,9 +105,17 @@ class Condition:
         return out
 
     def candidate(self, constraints: int | None = None) -> str:
-        """The condition's pattern with ``constraints`` of its constraints, binding ``$__f``."""
+        """The condition's pattern with ``constraints`` of its constraints, binding ``$__f``; of an
+        accumulate element, the element with them (its rows hold what its functions bind)."""
         kept = self.constraints if constraints is None else self.constraints[:constraints]
+        if self.functions:
+            return f"accumulate( {self.source}; {self.functions}" + (f"; {', '.join(kept)} )" if kept else " )")
         return f"{FACT} : {self.type}( {', '.join(kept)} ) {self.suffix}".rstrip()
+
+    def results(self) -> list[str]:
+        """The variables an accumulate element's functions bind (``$t : sum( $a )`` binds ``$t``)."""
+        return [m.group(1) for part in _split_top(self.functions, ",", at_and=False)
+                if (m := re.match(r"\s*(\$?[\w$]+)\s*:", part))]
 
 
 def _parse_pattern(cond: Condition, text: str) -> None:
@@ -116,6 +130,20 @@ def _parse_pattern(cond: Condition, text: str) -> None:
     cond.binding, cond.type = match.group(1), match.group(2)
     cond.constraints = _split_top(text[match.end():close], ",")
     cond.suffix = text[close + 1:].strip()
+
+
+def _parse_accumulate(cond: Condition, inner: str) -> None:
+    """Fill the parts of ``accumulate( source; functions [; constraints] )`` (the inside given) when
+    its functions bind results; an accumulate written otherwise (inline ``init``/``action``/``result``
+    code) keeps none and is explained as a whole."""
+    parts = _split_top(inner, ";", at_and=False)
+    if len(parts) not in (2, 3):
+        return
+    cond.source, cond.functions = parts[0], parts[1]
+    cond.constraints = _split_top(parts[2], ",") if len(parts) == 3 else []
+    if not cond.results():
+        cond.source = cond.functions = ""
+        cond.constraints = []
 
 
 def _unwrap(text: str) -> str:
@@ -169,6 +197,8 @@ def classify(cond: Condition) -> None:
             _parse_pattern(cond, _unwrap(text[head.end():]))
             if cond.type is None:
                 cond.kind = "other"
+        elif cond.kind == "accumulate":
+            _parse_accumulate(cond, _unwrap(text[head.end():]))
         return
     _parse_pattern(cond, text)
     if cond.type is None:
@@ -361,7 +391,9 @@ def plan_rules(files: dict[str, str]) -> tuple[list[RulePlan], list[tuple[Any, A
 
 
 def has_candidates(cond: Condition) -> bool:
-    return cond.type is not None and cond.kind != "other"
+    """Whether the condition has candidate queries (:meth:`Condition.candidate`): a pattern of a
+    type, or an accumulate element whose functions bind results."""
+    return (cond.type is not None or bool(cond.functions)) and cond.kind != "other"
 
 
 def _queries(plan: RulePlan) -> list[tuple[str, str]]:

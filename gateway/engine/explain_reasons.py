@@ -125,12 +125,22 @@ def _closest(run: Run, cond: Condition, name: Callable[[int], str]) -> tuple[Any
     """The candidate fact of ``cond`` that passes the most of its constraints in order, and how
     many it passes (-1: there is no candidate at all); ``name(j)``: the query with j constraints."""
     best, passed = None, -1
+    if not has_candidates(cond):  # nothing to ask (no query was made)
+        return best, passed
     for j in range(0, len(cond.constraints) + 1):
         rows = run.rows(name(j))
         if not rows:
             break
-        best, passed = rows[0].get(FACT), j
+        best, passed = _candidate(cond, rows[0]), j
     return best, passed
+
+
+def _candidate(cond: Condition, row: dict[str, Any]) -> Any:
+    """What a candidate query's row shows: the fact (``$__f``), or an accumulate element's results
+    by the names its functions bind them to (``{"$t": 1200.0}``)."""
+    if cond.functions:
+        return {name: row.get(name) for name in cond.results()}
+    return row.get(FACT)
 
 
 def _why_pattern(run: Run, plan: RulePlan, k: int, cond: Condition,
@@ -139,14 +149,16 @@ def _why_pattern(run: Run, plan: RulePlan, k: int, cond: Condition,
     out: dict[str, Any] = {"constraint": None, "closest": None}
     source = f" {cond.suffix}" if cond.kind == "from" else ""
     out["score"] = -1.0
-    if passed < 0 or cond.type is None:
-        if cond.kind == "accumulate":
+    if passed < 0 or not has_candidates(cond):
+        if cond.kind == "accumulate" and cond.type is None:  # the accumulate element
+            out["reason"] = "the accumulate gives no value" if cond.functions else f"{cond.drl} does not hold"
+        elif cond.kind == "accumulate":
             out["reason"] = f"the accumulate gives no value ({cond.suffix})"
         else:
             out["reason"] = f"there is no {cond.type} fact{source}"
         return out
     if passed >= len(cond.constraints):  # every constraint holds for some fact: an earlier binding is what fails
-        out["reason"] = f"a {cond.type} matches its own constraints, but not together with the conditions before it"
+        out["reason"] = f"a {cond.type or 'result'} matches its own constraints, but not together with the conditions before it"
         out["closest"] = {"fact": fact}
         out["score"] = 1.0
         return out
@@ -158,7 +170,12 @@ def _why_pattern(run: Run, plan: RulePlan, k: int, cond: Condition,
     out["closest"] = {"fact": fact, "passed": passed, "of": len(cond.constraints), "field": field_name,
                       "value": value}
     out["score"] = passed / len(cond.constraints)
-    if cond.kind == "accumulate":
+    if cond.functions and field_name in fact:  # accumulate( …; $t : sum( $a ); $t > 100 )
+        out["reason"] = f"{field_name} is {_show(value)}, the rule wants {failing}"
+    elif cond.functions:
+        shown = ", ".join(f"{name} = {_show(result)}" for name, result in fact.items())
+        out["reason"] = f"the accumulate gives {shown}, the rule wants {failing}"
+    elif cond.kind == "accumulate":
         out["reason"] = f"the accumulated value is {_show(fact)}, the rule wants {failing}"
     elif field_name and isinstance(fact, dict) and field_name in fact or "." in (field_name or ""):
         shown = field_name if field_name and "." not in field_name else field_name

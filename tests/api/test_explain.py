@@ -48,6 +48,14 @@ then
     actions.say("pepper", "Welcome back " + $g.getId());
 end
 
+rule "Loyal guest"
+when
+    $g : Guest( )
+    accumulate( Visit( guest == $g.id ); $n : count( 1 ); $n >= 5 )
+then
+    actions.say("pepper", "Thank you for coming again");
+end
+
 rule "Side hall crowded"
 when
     exists Crowded( hall == "side" )
@@ -121,6 +129,10 @@ def test_drl_rules_say_what_stopped_them(client, api_gateway, drl_set):
     regular = rules["Regular"]
     assert regular["condition"]["kind"] == "accumulate" and regular["condition"]["index"] == 2
     assert regular["reason"] == "the accumulated value is 3, the rule wants intValue >= 5"
+    loyal = rules["Loyal guest"]  # the accumulate element: its result by the name it is bound to
+    assert loyal["condition"]["kind"] == "accumulate" and loyal["condition"]["index"] == 2
+    assert loyal["constraint"] == "$n >= 5" and loyal["closest"]["value"] == 3
+    assert loyal["reason"] == "$n is 3, the rule wants $n >= 5"
     side = rules["Side hall crowded"]
     assert side["condition"]["kind"] == "exists"
     assert side["reason"].startswith("no Crowded fact exists that matches") and '"main"' in side["reason"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from gateway.engine.explain_plan import _sentences, split_conditions
+from gateway.engine.explain_plan import _sentences, has_candidates, split_conditions
 from gateway.engine.explain_reasons import _wants
 from gateway.engine.replay import not_replayable, same_outcome
 
@@ -39,6 +39,19 @@ def test_a_candidate_query_binds_the_fact_and_keeps_a_prefix_of_the_constraints(
     cond = split_conditions('    $i : Item( price > 3, name == "x" ) from $o.items\n', 1)[0]
     assert cond.candidate(0) == "$__f : Item(  ) from $o.items"
     assert cond.candidate(1) == "$__f : Item( price > 3 ) from $o.items"
+
+
+def test_an_accumulate_element_is_asked_with_a_prefix_of_its_constraints():
+    cond = split_conditions("    accumulate( Order( customer == $c.id, $a : amount ); $t : sum( $a ), $n : count( 1 );"
+                            " $t > 100 && $n >= 2 )\n", 1)[0]
+    assert cond.kind == "accumulate" and cond.type is None and has_candidates(cond)
+    assert cond.source == "Order( customer == $c.id, $a : amount )" and cond.results() == ["$t", "$n"]
+    assert cond.constraints == ["$t > 100", "$n >= 2"]
+    assert cond.candidate(0) == "accumulate( Order( customer == $c.id, $a : amount ); $t : sum( $a ), $n : count( 1 ) )"
+    assert cond.candidate(1).endswith("; $t > 100 )")
+    inline = split_conditions("    accumulate( Order( $a : amount ), init( double t = 0; ), action( t += $a; ),"
+                              " result( t ) )\n", 1)[0]
+    assert inline.kind == "accumulate" and not has_candidates(inline)  # explained as a whole, asking nothing
 
 
 @pytest.mark.parametrize("constraint, wanted", [('language == "en"', '"en"'), ("age >= 12", "age >= 12"),
