@@ -195,8 +195,8 @@ def classify(cond: Condition) -> None:
         cond.kind = head.group(1)
         if cond.kind in ("not", "exists"):
             _parse_pattern(cond, _unwrap(text[head.end():]))
-            if cond.type is None:
-                cond.kind = "other"
+            if cond.type is None or re.search(r"\b(or|and)\b|\|\||&&", _masked(cond.suffix)):
+                cond.kind = "other"  # not( A or B ), exists( A and B ): not one pattern's facts
         elif cond.kind == "accumulate":
             _parse_accumulate(cond, _unwrap(text[head.end():]))
         return

@@ -41,6 +41,13 @@ def test_a_candidate_query_binds_the_fact_and_keeps_a_prefix_of_the_constraints(
     assert cond.candidate(1) == "$__f : Item( price > 3 ) from $o.items"
 
 
+def test_not_and_exists_over_several_patterns_are_said_as_a_whole():
+    conds = split_conditions("    not ( Visit( guest == $g.id ) or Visit( amount > 10 ) )\n"
+                             "    exists ( Guest( age > 100 ) and Visit( amount > 1000 ) )\n"
+                             "    not Visit( amount > 5 ) from $visits\n", 1)
+    assert [c.kind for c in conds] == ["other", "other", "not"]
+
+
 def test_an_accumulate_element_is_asked_with_a_prefix_of_its_constraints():
     cond = split_conditions("    accumulate( Order( customer == $c.id, $a : amount ); $t : sum( $a ), $n : count( 1 );"
                             " $t > 100 && $n >= 2 )\n", 1)[0]
