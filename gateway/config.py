@@ -75,6 +75,10 @@ class EngineSettings(BaseModel):
     compile_incremental: bool = Field(
         default=True, description="Compile in units and reuse unchanged rules (false: the whole set every time).")
     compile_workers: int = Field(default=2, description="Threads compiling rule units at once.")
+    background_nice: int = Field(
+        default=10, ge=0, le=19, description="How many nice steps lower than serving the background threads run "
+        "(rule compiles, explain queries, build jobs, the start-up warm-up; Linux): a compile then takes cores "
+        "only when fires do not need them (0: the same priority).")
     compile_plain_rules: bool = Field(
         default=True, description="Build rules of the plain shapes (field vs literal or bound field, sum "
         "accumulate, calls on a global with literals, bound facts and their getters) at run time without "

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from gateway.base import jvm
+from gateway.base import jvm, priority
 from gateway.base.lifecycle import CatalogLifecycle, NotAnItem
 from gateway.config import Settings, load_settings
 from gateway.engine import compiler, explain, kmodule, policy, scenarios, warmup
@@ -100,6 +100,7 @@ class Engine(CatalogLifecycle):
         super().__init__(catalog)
         self.settings = settings or load_settings()
         jvm.configure(self.settings.jvm)
+        priority.configure(self.settings.engine.background_nice)
         self._live: dict[str, LiveRuleSet] = {}
         self._listeners: list[Listener] = []
         self._fire_listeners: list[Listener] = []  # those of _listeners that hear decisions ("fire")

@@ -33,10 +33,10 @@ import re
 import threading
 import time
 from collections import OrderedDict, deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from gateway.base import priority
 from gateway.engine import warmup
 from gateway.engine.errors import CompileError, CompileFailed, EngineError
 from gateway.engine.explain_plan import RulePlan, plan_rules, query_files
@@ -118,7 +118,7 @@ class ExplainCache:
 
     def __init__(self, size: int = CACHE_SIZE) -> None:
         self._size = size
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="explain")
+        self._worker = priority.background_pool(1, "explain")
         self._waiting = threading.BoundedSemaphore(MAX_WAITING)
         self._built: OrderedDict[str, Explainer] = OrderedDict()
         self._lock = threading.Lock()

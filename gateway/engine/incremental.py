@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gateway.base import jvm
+from gateway.base import jvm, priority
 from gateway.engine import drl_items, plain_rules, shared_patterns
 from gateway.engine.build import (
     CompiledRuleSet,
@@ -341,7 +341,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
     compile_started = time.perf_counter()
     if jobs:
         workers = max(1, min(options.workers, len(jobs)))
-        pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rule-compiler")
+        pool = priority.background_pool(workers, "rule-compiler")
         try:
             futures = {pool.submit(run, kind, rules): (kind, rules) for kind, rules in jobs}
             pending = set(futures)
@@ -452,7 +452,7 @@ def _run_with_deadline(work: Callable[[], Any], deadline: _Deadline) -> Any:
     """``work()`` in a worker thread, given up on (left to finish unused) at the deadline."""
     if deadline.at is None:
         return work()
-    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="rule-compiler")
+    pool = priority.background_pool(1, "rule-compiler")
     try:
         future = pool.submit(work)
         try:

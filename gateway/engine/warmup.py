@@ -35,6 +35,7 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from gateway.base import priority
 from gateway.engine import compiler
 from gateway.engine.errors import EngineError
 
@@ -231,7 +232,7 @@ class ProcessWarmUp:
         if not background:
             self._work(rounds, fires)
             return None
-        thread = threading.Thread(target=self._work, args=(rounds, fires), name="engine-warm-up", daemon=True)
+        thread = threading.Thread(target=self._in_background, args=(rounds, fires), name="engine-warm-up", daemon=True)
         self._thread = thread
         thread.start()
         return thread
@@ -243,6 +244,10 @@ class ProcessWarmUp:
         thread = self._thread
         if thread is not None and thread.is_alive():
             thread.join(timeout_s)
+
+    def _in_background(self, rounds: int, fires: int) -> None:
+        priority.lower_this_thread()  # its own thread only: never the caller's
+        self._work(rounds, fires)
 
     def _work(self, rounds: int, fires: int) -> None:
         try:

@@ -25,6 +25,7 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from typing import Any
 
+from gateway.base import priority
 from gateway.engine.errors import BuildCancelled, EngineError
 
 log = logging.getLogger(__name__)
@@ -203,6 +204,7 @@ class JobService:
 
     # ---- running ---------------------------------------------------------------------------------
     def _work(self) -> None:
+        priority.lower_this_thread()
         while True:
             with self._cond:
                 while not self._queue and not self._closed:
