@@ -255,7 +255,9 @@ def explain(engine: Any, explainer: Explainer, facts: list[dict[str, Any]]) -> d
         queries.insert(result.facts)
         run = Run(queries)
         prefetch(run, [plan for plan in explainer.plans if plan.name not in matches and not plan.broken])
-        rules = [explain_rule(run, plan, matches.get(plan.name, [])) for plan in explainer.plans]
+        groups = frozenset(plan.attributes["activation-group"] for plan in explainer.plans
+                           if plan.name in matches and "activation-group" in plan.attributes)
+        rules = [explain_rule(run, plan, matches.get(plan.name, []), groups) for plan in explainer.plans]
     finally:
         queries.close()
     return {"fired": [entry["rule"] for entry in result.fired], "actions": result.actions, "rules": rules}

@@ -264,6 +264,7 @@ class RulePlan:
     line: int
     conditions: list[Condition]
     broken: str = ""  # why it cannot be explained (its queries did not compile)
+    attributes: dict[str, str] = field(default_factory=dict)  # its own (rule_attributes): what can hold it back
     _names: dict[int, list[str]] = field(default_factory=dict, repr=False)
 
     def condition_names(self, k: int) -> list[str]:
@@ -292,6 +293,25 @@ class RulePlan:
     def violators_query(self, k: int, j: int | None = None) -> str:
         """The elements that break the "forall" condition ``k`` (``j``: those failing its j-th constraint)."""
         return f"why__{self.number}__{k}__v" + ("" if j is None else str(j))
+
+
+_RULE_NAME = re.compile(r'^\s*rule\s+(?:"(?:\\.|[^"\\])*"|\'(?:\\.|[^\'\\])*\'|\S+)')
+_ATTRIBUTE = re.compile(r'(?<![\w-])(agenda-group|activation-group|auto-focus|no-loop|lock-on-active|date-effective|'
+                        r'date-expires|enabled)(?![\w-])\s*(?:"((?:\\.|[^"\\])*)"|\'((?:\\.|[^\'\\])*)\'|(true|false)\b)?')
+
+
+def rule_attributes(header: str) -> dict[str, str]:
+    """The attributes written in a rule's header (``rule "n" … when``) that can keep a rule whose
+    conditions hold from firing, by name: a text's value, ``true``/``false``, or ``true`` for a
+    bare flag (``no-loop``). A package-wide attribute is not read here."""
+    name = _RULE_NAME.match(header)
+    rest = _masked(header[name.end():] if name else header)
+    original = header[name.end():] if name else header
+    out: dict[str, str] = {}
+    for m in _ATTRIBUTE.finditer(rest):
+        quoted = 2 if m.group(2) is not None else 3 if m.group(3) is not None else None
+        out[m.group(1)] = original[m.start(quoted):m.end(quoted)] if quoted else (m.group(4) or "true")
+    return out
 
 
 def _rule_lhs(text: str) -> tuple[int, int] | None:
@@ -383,7 +403,8 @@ def plan_rules(files: dict[str, str]) -> tuple[list[RulePlan], list[tuple[Any, A
             first_line = item.line + text[:lhs[0]].count("\n")
             conditions = split_conditions(text[lhs[0]:lhs[1]], first_line)
             _author_words(source, conditions, text[lhs[0]:lhs[1]], first_line, item.name, original)
-            plans.append(RulePlan(item.name, len(plans) + 1, source.file, source.source_line(item.line), conditions))
+            plans.append(RulePlan(item.name, len(plans) + 1, source.file, source.source_line(item.line), conditions,
+                                  attributes=rule_attributes(text[:lhs[0]])))
     return plans, sources
 
 

@@ -13,6 +13,7 @@ alternative an ``or``; the element that breaks it a ``forall``. The queries run 
 from __future__ import annotations
 
 import re
+from datetime import date, datetime
 from typing import Any, Callable
 
 import orjson
@@ -258,8 +259,10 @@ def prefetch(run: Run, plans: list[RulePlan]) -> None:
     run.prefetch([name for name in second if name not in run.fetched])
 
 
-def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]]) -> dict[str, Any]:
-    """What one rule did: fired with its matches, or the condition that stopped it and why."""
+def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]], groups_fired: frozenset[str] = frozenset()
+                 ) -> dict[str, Any]:
+    """What one rule did: fired with its matches, or the condition that stopped it and why
+    (``groups_fired``: the activation groups in which a rule fired)."""
     base: dict[str, Any] = {"rule": plan.name, "file": plan.file, "line": plan.line}
     if fired:
         return {**base, "fired": True, "matches": fired}
@@ -287,5 +290,34 @@ def explain_rule(run: Run, plan: RulePlan, fired: list[list[Any]]) -> dict[str, 
             out.update(constraint=None, reason=f"condition {k} ({cond.drl}) does not hold")
         return out
     return {**base, "fired": False, "condition": None,
-            "reason": "all its conditions hold, but it did not fire: its agenda group had no focus, a rule of its "
-                      "activation group fired first, no-loop/lock-on-active stopped it, or the fire limit was reached"}
+            "reason": "all its conditions hold, but it did not fire: " + held_back(plan.attributes, groups_fired)}
+
+
+def held_back(attributes: dict[str, str], groups_fired: frozenset[str], today: date | None = None) -> str:
+    """Why a rule whose conditions hold did not fire, from its attributes: the first that explains
+    it (disabled, not yet effective or expired today, its activation group's turn taken), else
+    what could have (its agenda group, no-loop/lock-on-active), else the fire limit."""
+    today = today or date.today()
+    effective, expires = _day(attributes.get("date-effective")), _day(attributes.get("date-expires"))
+    group, agenda = attributes.get("activation-group"), attributes.get("agenda-group")
+    if attributes.get("enabled") == "false":
+        return "it is disabled (enabled false)"
+    if effective is not None and effective > today:
+        return f"it takes effect on {attributes['date-effective']} (date-effective)"
+    if expires is not None and expires <= today:
+        return f"it expired on {attributes['date-expires']} (date-expires)"
+    if group is not None and group in groups_fired:
+        return f'a rule of its activation group "{group}" fired first'
+    could = []
+    if agenda and agenda != "MAIN" and attributes.get("auto-focus") != "true":
+        could.append(f'its agenda group "{agenda}" did not have the focus while they held')
+    could += [f"{flag} stopped it" for flag in ("no-loop", "lock-on-active") if attributes.get(flag) == "true"]
+    return " or ".join(could) if could else "the fire limit was reached, or its agenda group had no focus"
+
+
+def _day(text: str | None) -> date | None:
+    """A ``date-effective``/``date-expires`` value as Drools' default format reads it (``1-Jan-2099``)."""
+    try:
+        return datetime.strptime(text.strip(), "%d-%b-%Y").date() if text else None
+    except ValueError:
+        return None

@@ -56,6 +56,14 @@ then
     actions.say("pepper", "Thank you for coming again");
 end
 
+rule "Spring greeting"
+date-effective "1-Mar-2099"
+when
+    Guest( )
+then
+    actions.say("pepper", "Happy spring");
+end
+
 rule "Side hall crowded"
 when
     exists Crowded( hall == "side" )
@@ -133,6 +141,9 @@ def test_drl_rules_say_what_stopped_them(client, api_gateway, drl_set):
     assert loyal["condition"]["kind"] == "accumulate" and loyal["condition"]["index"] == 2
     assert loyal["constraint"] == "$n >= 5" and loyal["closest"]["value"] == 3
     assert loyal["reason"] == "$n is 3, the rule wants $n >= 5"
+    spring = rules["Spring greeting"]  # its conditions hold: what held it back is its attribute
+    assert spring["fired"] is False and spring["condition"] is None
+    assert spring["reason"] == "all its conditions hold, but it did not fire: it takes effect on 1-Mar-2099 (date-effective)"
     side = rules["Side hall crowded"]
     assert side["condition"]["kind"] == "exists"
     assert side["reason"].startswith("no Crowded fact exists that matches") and '"main"' in side["reason"]

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from gateway.engine.explain_plan import _sentences, has_candidates, split_conditions
-from gateway.engine.explain_reasons import _wants
+from datetime import date
+
+from gateway.engine.explain_plan import _sentences, has_candidates, rule_attributes, split_conditions
+from gateway.engine.explain_reasons import _wants, held_back
 from gateway.engine.replay import not_replayable, same_outcome
 
 LHS = '''
@@ -80,3 +82,23 @@ def test_cut_and_session_decisions_are_not_replayable_and_outcomes_compare_as_mu
     assert same_outcome(["A", "B"], [a, b], ["B", "A"], [b, {"params": {"to": 1, "text": "hi"}, "module": "say"}])
     assert not same_outcome(["A"], [a], ["A", "A"], [a, a])
     assert not same_outcome(["A"], [a], ["A"], [b])
+
+
+def test_a_rule_whose_conditions_hold_is_told_what_held_it_back():
+    header = """rule "when agenda-group" // no-loop in a comment
+    agenda-group "late"  date-effective "1-Jan-2099"
+    no-loop
+    activation-group 'x'
+    enabled false
+when"""
+    assert rule_attributes(header) == {"agenda-group": "late", "date-effective": "1-Jan-2099", "no-loop": "true",
+                                       "activation-group": "x", "enabled": "false"}
+    today = date(2026, 11, 28)
+    assert held_back({"enabled": "false", "date-effective": "1-Jan-2099"}, frozenset(), today) == "it is disabled (enabled false)"
+    assert held_back({"date-effective": "01-jan-2099"}, frozenset(), today) == "it takes effect on 01-jan-2099 (date-effective)"
+    assert held_back({"date-effective": "1-Jan-2020"}, frozenset(), today).startswith("the fire limit")
+    assert held_back({"date-expires": "28-Nov-2026"}, frozenset(), today) == "it expired on 28-Nov-2026 (date-expires)"
+    assert held_back({"activation-group": "g"}, frozenset({"g"}), today) == 'a rule of its activation group "g" fired first'
+    assert held_back({"agenda-group": "late", "lock-on-active": "true"}, frozenset({"h"}), today) == (
+        'its agenda group "late" did not have the focus while they held or lock-on-active stopped it')
+    assert held_back({"agenda-group": "late", "auto-focus": "true"}, frozenset(), today).startswith("the fire limit")
