@@ -264,7 +264,7 @@ class RulePlan:
     line: int
     conditions: list[Condition]
     broken: str = ""  # why it cannot be explained (its queries did not compile)
-    attributes: dict[str, str] = field(default_factory=dict)  # its own (rule_attributes): what can hold it back
+    attributes: dict[str, str] = field(default_factory=dict)  # its file's and its own (rule_attributes): what can hold it back
     _names: dict[int, list[str]] = field(default_factory=dict, repr=False)
 
     def condition_names(self, k: int) -> list[str]:
@@ -301,9 +301,9 @@ _ATTRIBUTE = re.compile(r'(?<![\w-])(agenda-group|activation-group|auto-focus|no
 
 
 def rule_attributes(header: str) -> dict[str, str]:
-    """The attributes written in a rule's header (``rule "n" … when``) that can keep a rule whose
-    conditions hold from firing, by name: a text's value, ``true``/``false``, or ``true`` for a
-    bare flag (``no-loop``). A package-wide attribute is not read here."""
+    """The attributes written in a rule's header (``rule "n" … when``), or in a file's header for all
+    its rules, that can keep a rule whose conditions hold from firing, by name: a text's value,
+    ``true``/``false``, or ``true`` for a bare flag (``no-loop``)."""
     name = _RULE_NAME.match(header)
     rest = _masked(header[name.end():] if name else header)
     original = header[name.end():] if name else header
@@ -395,6 +395,7 @@ def plan_rules(files: dict[str, str]) -> tuple[list[RulePlan], list[tuple[Any, A
         if items is None:
             continue
         original = files.get(source.file) if source.line_map is not None else None
+        package = rule_attributes(items.header())  # the file's own attributes: every rule of it has them
         for item in items.rules:
             text = items.item_text(item)
             lhs = _rule_lhs(text)
@@ -404,7 +405,7 @@ def plan_rules(files: dict[str, str]) -> tuple[list[RulePlan], list[tuple[Any, A
             conditions = split_conditions(text[lhs[0]:lhs[1]], first_line)
             _author_words(source, conditions, text[lhs[0]:lhs[1]], first_line, item.name, original)
             plans.append(RulePlan(item.name, len(plans) + 1, source.file, source.source_line(item.line), conditions,
-                                  attributes=rule_attributes(text[:lhs[0]])))
+                                  attributes={**package, **rule_attributes(text[:lhs[0]])}))
     return plans, sources
 
 

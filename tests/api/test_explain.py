@@ -151,6 +151,20 @@ def test_drl_rules_say_what_stopped_them(client, api_gateway, drl_set):
     assert api_gateway.store.db["decisions"].count_documents({"ruleset": drl_set}) == decisions_before
 
 
+def test_attributes_written_for_a_whole_file_are_said_for_its_rules(client, drl_set):
+    files = {"r.drl": TYPES.replace("global Actions actions;", 'global Actions actions;\ndate-expires "1-Jan-2001"') + """
+rule "Old greeting"
+when
+    Guest( )
+then
+    actions.say("pepper", "Hi");
+end
+"""}
+    answer = client.post(f"/api/rulesets/{drl_set}/explain", json={"files": files, "facts": [{"type": "Guest", "id": "g"}]})
+    assert answer.status_code == 200, answer.text
+    assert by_rule(answer.json())["Old greeting"]["reason"].endswith("it expired on 1-Jan-2001 (date-expires)")
+
+
 def test_a_not_condition_shows_the_fact_that_exists(client, drl_set):
     facts = [{"type": "Guest", "id": "g2", "age": 40, "language": "en"}, {"type": "Crowded", "hall": "main"}]
     english = by_rule(client.post(f"/api/rulesets/{drl_set}/explain", json={"facts": facts}).json())["Greet in English"]
