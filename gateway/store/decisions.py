@@ -35,6 +35,10 @@ log = logging.getLogger(__name__)
 DECISIONS = "decisions"
 RECENT_KEPT = 2000
 MAX_PAGE = 1000
+#: How long a read waits for this process's decisions recorded before it to reach the database
+#: (they are shipped by the journal, normally within milliseconds; a database that is down does not
+#: hold a read longer than this).
+READ_OWN_S = 1.0
 CORRELATION_INDEX = [("correlation_id", pymongo.ASCENDING), ("_id", pymongo.ASCENDING)]  # a trace, oldest first
 # indexes earlier versions kept on decisions (see DecisionRecord._indexes)
 RETIRED_INDEXES = {"origin_1__id_-1", "fired_1__id_-1", "correlation_id_1", "_meta.stored_type_1__meta.inserted_at_1"}
@@ -87,9 +91,12 @@ class DecisionRecord:
     def find(self, *, ruleset: str | None = None, version: int | None = None, origin: str | None = None,
              rule: str | None = None, since: datetime | None = None, until: datetime | None = None,
              limit: int = 50, cursor: str | None = None) -> tuple[list[dict[str, Any]], str | None]:
-        """Decisions newest first with filters; returns (page, cursor of the next page or None)."""
+        """Decisions newest first with filters; returns (page, cursor of the next page or None).
+        This process's decisions recorded before the call are in it (waited for up to READ_OWN_S:
+        a client that fires and then lists finds its decision)."""
         if not 1 <= limit <= MAX_PAGE:
             raise StoreError(f"limit {limit}: must be between 1 and {MAX_PAGE}")
+        self.store.settle(READ_OWN_S)
         spec = _spec(ruleset=ruleset, version=version, origin=origin, rule=rule, since=since, until=until,
                      cursor=cursor)
         try:
@@ -130,7 +137,9 @@ class DecisionRecord:
                 return
 
     def by_correlation(self, correlation_id: str, limit: int = MAX_PAGE) -> list[dict[str, Any]]:
-        """The decisions recorded with ``correlation_id``, oldest first (a trace; an index walk)."""
+        """The decisions recorded with ``correlation_id``, oldest first (a trace; an index walk), this
+        process's recorded before the call included (as :meth:`find`)."""
+        self.store.settle(READ_OWN_S)
         try:
             docs = list(self.store.db[DECISIONS].find({"correlation_id": correlation_id}, {"_meta": 0})
                         .sort("_id", pymongo.ASCENDING).limit(limit))

@@ -236,6 +236,8 @@ class Journal:
         self._failures = 0  # consecutive failed tries (the backoff)
         self.linger_s = linger_s  # wait this long for a batch to fill: fewer, larger inserts under load
         self._flushing = 0
+        self._appended = 0  # this process's writes appended, and shipped (in order): settle() waits between
+        self._shipped = 0
         self.adopt_interval_s = adopt_interval_s
         self.dropped = 0
         self.set_aside_count = 0
@@ -270,6 +272,7 @@ class Journal:
             for line in lines:
                 segment.append(line, self.fsync)
                 self._pending.append(Entry(database, collection, line, segment))
+            self._appended += len(lines)
             self._wake.notify()
 
     def room(self) -> int:
@@ -340,9 +343,11 @@ class Journal:
                 continue
             with self._lock:
                 self._in_hand = []
+                self._shipped += len(batch)
                 for entry in batch:
                     entry.segment.shipped += 1
                 self._release_segments(batch)
+                self._idle.notify_all()
             if not self._ship_adopted() and not self._back_off():
                 return
 
@@ -542,6 +547,26 @@ class Journal:
             self._wake.notify()
             try:
                 return self._wait_shipped(deadline)
+            finally:
+                self._flushing -= 1
+
+    def settle(self, timeout_s: float) -> bool:
+        """Wait until this process's writes appended before the call are in the database (not those
+        appended meanwhile, so a steady stream of writes does not hold it up); False on timeout."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            mark = self._appended
+            if self._shipped >= mark:
+                return True
+            self._flushing += 1  # the shipper does not linger while someone waits
+            self._wake.notify()
+            try:
+                while self._shipped < mark:
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        return False
+                    self._idle.wait(timeout=min(remaining, 0.05))
+                return True
             finally:
                 self._flushing -= 1
 

@@ -194,6 +194,11 @@ class InformationState:
         """Wait until every write made so far is in the database; False if it is not reachable."""
         return self.journal.flush(timeout_s)
 
+    def settle(self, timeout_s: float = 1.0) -> bool:
+        """Wait until this process's writes made before the call are in the database (a read of
+        the database then sees them); False after ``timeout_s`` (the read goes on without them)."""
+        return self.journal.settle(timeout_s)
+
     def _ship(self, database: str, collection: str, lines: list[bytes]) -> None:
         """Insert journalled writes (from the shipper process, or here); the documents the database
         refuses are set aside. Raises when the batch is not known to be in (it is then retried)."""

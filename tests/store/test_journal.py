@@ -381,3 +381,36 @@ def test_a_segment_an_adopter_left_half_shipped_is_adopted_again(tmp_path: Path)
         assert shipped == ["d0", "d1"] and not left.exists()
     finally:
         journal.close()
+
+
+def test_settle_waits_for_the_writes_before_it_and_not_for_those_after(tmp_path: Path) -> None:
+    """A read of the database after ``settle`` sees this process's writes made before the call
+    (a client that fires, then lists decisions, finds its own); writes appended while it waits
+    do not hold it up, so a steady stream of them never makes a read wait its whole timeout."""
+    gate = threading.Semaphore(0)
+    shipped: list[str] = []
+    journal: Journal
+
+    def ship(db: str, c: str, lines: list[bytes]) -> None:
+        for line in lines:
+            assert gate.acquire(timeout=10)
+            ident = json.loads(line)["d"]["id"]
+            shipped.append(ident)
+            if ident == "mine":  # a write that arrives while the reader waits
+                journal.append("db", "c", [encode("db", "c", {"id": "after"})])
+
+    journal = Journal(tmp_path, ship, batch=1)
+    try:
+        journal.append("db", "c", [encode("db", "c", {"id": "mine"})])
+        assert not journal.settle(0.2) and shipped == []  # still in the journal: not yet readable
+        journal.append("db", "c", [encode("db", "c", {"id": "later"})])
+        opener = threading.Timer(0.3, lambda: (gate.release(), gate.release()))  # "mine" and "later" only
+        opener.start()
+        assert journal.settle(5)  # returns with "after" still waiting for the gate
+        assert shipped == ["mine", "later"]
+        assert not journal.settle(0.2)  # now "after" is one of this reader's
+        gate.release()
+        assert journal.settle(5) and shipped == ["mine", "later", "after"]
+    finally:
+        gate.release()
+        journal.close()
