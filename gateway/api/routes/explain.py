@@ -22,6 +22,7 @@ from gateway.api.jsonio import JSON, JsonRoute
 from gateway.api.routes.decisions import recorded_decision
 from gateway.api.routes.rulesets import MAX_FILES, RuleSetName, facts_from_body
 from gateway.engine.replay import not_replayable
+from gateway.store.decisions import READ_OWN_S
 from gateway.store.store import StoreUnavailable
 from gateway.store.traces import trace
 
@@ -69,6 +70,7 @@ def get_trace(correlation_id: Annotated[str, PathParam(max_length=200)], store: 
     """Everything recorded for one chain, oldest first: sensor message → RDF item → query result →
     decision → robot actions and their outcomes (a REST, KIE or ROS service fire: the decision and
     its actions), each with ``since_previous_ms``, and the ``hops`` between kinds."""
+    store.settle(READ_OWN_S)  # what this process recorded before the request is in the chain
     try:
         found = trace(store.db, correlation_id)
     except StoreUnavailable as exc:
