@@ -8,6 +8,11 @@ explain queries of its last deploy compiled in the background, and 0.2–0.8 ms 
 at nice 10 (docs/benchmarks.md, "Background work at a lower priority"). A lower priority costs
 nothing on an idle machine: it only decides who waits when both want a core.
 
+Off by default (``engine.background_nice: 0``): on a machine saturated by other processes (the
+test suite's workers, a browser, the database), a lowered thread waits for a core for long
+stretches, also while it holds the GIL or runs a build an author is waiting for (a workbench test
+waited 60 s for a held build's first stage). Turn it on where the gateway has its cores to itself.
+
 How: Linux schedules each thread on its own, so a thread can lower its own priority
 (``setpriority`` on its thread id; raising it back would need privileges, so only threads that
 only ever do background work are lowered, once, when they start). The Java work such a thread
@@ -25,8 +30,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 log = logging.getLogger(__name__)
 
-#: How much lower (nice steps) background threads run; ``engine.background_nice`` (0: as serving).
-_nice = 10
+#: How much lower (nice steps) background threads run; ``engine.background_nice`` (0, the default: as serving).
+_nice = 0
 
 
 def configure(nice: int) -> None:
