@@ -305,12 +305,11 @@ def rule_attributes(header: str) -> dict[str, str]:
     its rules, that can keep a rule whose conditions hold from firing, by name: a text's value,
     ``true``/``false``, or ``true`` for a bare flag (``no-loop``)."""
     name = _RULE_NAME.match(header)
-    rest = _masked(header[name.end():] if name else header)
-    original = header[name.end():] if name else header
+    text = header[name.end():] if name else header
     out: dict[str, str] = {}
-    for m in _ATTRIBUTE.finditer(rest):
+    for m in _ATTRIBUTE.finditer(_masked(text)):  # strings blanked: their words are no attributes
         quoted = 2 if m.group(2) is not None else 3 if m.group(3) is not None else None
-        out[m.group(1)] = original[m.start(quoted):m.end(quoted)] if quoted else (m.group(4) or "true")
+        out[m.group(1)] = text[m.start(quoted):m.end(quoted)] if quoted else (m.group(4) or "true")
     return out
 
 

@@ -150,7 +150,7 @@ def _why_pattern(run: Run, plan: RulePlan, k: int, cond: Condition,
     out: dict[str, Any] = {"constraint": None, "closest": None}
     source = f" {cond.suffix}" if cond.kind == "from" else ""
     out["score"] = -1.0
-    if passed < 0 or not has_candidates(cond):
+    if passed < 0:  # no candidate at all (or none to ask for: see _closest)
         if cond.kind == "accumulate" and cond.type is None:  # the accumulate element
             out["reason"] = "the accumulate gives no value" if cond.functions else f"{cond.drl} does not hold"
         elif cond.kind == "accumulate":

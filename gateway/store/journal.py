@@ -541,43 +541,32 @@ class Journal:
     # ---- waiting and closing ---------------------------------------------------------------------
     def flush(self, timeout_s: float = 10.0) -> bool:
         """Wait until everything appended so far is in the database; False on timeout/outage."""
-        deadline = time.monotonic() + timeout_s
         with self._lock:
-            self._flushing += 1  # the shipper does not linger while someone waits
-            self._wake.notify()
-            try:
-                return self._wait_shipped(deadline)
-            finally:
-                self._flushing -= 1
+            return self._wait(time.monotonic() + timeout_s, lambda: not (
+                self._pending or self._in_hand or self._adopted or self._adopted_in_hand))
 
     def settle(self, timeout_s: float) -> bool:
         """Wait until this process's writes appended before the call are in the database (not those
         appended meanwhile, so a steady stream of writes does not hold it up); False on timeout."""
-        deadline = time.monotonic() + timeout_s
         with self._lock:
             mark = self._appended
-            if self._shipped >= mark:
-                return True
-            self._flushing += 1  # the shipper does not linger while someone waits
-            self._wake.notify()
-            try:
-                while self._shipped < mark:
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        return False
-                    self._idle.wait(timeout=min(remaining, 0.05))
-                return True
-            finally:
-                self._flushing -= 1
+            return self._wait(time.monotonic() + timeout_s, lambda: self._shipped >= mark)
 
-    def _wait_shipped(self, deadline: float) -> bool:
-        """(lock held) Wait until nothing is pending, in flight or adopted (queued or in flight)."""
-        while self._pending or self._in_hand or self._adopted or self._adopted_in_hand:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False
-            self._idle.wait(timeout=min(remaining, 0.05))
-        return True
+    def _wait(self, deadline: float, done: Callable[[], bool]) -> bool:
+        """(lock held) Wait until ``done()``, the shipper not lingering meanwhile; False at ``deadline``."""
+        if done():
+            return True
+        self._flushing += 1
+        self._wake.notify()
+        try:
+            while not done():
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._idle.wait(timeout=min(remaining, 0.05))
+            return True
+        finally:
+            self._flushing -= 1
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Ship what can be shipped within ``timeout_s``; what is left stays on disk for next time."""
