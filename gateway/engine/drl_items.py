@@ -269,10 +269,12 @@ class RuleSetItems:
         return digest("rule", env, src.file, src.package, src.header(), self.package_headers.get(src.package, ""),
                       self.context_hash, self.types_hash(self.closure(used)), text)
 
-    def declarations_key(self, env: str) -> str:
-        """What the declarations unit (types, functions, queries ... of every file) depends on."""
+    def declarations_key(self, env: str, apart: frozenset[tuple[str, int]] = frozenset()) -> str:
+        """What the declarations unit (types, functions, queries ... of every file) depends on;
+        ``apart``: (file, start) of queries built in units of their own, not part of it."""
         parts = []
         for src in sorted(self.sources, key=lambda s: s.file):
             parts.append(f"{src.file}\0{src.package}\0{src.header()}")
-            parts.extend(f"{i.kind}\0{src.item_text(i)}" for i in src.items if i.kind != "rule")
+            parts.extend(f"{i.kind}\0{src.item_text(i)}" for i in src.items
+                         if i.kind != "rule" and (src.file, i.start) not in apart)
         return digest("declarations", env, *parts)

@@ -13,11 +13,12 @@ alternative an ``or``; the element that breaks it a ``forall``. The queries run 
 from __future__ import annotations
 
 import re
-from datetime import date, datetime
+from datetime import date
 from typing import Any, Callable
 
 import orjson
 
+from gateway.engine import rule_dates
 from gateway.engine.errors import FactError
 from gateway.engine.explain_plan import FACT, Condition, RulePlan, has_candidates
 from gateway.engine.results import FireResult, decode_result, encode_facts
@@ -316,8 +317,6 @@ def held_back(attributes: dict[str, str], groups_fired: frozenset[str], today: d
 
 
 def _day(text: str | None) -> date | None:
-    """A ``date-effective``/``date-expires`` value as Drools' default format reads it (``1-Jan-2099``)."""
-    try:
-        return datetime.strptime(text.strip(), "%d-%b-%Y").date() if text else None
-    except ValueError:
-        return None
+    """A ``date-effective``/``date-expires`` value's day as the engine reads it (its
+    ``drools.dateformat``; ``1-Jan-2099`` by default), None if there is none or it is no date."""
+    return rule_dates.day(text) if text else None

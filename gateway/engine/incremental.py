@@ -256,15 +256,16 @@ def _compile_whole(sources, items, env, cache, deadline, stats, on_progress, opt
 
 def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, deadline, stats, on_progress,
                          options) -> _Plan:
-
     _check_duplicates(items, sources)
     by_file = {s.file: s for s in sources}
-    decl_id = items.declarations_key(env)
+    apart = plain_rules.queries_apart(items.sources) if options.plain_rules else frozenset()
+    decl_id = items.declarations_key(env, apart)
     order: list[tuple[str, SourceItems, drl_items.Item]] = []
     for src in sorted(items.sources, key=lambda s: s.file):
-        for item in src.rules:
-            order.append((items.rule_key(env, src, item), src, item))
-    stats.rules = len(order)
+        for item in src.items:
+            if item.kind == "rule" or (src.file, item.start) in apart:
+                order.append((items.rule_key(env, src, item), src, item))
+    stats.rules = sum(item.kind == "rule" for _, _, item in order)  # the queries built apart aside
     cache.refresh()
     found: dict[str, str] = {}
     missing: list[tuple[str, SourceItems, drl_items.Item]] = []
@@ -296,8 +297,9 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
     batch = _batch_size(len(missing), options.workers)
     for k in range(0, len(missing), batch):
         jobs.append(("rules", missing[k:k + batch]))
-    for k in range(0, len(plain), MAX_PLAIN_BATCH):  # last: they wait for the declarations unit
-        jobs.append(("plain", plain[k:k + MAX_PLAIN_BATCH]))
+    for group in ([p for p in plain if p[2].kind == "rule"], [p for p in plain if p[2].kind == "query"]):
+        for k in range(0, len(group), MAX_PLAIN_BATCH):  # last: they wait for the declarations unit
+            jobs.append(("plain", group[k:k + MAX_PLAIN_BATCH]))  # queries: units of their own
     total = max(len(missing) + len(plain), 1)
     done = 0
     _progress(on_progress, 0, total, "compile")
@@ -312,8 +314,8 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             return _build_plain(rules, env, declarations[0])
         if kind == "declarations":
             try:
-                unit_sources = [_unit_source(by_file[s.file], s, s.blanked(lambda i: i.kind != "rule"))
-                                for s in items.sources]
+                unit_sources = [_unit_source(by_file[s.file], s, s.blanked(
+                    lambda i, s=s: i.kind != "rule" and (s.file, i.start) not in apart)) for s in items.sources]
                 built = build_unit(unit_sources, decl_id, deadline)
                 unit = UnitArtifact(decl_id, "declarations", built.model_classes, {}, built.data)
                 declarations.append(_load(unit, None))
@@ -321,14 +323,11 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             finally:
                 declarations_ready.set()
         wanted = {(src.file, item.start) for _, src, item in rules}
-        files_wanted = {f for f, _ in wanted}
         unit_id = drl_items.digest("rules", env, *(key for key, _, _ in rules))
         unit_sources = []
-        for s in items.sources:
-            if s.file in files_wanted:
-                text = s.blanked(lambda i, s=s: i.kind != "rule" or (s.file, i.start) in wanted)
-            else:  # only its declarations matter here
-                text = s.blanked(lambda i: i.kind != "rule")
+        for s in items.sources:  # its declarations (no query built apart: no rule calls one) and its rules
+            text = s.blanked(lambda i, s=s: (s.file, i.start) in wanted
+                             or (i.kind != "rule" and (s.file, i.start) not in apart))
             unit_sources.append(_unit_source(by_file[s.file], s, text))
         built = build_unit(unit_sources, unit_id, deadline)
         unit = UnitArtifact(unit_id, "rules", built.model_classes,
@@ -610,7 +609,8 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
             declarations.models, unit_models, positions, packages, names, kiebase_configuration(ks)))
         stats.assemble_s = time.perf_counter() - started
         joins = None
-        all_plain = not plan.whole and bool(rule_units) and all(unit.kind == "plain" for unit in rule_units)
+        all_plain = (not plan.whole and all(unit.kind == "plain" for unit in rule_units)
+                     and not all(plain_rules.queries_only(unit.data) for unit in rule_units))  # some rules, all plain
         if all_plain and (request_joins == "always" or (request_joins == "auto" and j["Runner"].requestJoinsPay(kbase))):
             joined = time.perf_counter()
             joins = _request_join_base(rule_units, declarations, lambda models: units.assemble(

@@ -11,6 +11,7 @@ column that says which attribute it is and what form a date takes. Nothing is bu
 from __future__ import annotations
 
 import re
+from datetime import date
 from functools import lru_cache
 from typing import Iterable, Protocol
 
@@ -59,3 +60,13 @@ def errors(sources: Iterable[DrlText]) -> list[CompileError]:
 def _problem(text: str) -> str | None:
     found = jvm.helper_class("PlainRules").ruleDateProblem(text)
     return None if found is None else str(found)
+
+
+@lru_cache(maxsize=256)
+def day(text: str) -> date | None:
+    """The day a ``date-effective``/``date-expires`` value means, or None if it is not a date: read
+    as the built rule base reads it (``drools.dateformat``, English month names, any case), so an
+    explanation that a rule is not yet effective or has expired judges as the engine does."""
+    found = jvm.helper_class("PlainRules").ruleDay(text.strip())
+    return None if found is None else date.fromisoformat(str(found))
+

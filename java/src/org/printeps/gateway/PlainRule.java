@@ -107,6 +107,36 @@ final class PlainRule {
         return DroolsInternals.rule(pkg, (String) spec.get("name"), attributes, metadata, items.toArray(new RuleItemBuilder<?>[0]));
     }
 
+    /**
+     * A query without parameters ({@code "query": true}): its conditions built as a rule's are
+     * (the same patterns, indexes, accumulates, not/exists), ending in a query instead of a
+     * consequence; its bound variables are what a row of its results reads.
+     */
+    @SuppressWarnings("unchecked")
+    org.drools.model.Query buildQuery() {
+        List<org.drools.model.view.ViewItemBuilder<?>> items = new ArrayList<org.drools.model.view.ViewItemBuilder<?>>();
+        for (Object element : (List<Object>) spec.get("lhs")) {
+            Map<String, Object> e = (Map<String, Object>) element;
+            List<RuleItemBuilder<?>> built = new ArrayList<RuleItemBuilder<?>>();
+            if (e.containsKey("pattern")) {
+                built.add(pattern((Map<String, Object>) e.get("pattern"), null, null));
+            } else if (e.containsKey("accumulate")) {
+                accumulates.accumulate((Map<String, Object>) e.get("accumulate"), built);
+            } else if (e.containsKey("not") || e.containsKey("exists")) {
+                built.add(negation(e));
+            } else if (e.containsKey("fromAccumulate")) {
+                accumulates.fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), built);
+            } else {
+                throw new Reject("unknown condition " + e.keySet());
+            }
+            for (RuleItemBuilder<?> item : built) {
+                if (!(item instanceof org.drools.model.view.ViewItemBuilder)) throw new Reject("a query condition of another kind");
+                items.add((org.drools.model.view.ViewItemBuilder<?>) item);
+            }
+        }
+        return PatternDSL.query(pkg, (String) spec.get("name")).build(items.toArray(new org.drools.model.view.ViewItemBuilder<?>[0]));
+    }
+
     Class<?> resolve(String name) {
         List<String> candidates = new ArrayList<String>();
         if (name.contains(".")) {

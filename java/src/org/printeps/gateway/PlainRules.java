@@ -1,5 +1,7 @@
 package org.printeps.gateway;
 
+import java.time.LocalDate;
+import java.time.ZoneId;
 import java.util.ArrayList;
 import java.util.Collections;
 import java.util.HashMap;
@@ -93,8 +95,12 @@ public final class PlainRules {
         for (int k = 0; k < rules.size(); k++) {
             Map<String, Object> r = (Map<String, Object>) rules.get(k);
             try {
-                Rule rule = new PlainRule(context, r).build();
-                byPackage.computeIfAbsent((String) r.get("package"), PlainModel::new).rules.add(rule);
+                PlainModel model = byPackage.computeIfAbsent((String) r.get("package"), PlainModel::new);
+                if (Boolean.TRUE.equals(r.get("query"))) {
+                    model.queries.add(new PlainRule(context.forQueries(), r).buildQuery());
+                } else {
+                    model.rules.add(new PlainRule(context, r).build());
+                }
             } catch (Reject e) {
                 rejected.add(k + "\t" + e.getMessage());
             } catch (RuntimeException | LinkageError e) {
@@ -134,6 +140,19 @@ public final class PlainRules {
             this.requestJoins = requestJoins;
         }
 
+        private Context queries;
+
+        /** This build's context for queries: they always read the session's memories (a query is
+         *  asked of a session, never of a request), sharing this build's field readers. */
+        Context forQueries() {
+            if (!requestJoins) return this;
+            if (queries == null) {
+                queries = new Context(loader, globals, false);
+                queries.metadata.putAll(metadata);
+            }
+            return queries;
+        }
+
         DomainClassMetadata metadata(Class<?> type) {
             return metadata.computeIfAbsent(type, DroolsInternals::domainClassMetadata);
         }
@@ -162,6 +181,19 @@ public final class PlainRules {
         }
     }
 
+    /**
+     * The day a {@code date-effective}/{@code date-expires} value means, as {@code yyyy-MM-dd}, or
+     * null if it is not a date: read as {@link #ruleDateProblem} reads it, so an explanation judges
+     * the date with the mask the rule base was built with ({@code drools.dateformat}).
+     */
+    public static String ruleDay(String text) {
+        try {
+            return LocalDate.ofInstant(DroolsInternals.ruleDate(text).toInstant(), ZoneId.systemDefault()).toString();
+        } catch (RuntimeException e) {
+            return null;
+        }
+    }
+
     /** The date mask {@code date-effective}/{@code date-expires} values are read with. */
     public static String ruleDateFormat() {
         return DroolsInternals.ruleDateFormat();
@@ -171,6 +203,7 @@ public final class PlainRules {
     static final class PlainModel implements Model {
         private final String packageName;
         final List<Rule> rules = new ArrayList<Rule>();
+        final List<Query> queries = new ArrayList<Query>();
 
         PlainModel(String packageName) { this.packageName = packageName; }
 
@@ -178,7 +211,7 @@ public final class PlainRules {
         public String getPackageName() { return packageName; }
         public List<Global> getGlobals() { return Collections.emptyList(); }
         public List<Rule> getRules() { return rules; }
-        public List<Query> getQueries() { return Collections.emptyList(); }
+        public List<Query> getQueries() { return queries; }
         public List<TypeMetaData> getTypeMetaDatas() { return Collections.emptyList(); }
         public List<EntryPoint> getEntryPoints() { return Collections.emptyList(); }
     }

@@ -184,27 +184,30 @@ public final class Units {
             MergedModel into = merged.computeIfAbsent(m.getPackageName(), MergedModel::new);
             into.addDeclarations(m);
         }
-        List<Map<String, Map<String, Rule>>> index = new ArrayList<Map<String, Map<String, Rule>>>();
+        List<Map<String, Map<String, Object>>> index = new ArrayList<Map<String, Map<String, Object>>>();
         for (int u = 0; u < units.size(); u++) index.add(null);
         for (int k = 0; k < ruleNames.length; k++) {
             int u = unitIndex[k];
-            Map<String, Map<String, Rule>> byPackage = index.get(u);
-            if (byPackage == null) {
-                byPackage = new HashMap<String, Map<String, Rule>>();
+            Map<String, Map<String, Object>> byPackage = index.get(u);
+            if (byPackage == null) {  // a unit's rules, and the queries built apart from the declarations
+                byPackage = new HashMap<String, Map<String, Object>>();
                 for (Model m : units.get(u)) {
-                    Map<String, Rule> rules = byPackage.computeIfAbsent(m.getPackageName(), p -> new HashMap<String, Rule>());
-                    for (Rule r : m.getRules()) rules.put(r.getName(), r);
+                    Map<String, Object> items = byPackage.computeIfAbsent(m.getPackageName(), p -> new HashMap<String, Object>());
+                    for (Query q : m.getQueries()) items.put(q.getName(), q);
+                    for (Rule r : m.getRules()) items.put(r.getName(), r);
                     MergedModel into = merged.computeIfAbsent(m.getPackageName(), MergedModel::new);
                     into.addEntryPoints(m);
                 }
                 index.set(u, byPackage);
             }
-            Map<String, Rule> rules = byPackage.get(packages[k]);
-            Rule rule = rules == null ? null : rules.get(ruleNames[k]);
-            if (rule == null) {
+            Map<String, Object> items = byPackage.get(packages[k]);
+            Object item = items == null ? null : items.get(ruleNames[k]);
+            if (item == null) {
                 throw new IllegalStateException("unit " + u + " has no rule '" + ruleNames[k] + "' in package " + packages[k]);
             }
-            merged.computeIfAbsent(packages[k], MergedModel::new).rules.add(rule);
+            MergedModel into = merged.computeIfAbsent(packages[k], MergedModel::new);
+            if (item instanceof Rule) into.rules.add((Rule) item);
+            else into.queries.add((Query) item);
         }
         return DroolsInternals.kieBaseFromModels(new ArrayList<Model>(merged.values()), conf);
     }
