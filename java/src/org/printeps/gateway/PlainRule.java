@@ -87,17 +87,7 @@ final class PlainRule {
                 PlainRequestJoins.linkGuard(this, (Map<String, Object>) e.get(e.containsKey("pattern") ? "pattern" : "exists"), items);
                 items.add(PlainRequestJoins.keepOrder(this));
             }
-            if (e.containsKey("pattern")) {
-                items.add(pattern((Map<String, Object>) e.get("pattern"), null, routedBy));
-            } else if (e.containsKey("accumulate")) {
-                accumulates.accumulate((Map<String, Object>) e.get("accumulate"), items);
-            } else if (e.containsKey("not") || e.containsKey("exists")) {
-                items.add(negation(e));
-            } else if (e.containsKey("fromAccumulate")) {
-                accumulates.fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), items);
-            } else {
-                throw new Reject("unknown condition " + e.keySet());
-            }
+            condition(e, routedBy, items);
         }
         items.add(new PlainThen(this).consequence((List<Object>) spec.get("rhs")));
         Object salience = spec.get("salience");
@@ -105,6 +95,23 @@ final class PlainRule {
         if (salience != null) attributes.put(Rule.Attribute.SALIENCE, Integer.valueOf(((Number) salience).intValue()));
         attributes(attributes, (Map<String, Object>) spec.get("attributes"));
         return DroolsInternals.rule(pkg, (String) spec.get("name"), attributes, metadata, items.toArray(new RuleItemBuilder<?>[0]));
+    }
+
+    /** One condition element of a rule or query, added to {@code items} (a pattern reads its fact
+     *  from {@code routedBy}'s Routed facts when not null: {@link RequestDispatch}). */
+    @SuppressWarnings("unchecked")
+    private void condition(Map<String, Object> e, Declaration<Object> routedBy, List<RuleItemBuilder<?>> items) {
+        if (e.containsKey("pattern")) {
+            items.add(pattern((Map<String, Object>) e.get("pattern"), null, routedBy));
+        } else if (e.containsKey("accumulate")) {
+            accumulates.accumulate((Map<String, Object>) e.get("accumulate"), items);
+        } else if (e.containsKey("not") || e.containsKey("exists")) {
+            items.add(negation(e));
+        } else if (e.containsKey("fromAccumulate")) {
+            accumulates.fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), items);
+        } else {
+            throw new Reject("unknown condition " + e.keySet());
+        }
     }
 
     /**
@@ -118,17 +125,7 @@ final class PlainRule {
         for (Object element : (List<Object>) spec.get("lhs")) {
             Map<String, Object> e = (Map<String, Object>) element;
             List<RuleItemBuilder<?>> built = new ArrayList<RuleItemBuilder<?>>();
-            if (e.containsKey("pattern")) {
-                built.add(pattern((Map<String, Object>) e.get("pattern"), null, null));
-            } else if (e.containsKey("accumulate")) {
-                accumulates.accumulate((Map<String, Object>) e.get("accumulate"), built);
-            } else if (e.containsKey("not") || e.containsKey("exists")) {
-                built.add(negation(e));
-            } else if (e.containsKey("fromAccumulate")) {
-                accumulates.fromAccumulate((Map<String, Object>) e.get("fromAccumulate"), built);
-            } else {
-                throw new Reject("unknown condition " + e.keySet());
-            }
+            condition(e, null, built);
             for (RuleItemBuilder<?> item : built) {
                 if (!(item instanceof org.drools.model.view.ViewItemBuilder)) throw new Reject("a query condition of another kind");
                 items.add((org.drools.model.view.ViewItemBuilder<?>) item);
