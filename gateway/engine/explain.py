@@ -41,7 +41,7 @@ from gateway.engine import warmup
 from gateway.engine.errors import CompileError, CompileFailed, EngineError
 from gateway.engine.explain_plan import RulePlan, plan_rules, query_files
 from gateway.engine.explain_reasons import Run, ThrowawaySession, explain_rule, prefetch
-from gateway.engine.ruleset import content_hash
+from gateway.engine.ruleset import MAX_FILES, MAX_TOTAL_BYTES, content_hash
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +93,7 @@ def build(engine: Any, files: dict[str, str]) -> Explainer:
     skip: set[int] = set()
     for _attempt in range(4):
         extra = query_files(plans, sources, skip)
+        _check_size(plans, {**base, **extra})
         try:
             return Explainer(plans, rules, engine.compile_draft({**base, **extra}))
         except CompileFailed as failed:
@@ -105,6 +106,26 @@ def build(engine: Any, files: dict[str, str]) -> Explainer:
                     plan.broken = "its conditions could not be turned into diagnostic queries: " + ours[0].message
             skip |= newly
     raise EngineError("the diagnostic queries of this rule set do not compile")
+
+
+class ExplainTooLarge(EngineError):
+    """The rule set's diagnostic queries pass the bounds of a rule set's text (422): explained
+    whole, they would be built as one more rule set that large, next to the live one."""
+
+    kind = "invalid"
+
+
+def _check_size(plans: list[RulePlan], files: dict[str, str]) -> None:
+    """ExplainTooLarge when the queries' DRL passes MAX_TOTAL_BYTES or MAX_FILES. Why: at 10,000
+    rules they are ~58,000 queries (~8 MB), which would need about as much heap again as the
+    rules; the build's own upload check would say "rule set too large" of a set that is deployed."""
+    size = sum(len(text.encode("utf-8")) for text in files.values())
+    if size > MAX_TOTAL_BYTES or len(files) > MAX_FILES:
+        queries = sum(text.count('\nquery "') + text.startswith('query "') for text in files.values())
+        raise ExplainTooLarge(
+            f"this rule set is too large to explain: its {len(plans):,} rules need {queries:,} diagnostic queries "
+            f"({size / 1e6:.1f} MB of DRL; explain builds at most {MAX_TOTAL_BYTES / 1e6:.0f} MB in "
+            f"{MAX_FILES} files: about 6,000 rules of simple shapes)")
 
 
 class ExplainBusy(EngineError):

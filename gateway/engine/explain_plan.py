@@ -19,6 +19,7 @@ from typing import Any
 
 from gateway.engine import compiler
 from gateway.engine.errors import CompileError
+from gateway.engine.ruleset import MAX_FILES
 
 QUERY_FILE = "zz_explain_{n}.drl"
 FACT = "$__f"
@@ -468,6 +469,16 @@ def _condition_queries(plan: RulePlan, k: int) -> list[tuple[str, str]]:
     return out
 
 
+def _chunks(each: list[tuple[str, list[str]]], per_package: int) -> list[tuple[str, list[str]]]:
+    """Each file's queries in packages of at most ``per_package`` (a rule's queries kept together)."""
+    chunks: list[tuple[str, list[str]]] = []
+    for file, texts in each:
+        if not chunks or chunks[-1][0] != file or len(chunks[-1][1]) + len(texts) > per_package:
+            chunks.append((file, []))
+        chunks[-1][1].extend(texts)
+    return chunks
+
+
 def query_files(plans: list[RulePlan], sources: list[tuple[Any, Any]], skip: set[int] = frozenset()) -> dict[str, str]:
     """The diagnostic queries as DRL files, each its own package of at most QUERIES_PER_PACKAGE
     queries (one package of hundreds of queries exceeds the JVM's method size limit), importing
@@ -476,15 +487,16 @@ def query_files(plans: list[RulePlan], sources: list[tuple[Any, Any]], skip: set
                        for item in items.items if item.kind in ("type", "enum")})
     headers = {src.file: (items.package, _PACKAGE.sub("", items.header()))
                for src, items in sources if items is not None}
-    chunks: list[tuple[str, list[str]]] = []
-    for plan in plans:
-        if plan.number in skip or plan.broken:
-            continue
-        package, header = headers.get(plan.file, ("defaultpkg", ""))
-        texts = [f'query "{name}"\n    {body}\nend\n' for name, body in _queries(plan)]
-        if not chunks or chunks[-1][0] != plan.file or len(chunks[-1][1]) + len(texts) > QUERIES_PER_PACKAGE:
-            chunks.append((plan.file, []))
-        chunks[-1][1].extend(texts)
+    each = [(plan.file, [f'query "{name}"\n    {body}\nend\n' for name, body in _queries(plan)])
+            for plan in plans if plan.number not in skip and not plan.broken]
+    # bigger packages where small ones would pass the files a rule set may have (a large rule set):
+    # the queries of the plain shapes are not compiled, so the method size limit does not bind them
+    budget = MAX_FILES - len(sources)  # the declarations go with them, a file each
+    per_package = QUERIES_PER_PACKAGE
+    chunks = _chunks(each, per_package)
+    while len(chunks) > budget and per_package < sum(len(texts) for _, texts in each):
+        per_package *= 2
+        chunks = _chunks(each, per_package)
     out = {}
     for n, (fname, texts) in enumerate(chunks, start=1):
         package, header = headers.get(fname, ("defaultpkg", ""))
