@@ -73,6 +73,12 @@ class SourceItems:
             self._header = " ".join(_strip_comments(kept).split())
         return self._header
 
+    def only(self, apart: frozenset[tuple[str, int]]) -> bool:
+        """Whether this file holds nothing but items of ``apart`` (queries built in plain units)
+        and declares no global: the declarations unit needs nothing of it (explain's query files)."""
+        return bool(self.items) and all((self.file, i.start) in apart for i in self.items) and not re.search(
+            r"\bglobal\b", self.header())
+
     def blanked(self, keep: Callable[[Item], bool]) -> str:
         """The text with every item ``keep`` refuses replaced by spaces (line breaks kept)."""
         return blank(self.text, [(i.start, i.end) for i in self.items if not keep(i)])
@@ -274,6 +280,8 @@ class RuleSetItems:
         ``apart``: (file, start) of queries built in units of their own, not part of it."""
         parts = []
         for src in sorted(self.sources, key=lambda s: s.file):
+            if src.only(apart):
+                continue
             parts.append(f"{src.file}\0{src.package}\0{src.header()}")
             parts.extend(f"{i.kind}\0{src.item_text(i)}" for i in src.items
                          if i.kind != "rule" and (src.file, i.start) not in apart)

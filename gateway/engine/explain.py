@@ -78,9 +78,13 @@ def _broken_rules(errors: list[CompileError], files: dict[str, str], plans: list
 
 def declarations(sources: list[tuple[Any, Any]]) -> dict[str, str]:
     """The rule set's DRL without its rules (types, functions, globals, queries), one file per source:
-    the queries run on their own build of these, so the rules are not compiled again for them."""
-    return {f"zz_base_{n}.drl": items.blanked(lambda item: item.kind != "rule")
-            for n, (_src, items) in enumerate(sources, start=1) if items is not None}
+    the queries run on their own build of these, so the rules are not compiled again for them. A
+    .drl file keeps its name, so that these are the rule set's own declarations unit, already
+    built (its key is the files' names and everything but their rules); a text from a .dslr or a
+    decision table gets a .drl name of its own."""
+    return {(src.file if src.file.endswith(".drl") and not src.file.startswith("zz_") else f"zz_base_{n}.drl"):
+            items.blanked(lambda item: item.kind != "rule")
+            for n, (src, items) in enumerate(sources, start=1) if items is not None}
 
 
 def build(engine: Any, files: dict[str, str]) -> Explainer:

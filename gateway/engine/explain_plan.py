@@ -501,5 +501,17 @@ def query_files(plans: list[RulePlan], sources: list[tuple[Any, Any]], skip: set
     for n, (fname, texts) in enumerate(chunks, start=1):
         package, header = headers.get(fname, ("defaultpkg", ""))
         imports = "\n".join(f"import {name};" for name in declared if name.rsplit(".", 1)[0] != f"{package}.why{n}")
-        out[QUERY_FILE.format(n=n)] = (f"package {package}.why{n};\n{imports}\n{header}\n\n" + "\n".join(texts))
+        body = "\n".join(texts)
+        out[QUERY_FILE.format(n=n)] = f"package {package}.why{n};\n{imports}\n{_used_globals(header, body)}\n\n{body}"
     return out
+
+
+_GLOBAL = re.compile(r"\bglobal\s+[\w.$]+(?:\s*<[^;]*?>)?(?:\s*\[\s*\])*\s+([\w$]+)\s*;?")
+
+
+def _used_globals(header: str, body: str) -> str:
+    """The header without the globals ``body`` does not name. Why: a file of queries that declares
+    no global and whose queries all build plain needs nothing of the declarations unit, which is
+    then the rule set's own, already built (``drl_items.RuleSetItems.declarations_key``)."""
+    names = set(re.findall(r"[\w$]+", body))
+    return _GLOBAL.sub(lambda m: m.group(0) if m.group(1) in names else "", header)

@@ -314,8 +314,8 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
             return _build_plain(rules, env, declarations[0])
         if kind == "declarations":
             try:
-                unit_sources = [_unit_source(by_file[s.file], s, s.blanked(
-                    lambda i, s=s: i.kind != "rule" and (s.file, i.start) not in apart)) for s in items.sources]
+                unit_sources = [_unit_source(by_file[s.file], s, s.blanked(lambda i, s=s: i.kind != "rule" and (
+                    s.file, i.start) not in apart)) for s in items.sources if not s.only(apart)]
                 built = build_unit(unit_sources, decl_id, deadline)
                 unit = UnitArtifact(decl_id, "declarations", built.model_classes, {}, built.data)
                 declarations.append(_load(unit, None))

@@ -128,10 +128,14 @@ def test_plain_queries_answer_as_compiled_ones(tmp_path):
 
 
 def test_explains_diagnostic_queries_compile_nothing(tmp_path, options):
-    files = {"q.drl": DRL + "\n// this test's own text: no other test's explain builds it in the background\n"}
+    # without "a child": its diagnostic query ?calledByRule() is not of a plain shape, and would be
+    # compiled with the declarations (this test's own text: no other test's explain builds it)
+    files = {"q.drl": DRL.split('rule "a child"')[0] + "\n// explained\n"}
     engine = engine_with(tmp_path, "q", files, explain_prebuild=False, compile_cache_dir=str(tmp_path / "units"))
     explainer = build_explainer(engine, files)
     stats = explainer.queries.stats
     assert stats.rules_compiled == 0 and stats.rules_built >= 5, stats  # every diagnostic query plain
+    # and the declarations they need are the deployed version's own unit, not compiled again
+    assert (stats.units_compiled, stats.units_reused) == (1, 1), stats
     answer = engine.explain("q", FACTS)
     assert sorted(answer["fired"]) == sorted(f["rule"] for f in engine.fire("q", FACTS).fired)
