@@ -631,7 +631,7 @@ def assemble(plan: _Plan, files: dict[str, str], expanded: dict[str, str], cache
         types=json.loads(str(runner.describeTypes())),
         type_names=json.loads(str(runner.typeFullNames())),
         expanded=expanded,
-        rule_names=sorted(str(rule.getName()) for package in kbase.getKiePackages() for rule in package.getRules()),
+        rule_names=sorted(str(name) for name in runner.ruleNames()),  # not its queries
         kbase=kbase,
         plan=_plan_to_json(plan, expanded),
         stats=stats,

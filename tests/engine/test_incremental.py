@@ -251,7 +251,7 @@ def test_incremental_builds_fire_exactly_as_whole_builds_over_random_edits(optio
             # the rules naming Customer (+ the rule a new field brings); none when every such rule was
             # built before against the same declaration (the field came and went again)
             assert 0 <= rebuilt_rules(built.stats) <= naming_customer + 1, built.stats
-            assert rebuilt_rules(built.stats) < built.rule_count
+            assert rebuilt_rules(built.stats) < built.rule_count or naming_customer == built.rule_count
 
 
 def _rule_texts(files: dict[str, str]) -> dict[str, str]:

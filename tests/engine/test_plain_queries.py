@@ -96,8 +96,8 @@ def test_parameterless_plain_queries_build_plain_and_the_others_compile(options)
     # "welcome" and the four plain queries no one names; "by tier" (parameters) and the query
     # "a child" calls stay in the compiled declarations unit, and that rule (a query call) is compiled
     assert (compiled.stats.rules, compiled.stats.rules_built, compiled.stats.rules_compiled) == (2, 5, 1), compiled.stats
-    assert compiled.rule_names == sorted(["welcome", "a child", "adults", "vipVisits", "big spenders", "no visit yet",
-                                          "by tier", "calledByRule"])  # Drools lists queries with the rules
+    # a set's rules are its rules: Drools lists queries among a package's rules, the count does not
+    assert (compiled.rule_count, compiled.rule_names) == (2, ["a child", "welcome"])
 
 
 def _answers(tmp_path, plain: bool) -> tuple[list, list]:

@@ -237,9 +237,20 @@ public final class Runner {
     public String typeFullNames() { return types.fullNames(); }
 
     public int ruleCount() {
-        int n = 0;
-        for (KiePackage p : kieBase.getKiePackages()) n += p.getRules().size();
-        return n;
+        return ruleNames().length;
+    }
+
+    /** The names of the rule base's rules; not its queries, which Drools lists among a package's rules. */
+    public String[] ruleNames() {
+        List<String> names = new ArrayList<String>();
+        for (KiePackage p : kieBase.getKiePackages()) {
+            java.util.Set<String> queries = new java.util.HashSet<String>();
+            for (org.kie.api.definition.rule.Query q : p.getQueries()) queries.add(q.getName());
+            for (org.kie.api.definition.rule.Rule r : p.getRules()) {
+                if (!queries.contains(r.getName())) names.add(r.getName());
+            }
+        }
+        return names.toArray(new String[0]);
     }
 
     KieSession newSession() {
