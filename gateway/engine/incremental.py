@@ -680,14 +680,13 @@ def build_from_plan(files: dict[str, str], options: CompileOptions, on_progress:
     started = time.perf_counter()
     stats = BuildStats(mode="plan")
     plan = _plan_from_json(saved)
-    stats.rules = len(plan.rules)
     stats.units_reused = len({u for u, _, _ in plan.rules} | {plan.declarations})
     try:
         compiled = assemble(plan, files, dict(saved.get("expanded", {})), cache, stats, on_progress,
                             request_joins=options.request_joins)
     except _MissingUnit:
         return None
-    stats.total_s = time.perf_counter() - started
+    stats.total_s, stats.rules = time.perf_counter() - started, compiled.rule_count  # rules, not queries
     return compiled
 
 

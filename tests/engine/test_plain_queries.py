@@ -98,6 +98,8 @@ def test_parameterless_plain_queries_build_plain_and_the_others_compile(options)
     assert (compiled.stats.rules, compiled.stats.rules_built, compiled.stats.rules_compiled) == (2, 5, 1), compiled.stats
     # a set's rules are its rules: Drools lists queries among a package's rules, the count does not
     assert (compiled.rule_count, compiled.rule_names) == (2, ["a child", "welcome"])
+    again = compiler.compile_files({"q.drl": DRL}, "q", options)  # assembled from its saved plan
+    assert (again.stats.mode, again.stats.rules, again.rule_count) == ("plan", 2, 2), again.stats
 
 
 def _answers(tmp_path, plain: bool) -> tuple[list, list]:
