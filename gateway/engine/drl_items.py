@@ -23,7 +23,7 @@ import hashlib
 import itertools
 import json
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Container, Iterable
 from dataclasses import dataclass, field
 
 _IDENT = re.compile(r"[A-Za-z_$][\w$]*")
@@ -73,7 +73,7 @@ class SourceItems:
             self._header = " ".join(_strip_comments(kept).split())
         return self._header
 
-    def only(self, apart: frozenset[tuple[str, int]]) -> bool:
+    def only(self, apart: Container[tuple[str, int]]) -> bool:
         """Whether this file holds nothing but items of ``apart`` (queries built in plain units)
         and declares no global: the declarations unit needs nothing of it (explain's query files)."""
         return bool(self.items) and all((self.file, i.start) in apart for i in self.items) and not re.search(
@@ -275,7 +275,7 @@ class RuleSetItems:
         return digest("rule", env, src.file, src.package, src.header(), self.package_headers.get(src.package, ""),
                       self.context_hash, self.types_hash(self.closure(used)), text)
 
-    def declarations_key(self, env: str, apart: frozenset[tuple[str, int]] = frozenset()) -> str:
+    def declarations_key(self, env: str, apart: Container[tuple[str, int]] = frozenset()) -> str:
         """What the declarations unit (types, functions, queries ... of every file) depends on;
         ``apart``: (file, start) of queries built in units of their own, not part of it."""
         parts = []

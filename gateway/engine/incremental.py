@@ -258,7 +258,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
                          options) -> _Plan:
     _check_duplicates(items, sources)
     by_file = {s.file: s for s in sources}
-    apart = plain_rules.queries_apart(items.sources) if options.plain_rules else frozenset()
+    apart = plain_rules.queries_apart(items.sources) if options.plain_rules else {}  # (file, start) -> description
     decl_id = items.declarations_key(env, apart)
     order: list[tuple[str, SourceItems, drl_items.Item]] = []
     for src in sorted(items.sources, key=lambda s: s.file):
@@ -283,7 +283,7 @@ def _compile_incremental(sources, items: RuleSetItems, env, cache: UnitCache, de
         else:
             found[key] = unit_id
     stats.units_reused = len(set(found.values()))
-    plain, missing = _plain_rules(items, missing) if options.plain_rules else ([], missing)
+    plain, missing = _plain_rules(items, missing, apart) if options.plain_rules else ([], missing)
     jobs: list[tuple[str, list[tuple[str, SourceItems, drl_items.Item]]]] = []
     declarations_ready = threading.Event()  # set once the declarations unit is loaded (or failed)
     declarations: list[_Loaded] = []
@@ -391,14 +391,15 @@ Missing = list[tuple[str, SourceItems, drl_items.Item]]  # (rule key, its file, 
 Plain = list[tuple[str, SourceItems, drl_items.Item, dict]]  # the same and its plain description
 
 
-def _plain_rules(items: RuleSetItems, missing: Missing) -> tuple[Plain, Missing]:
-    """``missing`` split into rules of the plain shapes (with their descriptions) and the rest."""
+def _plain_rules(items: RuleSetItems, missing: Missing, described: dict) -> tuple[Plain, Missing]:
+    """``missing`` split into plain rules (with their descriptions: ``described``'s, else made) and the rest."""
     imports = plain_rules.package_imports(items.sources)
     plain: Plain = []
     rest: Missing = []
     for key, src, item in missing:
         package_imports = imports.get(src.package)
-        spec = plain_rules.describe(src, item, package_imports) if package_imports is not None else None
+        spec = described.get((src.file, item.start)) or (
+            plain_rules.describe(src, item, package_imports) if package_imports is not None else None)
         if spec is None:
             rest.append((key, src, item))
         else:

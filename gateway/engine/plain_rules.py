@@ -145,29 +145,28 @@ def describe(src: SourceItems, item: Item, imports: list[str]) -> dict[str, Any]
         return None
 
 
-def queries_apart(sources: list[SourceItems]) -> frozenset[tuple[str, int]]:
-    """(file, start) of the queries that build plain, in units of their own instead of the
-    declarations unit: without parameters, of the plain shapes, and named by no other item (no
-    rule or query calls them, so no other unit needs them to compile). Why: explain's diagnostic
-    queries are hundreds of such queries per version; compiled with the declarations they took
-    ~6 s of CPU and ~250 MB of heap for 100 rules."""
+def queries_apart(sources: list[SourceItems]) -> dict[tuple[str, int], dict[str, Any]]:
+    """The queries that build plain, in units of their own instead of the declarations unit, by
+    (file, start), each with its description: without parameters, of the plain shapes, and named by
+    no other item (no rule or query calls them, so no other unit needs them to compile). Why:
+    explain's diagnostic queries are hundreds of such queries per version; compiled with the
+    declarations they took ~6 s of CPU and ~250 MB of heap for 100 rules."""
     if not any(item.kind == "query" for src in sources for item in src.items):
-        return frozenset()
-    named: Counter[str] = Counter()
-    for src in sources:
-        for item in src.items:
-            named.update(identifiers(src.item_text(item)))
+        return {}
+    words = {(src.file, item.start): identifiers(src.item_text(item)) for src in sources for item in src.items}
+    named: Counter[str] = Counter(word for found in words.values() for word in found)
     imports = package_imports(sources)
-    apart = set()
+    apart: dict[tuple[str, int], dict[str, Any]] = {}
     for src in sources:
         package_imports_ = imports.get(src.package)
         for item in src.items:
             if item.kind != "query" or package_imports_ is None:
                 continue
-            by_others = named[item.name] - (item.name in identifiers(src.item_text(item)))
-            if by_others == 0 and describe(src, item, package_imports_) is not None:
-                apart.add((src.file, item.start))
-    return frozenset(apart)
+            if named[item.name] - (item.name in words[(src.file, item.start)]) == 0:  # no other item names it
+                spec = describe(src, item, package_imports_)
+                if spec is not None:
+                    apart[(src.file, item.start)] = spec
+    return apart
 
 
 def queries_only(spec: bytes) -> bool:

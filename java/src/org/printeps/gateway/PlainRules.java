@@ -129,27 +129,35 @@ public final class PlainRules {
     static final class Context {
         final ClassLoader loader;
         final Map<String, Global<?>> globals;
-        final Map<Class<?>, DomainClassMetadata> metadata = new HashMap<Class<?>, DomainClassMetadata>();
-        final Map<String, Property> properties = new HashMap<String, Property>();
+        final Map<Class<?>, DomainClassMetadata> metadata;
+        final Map<String, Property> properties;
         /** Whether the patterns after a rule's first read the request's facts (see {@link PlainRule}). */
         final boolean requestJoins;
 
         Context(ClassLoader loader, Map<String, Global<?>> globals, boolean requestJoins) {
             this.loader = loader;
             this.globals = globals;
+            this.metadata = new HashMap<Class<?>, DomainClassMetadata>();
+            this.properties = new HashMap<String, Property>();
             this.requestJoins = requestJoins;
+        }
+
+        /** The same build's caches (metadata, field readers), for the patterns of its queries. */
+        private Context(Context build) {
+            this.loader = build.loader;
+            this.globals = build.globals;
+            this.metadata = build.metadata;
+            this.properties = build.properties;
+            this.requestJoins = false;
         }
 
         private Context queries;
 
         /** This build's context for queries: they always read the session's memories (a query is
-         *  asked of a session, never of a request), sharing this build's field readers. */
+         *  asked of a session, never of a request), sharing this build's metadata and field readers. */
         Context forQueries() {
             if (!requestJoins) return this;
-            if (queries == null) {
-                queries = new Context(loader, globals, false);
-                queries.metadata.putAll(metadata);
-            }
+            if (queries == null) queries = new Context(this);
             return queries;
         }
 
